@@ -1,0 +1,18 @@
+"""mbs -- multibody modeling front-end (DH/URDF chains, symbolic and numeric models).
+
+Main entry points::
+
+    from mbs import Chain
+    chain = Chain.from_urdf(mbs.robots.urdf_path("ur5"))
+    chain = Chain.from_dh(rows, convention="standard")
+    sym = chain.symbolic()     # sympy: M, K, P, gravity, coriolis, eom, H, dHdt
+    num = chain.numeric()      # generic scalar: mass_matrix (crba), bias (rnea), acceleration
+    chain.to_pinocchio()       # the referee; mbs.check.compare_with_pinocchio(chain)
+"""
+from .errors import ModelError, UnsupportedJointError
+from .inertia import RigidInertia
+from .chain import Chain, Joint, Body, build_tree
+from . import robots
+
+__all__ = ["Chain", "Joint", "Body", "RigidInertia", "ModelError", "UnsupportedJointError",
+           "build_tree", "robots"]

@@ -1,0 +1,360 @@
+"""Numeric multibody model, the SMARTMOBILE way: recursive algorithms written once over
+a generic scalar (see :mod:`mbs.scalar`).
+
+The same code runs on
+
+- Python floats / numpy float vectors ``q`` of shape ``(n,)``,
+- batches: ``q`` of shape ``(n, B)`` (each ``q[i]`` is a numpy array of shape ``(B,)``),
+- ``verified.interval.Interval`` scalars (pass lists of intervals),
+- ``verified.graph.Tracer`` scalars: :meth:`NumericModel.rhs_graph` and
+  :meth:`NumericModel.energy_graph` turn the algorithms into expression graphs for the
+  verified solver without sympy.
+
+Algorithms (Featherstone, "Rigid Body Dynamics Algorithms"; Pinocchio's names):
+
+- :meth:`forward_kinematics` -- world placements of the body (joint) frames,
+- :meth:`kinetic_energy` / :meth:`potential_energy` -- SMARTMOBILE's getKineticEnergy /
+  getPotentialEnergy; K [J] = sum 1/2 (m |v_c|^2 + w^T I_c w), P [J] = -sum m g . c
+  (reference: base frame origin, fixed base included; see :mod:`mbs.symbolic`),
+- :meth:`mass_matrix` -- composite rigid body algorithm (crba), M(q) of eq. (4)/(13),
+- :meth:`rnea` / :meth:`bias` / :meth:`gravity_torque` -- recursive Newton-Euler,
+- :meth:`acceleration` -- qdd from M qdd = tau - D qd - bias(q, qd), solved by an LDL^T
+  factorization written over the generic scalar (M is symmetric positive definite, no
+  pivoting, so it traces into a fixed graph).
+
+Vectors are returned as numpy arrays when every input is a float / float array, else as
+Python lists of generic scalars (matrices: list of rows).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import ModelError
+from .scalar import add, sub, mul, div, neg, dot, square, total, is_sympy
+from . import spatial as sp3
+
+
+def _f(x, what):
+    if is_sympy(x):
+        if x.free_symbols:
+            raise ModelError(f"{what} is symbolic ({x}); call chain.subs({{...}}) before numeric()")
+        x = float(x)
+    v = float(x)
+    if v == 0.0:
+        return 0
+    if v == int(v) and abs(v) < 1e15:
+        return int(v)
+    return v
+
+
+def _ff(T, what):
+    if isinstance(T, tuple):
+        return tuple(_ff(t, what) for t in T)
+    return _f(T, what)
+
+
+def _is_plain(x) -> bool:
+    if isinstance(x, (float, int, np.floating, np.integer)):
+        return True
+    if isinstance(x, np.ndarray) and x.dtype.kind in "fiu":
+        return True
+    return False
+
+
+def _seq(x, n, what):
+    if isinstance(x, np.ndarray):
+        if x.shape[:1] != (n,):
+            raise ModelError(f"{what} must have length {n} along axis 0, got shape {x.shape}")
+        return [x[i] for i in range(n)]
+    try:
+        seq = list(x)
+    except TypeError:
+        raise ModelError(f"{what} must be a sequence of {n} values, got {type(x).__name__}") from None
+    if len(seq) != n:
+        raise ModelError(f"{what} must have {n} entries, got {len(seq)}")
+    return seq
+
+
+def _plain_out(vals, *inputs):
+    """numpy array (broadcast over a batch) if every input is a float/float array."""
+    if not all(_is_plain(v) for inp in inputs for v in inp):
+        return vals
+    if vals and isinstance(vals[0], list):
+        n = len(vals)
+        flat = np.broadcast_arrays(*[np.asarray(v, dtype=float) for row in vals for v in row])
+        return np.array(flat, dtype=float).reshape((n, n) + flat[0].shape)
+    if not vals:
+        return np.zeros(0)
+    flat = np.broadcast_arrays(*[np.asarray(v, dtype=float) for v in vals])
+    return np.array(flat, dtype=float)
+
+
+class NumericModel:
+    """Recursive generic-scalar algorithms for a :class:`mbs.Chain` (constants as floats)."""
+
+    def __init__(self, chain):
+        if chain.free_symbols:
+            raise ModelError(f"chain {chain.name!r} has free symbols {sorted(map(str, chain.free_symbols))}; "
+                             "substitute values with chain.subs({...}) before numeric()")
+        self.chain = chain
+        self.n = chain.n
+        self.parents = chain.parents
+        self.kinds = [b.joint.kind for b in chain.bodies]
+        self.axes = [_ff(b.joint.axis, "axis") for b in chain.bodies]
+        self.placements = [_ff(b.joint.placement, "placement") for b in chain.bodies]
+        self.damping = [_f(b.joint.damping, "damping") for b in chain.bodies]
+        self.gravity = _ff(chain.gravity, "gravity")
+        self.mass = [_f(b.inertia.mass, "mass") for b in chain.bodies]
+        self.com = [_ff(b.inertia.com, "com") for b in chain.bodies]
+        self.I_c = [_ff(b.inertia.inertia, "inertia") for b in chain.bodies]
+        self.h = [tuple(_f(m * c, "h") for c in com) for m, com in zip(self.mass, self.com)]
+        self.I_o = [_ff(sp3.inertia_about_origin(m, c, I), "I") for m, c, I in
+                    zip(self.mass, self.com, self.I_c)]
+        bi = chain.base_inertia
+        self.base_potential = -float(bi.mass) * sum(float(g) * float(c) for g, c in
+                                                     zip(self.gravity, bi.com))
+
+    # ------------------------------------------------------------------ kinematics
+    def joint_transforms(self, q):
+        """Placement (R, p) of each body frame in its parent's frame at q."""
+        out = []
+        for i in range(self.n):
+            Rp, pp = self.placements[i]
+            if self.kinds[i] == "revolute":
+                out.append((sp3.mm(Rp, sp3.joint_rotation(self.axes[i], q[i])), pp))
+            else:
+                out.append((Rp, sp3.vadd(pp, sp3.mv(Rp, sp3.vscale(q[i], self.axes[i])))))
+        return out
+
+    def forward_kinematics(self, q):
+        """World placements [(R, p)] of the n body frames (Pinocchio's ``data.oMi[1:]``)."""
+        q = _seq(q, self.n, "q")
+        X = self.joint_transforms(q)
+        world = []
+        for i in range(self.n):
+            p = self.parents[i]
+            world.append(X[i] if p < 0 else sp3.compose(world[p], X[i]))
+        return world
+
+    def frame_placement(self, name, q):
+        """World placement of a named frame (URDF link, DH frame "link{i}", "tool")."""
+        if name not in self.chain.frames:
+            raise ModelError(f"unknown frame {name!r}; frames: {sorted(self.chain.frames)}")
+        bi, T = self.chain.frames[name]
+        T = _ff(T, "frame")
+        if bi < 0:
+            return T
+        return sp3.compose(self.forward_kinematics(q)[bi], T)
+
+    def _velocities(self, X, qd):
+        vs = []
+        for i in range(self.n):
+            R, p = X[i]
+            pa = self.parents[i]
+            if pa < 0:
+                w, v = sp3.ZERO3, sp3.ZERO3
+            else:
+                w, v = sp3.motion_to_child(R, p, *vs[pa])
+            Sw, Sv = self._S(i, qd[i])
+            vs.append((sp3.vadd(w, Sw), sp3.vadd(v, Sv)))
+        return vs
+
+    def _S(self, i, s):
+        """Motion subspace S_i times scalar s: (w, v)."""
+        a = sp3.vscale(s, self.axes[i])
+        return (a, sp3.ZERO3) if self.kinds[i] == "revolute" else (sp3.ZERO3, a)
+
+    def _St(self, i, n, f):
+        """S_i^T (n, f)."""
+        return dot(self.axes[i], n if self.kinds[i] == "revolute" else f)
+
+    # ------------------------------------------------------------------ energies
+    def kinetic_energy(self, q, qd):
+        """K(q, qd) [J] = sum_i 1/2 m_i |v_ci|^2 + 1/2 w_i^T I_ci w_i (eq. (13))."""
+        q = _seq(q, self.n, "q"); qd = _seq(qd, self.n, "qd")
+        vs = self._velocities(self.joint_transforms(q), qd)
+        terms = []
+        for i, (w, v) in enumerate(vs):
+            m = self.mass[i]
+            vc = sp3.vadd(v, sp3.cross(w, self.com[i]))
+            t = mul(m, total(square(x) for x in vc))
+            t = add(t, dot(w, sp3.mv(self.I_c[i], w)))
+            terms.append(t)
+        return mul(0.5, total(terms))
+
+    def potential_energy(self, q):
+        """P(q) [J] = -sum_i m_i g . c_i + const, c_i the world centre of mass; zero level
+        at the base frame origin, the fixed base's own mass included (a constant)."""
+        world = self.forward_kinematics(q)
+        terms = [self.base_potential] if self.base_potential != 0 else []
+        for i, T in enumerate(world):
+            if self.mass[i] == 0:
+                continue
+            c = sp3.apply(T, self.com[i])
+            terms.append(mul(-self.mass[i], dot(self.gravity, c)))
+        return total(terms)
+
+    def hamiltonian(self, q, qd):
+        """H = K + P (eq. (4))."""
+        return add(self.kinetic_energy(q, qd), self.potential_energy(q))
+
+    def energy_rate(self, q, qd, tau=None):
+        """dH/dt = qd^T tau_total (eq. (7)), tau_total = tau - D qd (simplified form)."""
+        qd = _seq(qd, self.n, "qd")
+        tt = self._total_tau(qd, tau)
+        return total(mul(a, b) for a, b in zip(qd, tt))
+
+    # ------------------------------------------------------------------ dynamics
+    def mass_matrix(self, q):
+        """M(q) by the composite rigid body algorithm (Pinocchio ``crba``)."""
+        q = _seq(q, self.n, "q")
+        M = self._crba(self.joint_transforms(q))
+        return _plain_out(M, q)
+
+    def _crba(self, X):
+        n = self.n
+        Ic = [(self.mass[i], self.h[i], self.I_o[i]) for i in range(n)]
+        for i in reversed(range(n)):
+            pa = self.parents[i]
+            if pa >= 0:
+                R, p = X[i]
+                m2, h2, I2 = sp3.inertia_to_parent(R, p, *Ic[i])
+                m1, h1, I1 = Ic[pa]
+                Ic[pa] = (add(m1, m2), sp3.vadd(h1, h2), sp3.madd(I1, I2))
+        M = [[0] * n for _ in range(n)]
+        for i in range(n):
+            w, v = self._S(i, 1)
+            F = sp3.inertia_times_motion(*Ic[i], w, v)
+            M[i][i] = self._St(i, *F)
+            j = i
+            while self.parents[j] >= 0:
+                R, p = X[j]
+                F = sp3.force_to_parent(R, p, *F)
+                j = self.parents[j]
+                M[i][j] = M[j][i] = self._St(j, *F)
+        return M
+
+    def rnea(self, q, qd, qdd, gravity=True):
+        """Inverse dynamics tau = M qdd + c(q, qd) + g(q) (Pinocchio ``rnea``, no damping)."""
+        q = _seq(q, self.n, "q"); qd = _seq(qd, self.n, "qd"); qdd = _seq(qdd, self.n, "qdd")
+        tau = self._rnea(self.joint_transforms(q), qd, qdd, gravity)
+        return _plain_out(tau, q, qd, qdd)
+
+    def _rnea(self, X, qd, qdd, gravity=True):
+        n = self.n
+        a0 = (sp3.ZERO3, sp3.vneg(self.gravity) if gravity else sp3.ZERO3)
+        vs, as_, fs = [], [], []
+        for i in range(n):
+            R, p = X[i]
+            pa = self.parents[i]
+            vp, ap = ((sp3.ZERO3, sp3.ZERO3), a0) if pa < 0 else (vs[pa], as_[pa])
+            w, v = sp3.motion_to_child(R, p, *vp)
+            aw, av = sp3.motion_to_child(R, p, *ap)
+            Sqd = self._S(i, qd[i])
+            w, v = sp3.vadd(w, Sqd[0]), sp3.vadd(v, Sqd[1])
+            Sqdd = self._S(i, qdd[i])
+            cw, cv = sp3.motion_cross_motion(w, v, *Sqd)
+            aw = sp3.vadd(sp3.vadd(aw, Sqdd[0]), cw)
+            av = sp3.vadd(sp3.vadd(av, Sqdd[1]), cv)
+            vs.append((w, v)); as_.append((aw, av))
+            Ia = sp3.inertia_times_motion(self.mass[i], self.h[i], self.I_o[i], aw, av)
+            Iv = sp3.inertia_times_motion(self.mass[i], self.h[i], self.I_o[i], w, v)
+            cf = sp3.motion_cross_force(w, v, *Iv)
+            fs.append([sp3.vadd(Ia[0], cf[0]), sp3.vadd(Ia[1], cf[1])])
+        tau = [0] * n
+        for i in reversed(range(n)):
+            tau[i] = self._St(i, *fs[i])
+            pa = self.parents[i]
+            if pa >= 0:
+                R, p = X[i]
+                fn, ff = sp3.force_to_parent(R, p, *fs[i])
+                fs[pa] = [sp3.vadd(fs[pa][0], fn), sp3.vadd(fs[pa][1], ff)]
+        return tau
+
+    def bias(self, q, qd):
+        """Bias forces c(q, qd) + g(q) = rnea(q, qd, 0) (Pinocchio ``nonLinearEffects``)."""
+        return self.rnea(q, qd, [0] * self.n)
+
+    def coriolis(self, q, qd):
+        """Coriolis/centrifugal forces c(q, qd) = rnea(q, qd, 0) without gravity."""
+        return self.rnea(q, qd, [0] * self.n, gravity=False)
+
+    def gravity_torque(self, q):
+        """g(q) = dP/dq = rnea(q, 0, 0) (Pinocchio ``computeGeneralizedGravity``)."""
+        return self.rnea(q, [0] * self.n, [0] * self.n)
+
+    def _total_tau(self, qd, tau):
+        if tau is None:
+            tau = [0] * self.n
+        else:
+            tau = _seq(tau, self.n, "tau")
+        return [sub(t, mul(d, v)) for t, d, v in zip(tau, self.damping, qd)]
+
+    def acceleration(self, q, qd, tau=None):
+        """qdd = M(q)^{-1} (tau - D qd - c(q, qd) - g(q)) (forward dynamics, like
+        Pinocchio ``aba`` with damping added)."""
+        q = _seq(q, self.n, "q"); qd = _seq(qd, self.n, "qd")
+        tt = self._total_tau(qd, tau)
+        X = self.joint_transforms(q)
+        b = self._rnea(X, qd, [0] * self.n)
+        M = self._crba(X)
+        rhs = [sub(t, bb) for t, bb in zip(tt, b)]
+        qdd = ldl_solve(M, rhs)
+        return _plain_out(qdd, q, qd, tt)
+
+    def rhs(self, x, tau=None):
+        """ODE right-hand side for x = (q, qd): returns (qd, qdd) as one list (eq. (1))."""
+        x = _seq(x, 2 * self.n, "x")
+        q, qd = x[:self.n], x[self.n:]
+        qdd = self.acceleration(q, qd, tau)
+        out = list(qd) + list(qdd)
+        return _plain_out(out, x) if _is_plain(x[0]) else out
+
+    # ------------------------------------------------------------------ graphs
+    def rhs_graph(self):
+        """Expression graph x = (q, qd) -> (qd, qdd) (``verified.graph.trace``)."""
+        from verified.graph import trace
+        n = self.n
+        def fn(x, p):
+            return self.rhs(list(x))
+        return trace(fn, 2 * n, 0)
+
+    def energy_graph(self):
+        """Expression graph (q, qd) -> [H] (H = K + P), for the constraint H_H."""
+        from verified.graph import trace
+        n = self.n
+        def fn(x, p):
+            x = list(x)
+            return [self.hamiltonian(x[:n], x[n:])]
+        return trace(fn, 2 * n, 0)
+
+
+def ldl_solve(M, b):
+    """Solve M x = b for symmetric positive definite M (list of rows) by an LDL^T
+    factorization without pivoting, over the generic scalar."""
+    n = len(b)
+    L = [[0] * n for _ in range(n)]
+    D = [0] * n
+    for j in range(n):
+        s = M[j][j]
+        for k in range(j):
+            s = sub(s, mul(square(L[j][k]), D[k]))
+        D[j] = s
+        for i in range(j + 1, n):
+            s = M[i][j]
+            for k in range(j):
+                s = sub(s, mul(mul(L[i][k], L[j][k]), D[k]))
+            L[i][j] = div(s, D[j])
+    y = [0] * n
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s = sub(s, mul(L[i][k], y[k]))
+        y[i] = s
+    x = [0] * n
+    for i in reversed(range(n)):
+        s = div(y[i], D[i])
+        for k in range(i + 1, n):
+            s = sub(s, mul(L[k][i], x[k]))
+        x[i] = s
+    return x

@@ -1,0 +1,202 @@
+"""URDF to :class:`mbs.Chain` (parsed with yourdfpy, no meshes, no scene graph).
+
+Supported: ``revolute``, ``continuous`` (its angle is the coordinate, like revolute
+without limits) and ``prismatic`` joints; ``fixed`` joints are merged into the parent
+body (mass, centre of mass and inertia combined).  Inertial origins (xyz and rpy) are
+honoured.  ``<dynamics damping>`` becomes viscous damping, tau = -D qdot.
+
+Refused with :class:`mbs.errors.UnsupportedJointError` (unless locked, see ``lock``):
+``floating`` and ``planar`` joints (multi-dof; not supported) and ``mimic`` joints (the
+coupled coordinate is not independent; lock it, e.g. panda's fingers).
+
+Rotation entries of joint and inertial origins within ``ROTATION_SNAP_TOL`` of 0 or +-1
+are snapped to the exact value (UR5 writes pi/2 as 1.57079632679, whose cosine is
+4.9e-12); this changes the model by less than the tolerance.
+
+The root link (and every link welded to it) is the fixed base; its mass only adds a
+constant to the potential energy (see :mod:`mbs.symbolic`).
+"""
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .chain import RawJoint, build_tree, IDENTITY
+from .errors import ModelError, UnsupportedJointError
+from .inertia import RigidInertia
+
+#: rotation-matrix entries closer than this to 0 or +-1 are snapped
+ROTATION_SNAP_TOL = 1e-10
+
+
+def _snap_rotation(R):
+    R = np.array(R, dtype=float)
+    out = R.copy()
+    out[np.abs(R) < ROTATION_SNAP_TOL] = 0.0
+    out[np.abs(R - 1.0) < ROTATION_SNAP_TOL] = 1.0
+    out[np.abs(R + 1.0) < ROTATION_SNAP_TOL] = -1.0
+    return out
+
+
+def _to_float(x):
+    f = float(x)
+    if f == 0.0:
+        return 0.0  # no -0.0 in the content hash
+    if f == int(f) and abs(f) < 1e15:
+        return int(f)
+    return f
+
+
+def _placement(H, where):
+    if H is None:
+        return IDENTITY
+    H = np.asarray(H, dtype=float)
+    if H.shape != (4, 4) or not np.all(np.isfinite(H)):
+        raise ModelError(f"{where}: invalid origin {H}")
+    R = _snap_rotation(H[:3, :3])
+    return (tuple(tuple(_to_float(v) for v in row) for row in R),
+            tuple(_to_float(v) for v in H[:3, 3]))
+
+
+def _is_xml(s: str) -> bool:
+    return s.lstrip().startswith("<")
+
+
+def load_urdf(path_or_xml):
+    """Parse with yourdfpy (no meshes, no scene graph, no collision meshes).
+    Returns (yourdfpy.URDF, xml_text)."""
+    import yourdfpy
+    if isinstance(path_or_xml, (str, os.PathLike)) and not (
+            isinstance(path_or_xml, str) and _is_xml(path_or_xml)):
+        p = Path(path_or_xml)
+        if not p.is_file():
+            raise ModelError(f"URDF file {str(p)!r} does not exist")
+        xml = p.read_text()
+    elif isinstance(path_or_xml, bytes):
+        xml = path_or_xml.decode()
+    else:
+        xml = str(path_or_xml)
+    import logging
+    log = logging.getLogger("yourdfpy")
+    old = log.level
+    log.setLevel(logging.CRITICAL)
+    try:
+        robot = yourdfpy.URDF.load(io.BytesIO(xml.encode()), load_meshes=False,
+                                   build_scene_graph=False, load_collision_meshes=False,
+                                   build_collision_scene_graph=False)
+    except ModelError:
+        raise
+    except Exception as e:  # lxml / yourdfpy errors
+        raise ModelError(f"malformed URDF: {type(e).__name__}: {e}") from e
+    finally:
+        log.setLevel(old)
+    if robot is None or robot.robot is None:
+        raise ModelError("malformed URDF: no <robot> element")
+    return robot, xml
+
+
+def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=None):
+    """Build a :class:`mbs.Chain` from a URDF path or XML string.
+
+    ``lock``: mapping joint name -> fixed position; these joints (any type, also mimic,
+    floating or planar ones given position 0) are welded before the tree is built, e.g.
+    panda's fingers.  Returns a chain whose ``source`` remembers the XML and the locked
+    joints (used by :meth:`Chain.to_pinocchio`).
+    """
+    robot, xml = load_urdf(path_or_xml)
+    lock = dict(lock or {})
+    links = robot.robot.links
+    joints = robot.robot.joints
+    if not links:
+        raise ModelError("malformed URDF: no <link> elements")
+    names = [l.name for l in links]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise ModelError(f"malformed URDF: duplicate link name(s) {sorted(dup)}")
+    jn = [j.name for j in joints]
+    unknown = set(lock) - set(jn)
+    if unknown:
+        raise ModelError(f"cannot lock unknown joint(s) {sorted(unknown)}; joints are {jn}")
+
+    inertias = {}
+    for l in links:
+        where = f"link {l.name!r}"
+        ine = l.inertial
+        if ine is None:
+            inertias[l.name] = RigidInertia.zero()
+            continue
+        if ine.mass is None:
+            raise ModelError(f"{where}: <inertial> without <mass>")
+        if ine.inertia is None:
+            raise ModelError(f"{where}: <inertial> without <inertia>")
+        I = np.asarray(ine.inertia, dtype=float)
+        T = _placement(ine.origin, where + " inertial origin")
+        ri = RigidInertia(_to_float(ine.mass), (0, 0, 0),
+                          tuple(tuple(_to_float(v) for v in row) for row in I))
+        ri.validate(where)
+        inertias[l.name] = ri.transformed(T) if T is not IDENTITY else \
+            RigidInertia(ri.mass, T[1], ri.inertia)
+
+    raw = []
+    for j in joints:
+        where = f"joint {j.name!r}"
+        kind = j.type
+        if j.parent is None or j.child is None:
+            raise ModelError(f"{where}: missing <parent> or <child>")
+        T = _placement(j.origin, where)
+        if j.name in lock:
+            val = float(lock[j.name])
+            from .chain import joint_motion
+            import mbs.spatial as sp3
+            if kind in ("revolute", "continuous", "prismatic"):
+                axis = _axis(j, where)
+                T = sp3.compose(T, joint_motion("revolute" if kind != "prismatic" else "prismatic",
+                                                axis, val))
+            elif val != 0.0:
+                raise ModelError(f"{where}: a {kind} joint can only be locked at 0")
+            raw.append(RawJoint(j.name, "fixed", j.parent, j.child, T))
+            continue
+        if kind == "fixed":
+            raw.append(RawJoint(j.name, "fixed", j.parent, j.child, T))
+            continue
+        if kind in ("floating", "planar"):
+            raise UnsupportedJointError(
+                f"{where}: {kind} joints are not supported (only revolute, continuous, "
+                "prismatic and fixed); lock it with lock={...: 0.0} or model a fixed base")
+        if kind not in ("revolute", "continuous", "prismatic"):
+            raise ModelError(f"{where}: unknown joint type {kind!r}")
+        if j.mimic is not None:
+            raise UnsupportedJointError(
+                f"{where}: mimic joints (mimicking {j.mimic.joint!r}) are not supported; "
+                f"lock it, e.g. Chain.from_urdf(path, lock={{{j.name!r}: 0.0, ...}})")
+        damping = 0.0
+        if j.dynamics is not None and j.dynamics.damping is not None:
+            try:
+                damping = _to_float(j.dynamics.damping)
+            except (TypeError, ValueError):
+                raise ModelError(f"{where}: damping {j.dynamics.damping!r} is not a number") from None
+            if not np.isfinite(damping) or damping < 0:
+                raise ModelError(f"{where}: damping {damping} must be finite and >= 0")
+        raw.append(RawJoint(j.name, "prismatic" if kind == "prismatic" else "revolute",
+                            j.parent, j.child, T, _axis(j, where), damping))
+
+    children = {j.child for j in joints}
+    roots = [n for n in names if n not in children]
+    if len(roots) != 1:
+        raise ModelError(f"malformed URDF: expected exactly one root link, found {roots}")
+    src = {"kind": "urdf", "xml": xml, "locked": {k: float(v) for k, v in lock.items()}}
+    return build_tree(roots[0], inertias, raw, gravity=gravity,
+                      name=name or robot.robot.name or "urdf", source=src)
+
+
+def _axis(j, where):
+    ax = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+    nrm = np.linalg.norm(ax)
+    if ax.shape != (3,) or not np.isfinite(nrm) or nrm == 0:
+        raise ModelError(f"{where}: invalid axis {ax}")
+    if abs(nrm - 1.0) > 1e-12:
+        ax = ax / nrm  # URDF parsers normalize the axis
+    return tuple(_to_float(v) for v in ax)
