@@ -1,0 +1,655 @@
+"""Interval arrays: rigorous, outward-rounded interval arithmetic on numpy arrays.
+
+An :class:`Interval` holds lower and upper bounds as float64 arrays of one shape and
+broadcasts like numpy, so one operation processes thousands of boxes at once. A *box*
+is an ``Interval`` whose last axis indexes the state components: shape ``(..., n)``.
+
+Every operation returns an enclosure of the exact image of its operands (see
+:mod:`verified._kernels` for the rounding model). Floats and arrays mixed into an
+operation are taken as exact point values; to enclose a decimal constant such as
+``0.1`` use ``Interval(0.1).widen_ulps(1)`` or build it from a rational.
+
+Conventions:
+
+* ``lo <= hi``; bounds may be infinite only when produced by an operation (for
+  example division by an interval containing zero) or when a user opts in with
+  ``allow_unbounded=True``.
+* The empty set is ``[+inf, -inf]``: :meth:`Interval.is_empty`. ``sqrt`` and ``log``
+  are restricted to their domains as in IEEE 1788 (``sqrt([-4, 4]) = [0, 2]``,
+  ``sqrt([-4, -1])`` is empty).
+* Division by an interval that contains zero returns the hull of the exact image,
+  which is unbounded (``[1, 2] / [0, 1] = [1, inf]``, ``[1, 2] / [-1, 1] = [-inf, inf]``).
+* A NaN, an inverted pair of bounds or (by default) an infinite bound given by a user
+  raises :class:`IntervalError`.
+
+numpy ufuncs dispatch here, so generic model code such as ``np.sin(q) * l`` runs on
+floats, float arrays and intervals alike.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from . import _kernels as _k
+
+__all__ = [
+    "Interval",
+    "IntervalError",
+    "point",
+    "entire",
+    "empty",
+    "stack",
+    "concatenate",
+    "hull",
+    "intersect",
+    "sqr",
+    "ipow",
+    "sqrt",
+    "exp",
+    "log",
+    "sin",
+    "cos",
+    "tan",
+    "atan",
+    "iabs",
+    "minimum",
+    "maximum",
+]
+
+
+class IntervalError(ValueError):
+    """Invalid interval input: NaN, inverted bounds, or a non-finite bound."""
+
+
+def _as_float_array(value, what):
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise IntervalError(f"{what} must be real numbers, got {type(value).__name__}: {exc}") from None
+    return arr
+
+
+def _check_user_bounds(lo, hi, allow_unbounded):
+    if np.isnan(lo).any() or np.isnan(hi).any():
+        raise IntervalError("interval bounds contain NaN")
+    bad = lo > hi
+    if bad.any():
+        idx = np.argwhere(np.atleast_1d(bad))[0]
+        where = "" if lo.ndim == 0 else f" at index {tuple(int(i) for i in idx)}"
+        l0 = float(np.atleast_1d(lo)[tuple(idx)])
+        h0 = float(np.atleast_1d(hi)[tuple(idx)])
+        raise IntervalError(f"inverted interval{where}: lower bound {l0!r} > upper bound {h0!r}")
+    if not allow_unbounded and not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        raise IntervalError(
+            "interval bounds must be finite (pass allow_unbounded=True to build unbounded intervals)"
+        )
+
+
+_OPERAND_TYPES = (numbers.Real, np.ndarray, list, tuple)  # Interval added below
+
+
+class Interval:
+    """An array of closed real intervals ``[lo, hi]``.
+
+    Parameters
+    ----------
+    lo, hi : array_like
+        Lower and upper bounds; they broadcast against each other. ``hi=None`` makes
+        point intervals ``[lo, lo]``. An ``Interval`` passed as ``lo`` is copied.
+    allow_unbounded : bool
+        Accept infinite bounds (default: refuse them, since a user-given infinite
+        bound is usually a mistake).
+
+    Raises
+    ------
+    IntervalError
+        For NaN bounds, ``lo > hi``, or infinite bounds without ``allow_unbounded``.
+    """
+
+    __slots__ = ("lo", "hi")
+    __array_priority__ = 1000  # make ndarray + Interval defer to Interval.__radd__
+
+    def __init__(self, lo, hi=None, *, allow_unbounded=False):
+        if isinstance(lo, Interval) and hi is None:
+            self.lo = lo.lo.copy()
+            self.hi = lo.hi.copy()
+            return
+        lo = _as_float_array(lo, "lower bounds")
+        hi = lo if hi is None else _as_float_array(hi, "upper bounds")
+        try:
+            lo, hi = np.broadcast_arrays(lo, hi)
+        except ValueError:
+            raise IntervalError(f"bounds of shapes {lo.shape} and {hi.shape} do not broadcast") from None
+        _check_user_bounds(lo, hi, allow_unbounded)
+        self.lo = np.array(lo, dtype=np.float64)
+        self.hi = np.array(hi, dtype=np.float64)
+
+    @classmethod
+    def _from_bounds(cls, lo, hi):
+        """Wrap bound arrays without validation or copy (internal fast path)."""
+        obj = object.__new__(cls)
+        obj.lo = lo
+        obj.hi = hi
+        return obj
+
+    # ------------------------------------------------------------------ shape
+    @property
+    def shape(self):
+        return self.lo.shape
+
+    @property
+    def ndim(self):
+        return self.lo.ndim
+
+    @property
+    def size(self):
+        return self.lo.size
+
+    def __len__(self):
+        return len(self.lo)
+
+    def __getitem__(self, idx):
+        return Interval._from_bounds(self.lo[idx], self.hi[idx])
+
+    def __setitem__(self, idx, value):
+        lo, hi = _bounds(value)
+        self.lo[idx] = lo
+        self.hi[idx] = hi
+
+    def __iter__(self):
+        for i in range(len(self)):
+            yield self[i]
+
+    def reshape(self, *shape):
+        return Interval._from_bounds(self.lo.reshape(*shape), self.hi.reshape(*shape))
+
+    @property
+    def T(self):
+        return Interval._from_bounds(self.lo.T, self.hi.T)
+
+    def swapaxes(self, a, b):
+        return Interval._from_bounds(self.lo.swapaxes(a, b), self.hi.swapaxes(a, b))
+
+    def broadcast_to(self, shape):
+        return Interval._from_bounds(np.broadcast_to(self.lo, shape), np.broadcast_to(self.hi, shape))
+
+    def copy(self):
+        return Interval._from_bounds(self.lo.copy(), self.hi.copy())
+
+    def __repr__(self):
+        if self.ndim == 0:
+            return f"Interval({float(self.lo)!r}, {float(self.hi)!r})"
+        return f"Interval(lo={self.lo!r},\n         hi={self.hi!r})"
+
+    # ------------------------------------------------------- set properties
+    def is_empty(self):
+        """Boolean array: True where the interval is the empty set."""
+        return self.lo > self.hi
+
+    def is_bounded(self):
+        return np.isfinite(self.lo) & np.isfinite(self.hi)
+
+    def mid(self):
+        """A float inside each interval, near its midpoint (0 for ``[-inf, inf]``;
+        the finite float nearest to an infinite end for half-unbounded intervals)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            m = 0.5 * self.lo + 0.5 * self.hi
+        m = np.where(np.isnan(m), 0.0, m)  # [-inf, inf]
+        return np.clip(m, np.maximum(self.lo, -_k.MAXF), np.minimum(self.hi, _k.MAXF))
+
+    def rad(self):
+        """Upper bound ``r`` such that ``[mid - r, mid + r]`` contains the interval."""
+        m = self.mid()
+        with np.errstate(invalid="ignore", over="ignore"):
+            r = np.maximum(_k_round_up(m - self.lo), _k_round_up(self.hi - m))
+        return r
+
+    def width(self):
+        """Upper bound of ``hi - lo`` (0 for empty intervals)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            w = _k_round_up(self.hi - self.lo)
+        return np.where(self.is_empty(), 0.0, w)
+
+    def mag(self):
+        """``max |x|`` over the interval (exact)."""
+        return np.maximum(np.abs(self.lo), np.abs(self.hi))
+
+    def contains(self, values):
+        """Boolean array: True where the float ``values`` lie in the interval."""
+        v = np.asarray(values, dtype=np.float64)
+        return (self.lo <= v) & (v <= self.hi)
+
+    def issubset(self, other):
+        """Boolean array: True where ``self`` is a subset of ``other`` (empty is a subset of all)."""
+        olo, ohi = _bounds(other)
+        return ((olo <= self.lo) & (self.hi <= ohi)) | self.is_empty()
+
+    def interior_subset(self, other):
+        """True where ``self`` lies in the interior of ``other``."""
+        olo, ohi = _bounds(other)
+        return (olo < self.lo) & (self.hi < ohi)
+
+    def overlaps(self, other):
+        """True where ``self`` and ``other`` share at least one point."""
+        olo, ohi = _bounds(other)
+        return np.maximum(self.lo, olo) <= np.minimum(self.hi, ohi)
+
+    def intersect(self, other):
+        """Intersection; disjoint pairs give the empty interval ``[inf, -inf]``."""
+        olo, ohi = _bounds(other)
+        lo = np.maximum(self.lo, olo)
+        hi = np.minimum(self.hi, ohi)
+        bad = lo > hi
+        if bad.any():
+            lo = np.where(bad, np.inf, lo)
+            hi = np.where(bad, -np.inf, hi)
+        return Interval._from_bounds(lo, hi)
+
+    def hull(self, other):
+        """Interval hull of the union (empty operands are neutral)."""
+        olo, ohi = _bounds(other)
+        return Interval._from_bounds(np.minimum(self.lo, olo), np.maximum(self.hi, ohi))
+
+    def equals(self, other):
+        olo, ohi = _bounds(other)
+        return (self.lo == olo) & (self.hi == ohi)
+
+    def widen_ulps(self, n=1):
+        """Move each bound ``n`` floats outward (to enclose an inexactly stored constant)."""
+        lo, hi = self.lo, self.hi
+        for _ in range(int(n)):
+            lo = np.nextafter(lo, -np.inf)
+            hi = np.nextafter(hi, np.inf)
+        return Interval._from_bounds(lo, hi)
+
+    # ------------------------------------------------------------ splitting
+    def bisect(self, index=None, axis=-1):
+        """Split boxes in two at the midpoint of one component.
+
+        Parameters
+        ----------
+        index : int or int array, optional
+            Component (position along ``axis``) to split; an array gives one
+            component per box. Default: each box's widest component.
+        axis : int
+            The axis that indexes components (default: the last).
+
+        Returns
+        -------
+        (left, right) : two Intervals of the input's shape whose union is the input.
+        """
+        lo = np.moveaxis(self.lo, axis, -1)
+        hi = np.moveaxis(self.hi, axis, -1)
+        if index is None:
+            index = np.argmax(hi - lo, axis=-1)
+        index = np.broadcast_to(np.asarray(index), lo.shape[:-1])[..., None]
+        sel = Interval._from_bounds(
+            np.take_along_axis(lo, index, -1), np.take_along_axis(hi, index, -1)
+        )
+        m = sel.mid()
+        left_hi = hi.copy()
+        right_lo = lo.copy()
+        np.put_along_axis(left_hi, index, m, -1)
+        np.put_along_axis(right_lo, index, m, -1)
+        left = Interval._from_bounds(np.moveaxis(lo.copy(), -1, axis), np.moveaxis(left_hi, -1, axis))
+        right = Interval._from_bounds(np.moveaxis(right_lo, -1, axis), np.moveaxis(hi.copy(), -1, axis))
+        return left, right
+
+    def subdivide(self, pieces, axis=-1):
+        """Split each box into a uniform grid.
+
+        Parameters
+        ----------
+        pieces : int or sequence of int
+            Number of pieces per component (one int for all components).
+        axis : int
+            The component axis (default: the last).
+
+        Returns
+        -------
+        Interval of shape ``(..., prod(pieces), n)`` (components moved to the last
+        axis) whose union over the new axis is exactly the input box.
+        """
+        lo = np.moveaxis(self.lo, axis, -1)
+        hi = np.moveaxis(self.hi, axis, -1)
+        n = lo.shape[-1]
+        pieces = np.broadcast_to(np.asarray(pieces, dtype=int), (n,))
+        if (pieces < 1).any():
+            raise ValueError(f"pieces must be >= 1, got {pieces.tolist()}")
+        edges_lo, edges_hi = [], []
+        for j in range(n):
+            k = int(pieces[j])
+            t = np.arange(k + 1) / k
+            e = lo[..., j, None] * (1.0 - t) + hi[..., j, None] * t
+            e[..., 0] = lo[..., j]
+            e[..., -1] = hi[..., j]
+            e = np.maximum.accumulate(e, axis=-1)  # keep edges ordered despite rounding
+            edges_lo.append(e[..., :-1])
+            edges_hi.append(e[..., 1:])
+        grids_lo = np.stack(np.meshgrid(*[np.arange(int(p)) for p in pieces], indexing="ij"), -1).reshape(-1, n)
+        out_lo = np.stack([edges_lo[j][..., grids_lo[:, j]] for j in range(n)], -1)
+        out_hi = np.stack([edges_hi[j][..., grids_lo[:, j]] for j in range(n)], -1)
+        return Interval._from_bounds(out_lo, out_hi)
+
+    # ----------------------------------------------------------- arithmetic
+    def __add__(self, other):
+        if not isinstance(other, _OPERAND_TYPES):
+            return NotImplemented
+        return _binary(_k.add_loop, self, other)
+
+    def __radd__(self, other):
+        if not isinstance(other, _OPERAND_TYPES):
+            return NotImplemented
+        return _binary(_k.add_loop, other, self)
+
+    def __sub__(self, other):
+        if not isinstance(other, _OPERAND_TYPES):
+            return NotImplemented
+        return _binary(_k.sub_loop, self, other)
+
+    def __rsub__(self, other):
+        if not isinstance(other, _OPERAND_TYPES):
+            return NotImplemented
+        return _binary(_k.sub_loop, other, self)
+
+    def __mul__(self, other):
+        if not isinstance(other, _OPERAND_TYPES):
+            return NotImplemented
+        return _binary(_k.mul_loop, self, other)
+
+    def __rmul__(self, other):
+        if not isinstance(other, _OPERAND_TYPES):
+            return NotImplemented
+        return _binary(_k.mul_loop, other, self)
+
+    def __truediv__(self, other):
+        if not isinstance(other, _OPERAND_TYPES):
+            return NotImplemented
+        return _binary(_k.div_loop, self, other)
+
+    def __rtruediv__(self, other):
+        if not isinstance(other, _OPERAND_TYPES):
+            return NotImplemented
+        return _binary(_k.div_loop, other, self)
+
+    def __neg__(self):
+        return Interval._from_bounds(-self.hi, -self.lo)
+
+    def __pos__(self):
+        return self
+
+    def __abs__(self):
+        return iabs(self)
+
+    def __pow__(self, exponent):
+        return _power(self, exponent)
+
+    def __matmul__(self, other):
+        from .linalg import matmul
+
+        return matmul(self, other)
+
+    def __rmatmul__(self, other):
+        from .linalg import matmul
+
+        return matmul(other, self)
+
+    def sum(self, axis=None):
+        """Outward-rounded sum along ``axis`` (pairwise, vectorized over the other axes)."""
+        x = self.reshape(-1) if axis is None else self.swapaxes(axis, -1)
+        while x.shape[-1] > 1:
+            k = x.shape[-1] // 2
+            paired = x[..., :k] + x[..., k : 2 * k]
+            x = concatenate([paired, x[..., 2 * k :]], axis=-1) if x.shape[-1] % 2 else paired
+        if x.shape[-1] == 0:
+            return point(np.zeros(x.shape[:-1]))
+        return x[..., 0]
+
+    def dot(self, other):
+        from .linalg import matmul
+
+        return matmul(self, other)
+
+    # Comparisons between intervals have no single meaning: refuse them loudly.
+    def _no_order(self, other):
+        raise TypeError(
+            "intervals are not ordered; use .lo/.hi, .contains(), .issubset() or .overlaps()"
+        )
+
+    __lt__ = __le__ = __gt__ = __ge__ = _no_order
+
+    def __bool__(self):
+        raise TypeError("the truth value of an Interval is ambiguous; use .is_empty() or .contains()")
+
+    __hash__ = None
+
+    # ------------------------------------------------------------ numpy hooks
+    def __array_ufunc__(self, ufunc, method, *inputs, **kwargs):
+        if method != "__call__" or kwargs:
+            return NotImplemented
+        fn = _UFUNCS.get(ufunc)
+        if fn is None:
+            return NotImplemented
+        return fn(*inputs)
+
+    def __array__(self, dtype=None, copy=None):
+        raise TypeError(
+            "an Interval cannot be converted to a float array; use .mid(), .lo or .hi explicitly"
+        )
+
+
+_OPERAND_TYPES = _OPERAND_TYPES + (Interval,)
+
+
+# --------------------------------------------------------------------- helpers
+def _k_round_up(x):
+    """Upper bound of the exact result of one correctly rounded operation (vectorized)."""
+    return np.where(x == -np.inf, -_k.MAXF, x + (np.abs(x) * _k.EPS + _k.ETA))
+
+
+def _bounds(x):
+    """(lo, hi) float arrays of an Interval or of exact float values."""
+    if isinstance(x, Interval):
+        return x.lo, x.hi
+    if isinstance(x, numbers.Real) and not isinstance(x, bool):
+        v = float(x)
+        if v != v or v in (np.inf, -np.inf):
+            raise IntervalError(f"non-finite number {x!r} used in interval arithmetic")
+        arr = np.asarray(v)
+        return arr, arr
+    arr = _as_float_array(x, "operand")
+    if not np.isfinite(arr).all():
+        raise IntervalError("non-finite value (NaN or inf) used in interval arithmetic")
+    return arr, arr
+
+
+def _flat(arr, shape):
+    if arr.shape != shape:
+        arr = np.broadcast_to(arr, shape)
+    return np.ascontiguousarray(arr).reshape(-1)
+
+
+def _binary(loop, x, y):
+    xl, xh = _bounds(x)
+    yl, yh = _bounds(y)
+    try:
+        shape = xl.shape if xl.shape == yl.shape else np.broadcast_shapes(xl.shape, yl.shape)
+    except ValueError:
+        raise ValueError(f"interval operands of shapes {xl.shape} and {yl.shape} do not broadcast") from None
+    lo, hi = loop(_flat(xl, shape), _flat(xh, shape), _flat(yl, shape), _flat(yh, shape))
+    return Interval._from_bounds(lo.reshape(shape), hi.reshape(shape))
+
+
+def _unary(loop, x):
+    xl, xh = _bounds(x)
+    shape = xl.shape
+    lo, hi = loop(_flat(xl, shape), _flat(xh, shape))
+    return Interval._from_bounds(lo.reshape(shape), hi.reshape(shape))
+
+
+def _power(x, exponent):
+    if isinstance(exponent, Interval):
+        raise TypeError("interval exponents are not supported; use exp(y * log(x))")
+    e = float(exponent)
+    if e == int(e) and abs(e) < 2**31:
+        return ipow(x, int(e))
+    if e == 0.5:
+        return sqrt(x)
+    raise TypeError(f"only integer exponents (and 0.5) are supported, got {exponent!r}")
+
+
+# ----------------------------------------------------------- public functions
+def point(values):
+    """Point intervals ``[v, v]`` for exact float values (finite)."""
+    lo, hi = _bounds(values)
+    return Interval._from_bounds(np.array(lo), np.array(hi))
+
+
+def entire(shape=()):
+    """Intervals ``[-inf, inf]`` of the given shape."""
+    return Interval._from_bounds(np.full(shape, -np.inf), np.full(shape, np.inf))
+
+
+def empty(shape=()):
+    """Empty intervals ``[inf, -inf]`` of the given shape."""
+    return Interval._from_bounds(np.full(shape, np.inf), np.full(shape, -np.inf))
+
+
+def _as_interval(x):
+    if isinstance(x, Interval):
+        return x
+    lo, hi = _bounds(x)
+    return Interval._from_bounds(lo, hi)
+
+
+def stack(intervals, axis=0):
+    """Stack Intervals (or exact floats) along a new axis, like ``np.stack``."""
+    items = [_as_interval(x) for x in intervals]
+    return Interval._from_bounds(
+        np.stack([np.broadcast_to(x.lo, np.broadcast_shapes(*[i.shape for i in items])) for x in items], axis),
+        np.stack([np.broadcast_to(x.hi, np.broadcast_shapes(*[i.shape for i in items])) for x in items], axis),
+    )
+
+
+def concatenate(intervals, axis=0):
+    """Join Intervals along an existing axis, like ``np.concatenate``."""
+    items = [_as_interval(x) for x in intervals]
+    return Interval._from_bounds(
+        np.concatenate([x.lo for x in items], axis), np.concatenate([x.hi for x in items], axis)
+    )
+
+
+def hull(x, y=None, axis=None):
+    """Hull of two intervals, or of all intervals of ``x`` along ``axis``."""
+    if y is not None:
+        return _as_interval(x).hull(y)
+    x = _as_interval(x)
+    return Interval._from_bounds(np.min(x.lo, axis=axis), np.max(x.hi, axis=axis))
+
+
+def intersect(x, y):
+    return _as_interval(x).intersect(y)
+
+
+def sqr(x):
+    """Square: ``sqr([-1, 2]) = [0, 4]`` (tighter than ``x * x = [-2, 4]``)."""
+    return _unary(_k.sqr_loop, x)
+
+
+def ipow(x, n):
+    """Integer power ``x ** n`` (even powers are non-negative; ``n < 0`` divides)."""
+    if int(n) != n:
+        raise TypeError(f"ipow needs an integer exponent, got {n!r}")
+    xl, xh = _bounds(x)
+    shape = xl.shape
+    lo, hi = _k.ipow_loop(_flat(xl, shape), _flat(xh, shape), int(n))
+    return Interval._from_bounds(lo.reshape(shape), hi.reshape(shape))
+
+
+def sqrt(x):
+    """Square root on the domain ``[0, inf]`` (IEEE 1788: negative parts are dropped)."""
+    return _unary(_k.sqrt_loop, x)
+
+
+def exp(x):
+    return _unary(_k.exp_loop, x)
+
+
+def log(x):
+    """Natural log on the domain ``(0, inf]``; ``log([0, 1]) = [-inf, 0]``."""
+    return _unary(_k.log_loop, x)
+
+
+def sin(x):
+    return _unary(_k.sin_loop, x)
+
+
+def cos(x):
+    return _unary(_k.cos_loop, x)
+
+
+def tan(x):
+    """Tangent; ``[-inf, inf]`` where the interval may contain a pole."""
+    return _unary(_k.tan_loop, x)
+
+
+def atan(x):
+    return _unary(_k.atan_loop, x)
+
+
+def iabs(x):
+    return _unary(_k.iabs_loop, x)
+
+
+def minimum(x, y):
+    return _binary(_k.imin_loop, x, y)
+
+
+def maximum(x, y):
+    return _binary(_k.imax_loop, x, y)
+
+
+def _add(x, y):
+    return _binary(_k.add_loop, x, y)
+
+
+def _sub(x, y):
+    return _binary(_k.sub_loop, x, y)
+
+
+def _mul(x, y):
+    return _binary(_k.mul_loop, x, y)
+
+
+def _div(x, y):
+    return _binary(_k.div_loop, x, y)
+
+
+def _neg(x):
+    return -_as_interval(x)
+
+
+_UFUNCS = {
+    np.add: _add,
+    np.subtract: _sub,
+    np.multiply: _mul,
+    np.true_divide: _div,
+    np.negative: _neg,
+    np.positive: _as_interval,
+    np.square: sqr,
+    np.power: _power,
+    np.sqrt: sqrt,
+    np.exp: exp,
+    np.log: log,
+    np.sin: sin,
+    np.cos: cos,
+    np.tan: tan,
+    np.arctan: atan,
+    np.absolute: iabs,
+    np.minimum: minimum,
+    np.maximum: maximum,
+    np.fmin: minimum,
+    np.fmax: maximum,
+}
