@@ -70,8 +70,8 @@ class RigidInertia:
     def validate(self, where: str) -> None:
         """Raise :class:`ModelError` naming ``where`` if the data is not physical:
         negative mass, a non-symmetric inertia or one that is not positive
-        semi-definite (zero is allowed: point masses), or one violating the triangle
-        inequality of principal moments.  Symbolic entries are not checked."""
+        semi-definite (zero is allowed: point masses).  Symbolic entries are not
+        checked."""
         m = _num(self.mass)
         if m is not None:
             if not np.isfinite(m):
@@ -94,11 +94,9 @@ class RigidInertia:
         if ev[0] < -INERTIA_TOL * scale:
             raise ModelError(
                 f"{where}: inertia tensor is not positive (semi-)definite, eigenvalues {ev}")
-        tri = ev[0] + ev[1] - ev[2]
-        if tri < -1e-6 * scale:
-            raise ModelError(
-                f"{where}: principal moments of inertia {ev} violate the triangle inequality "
-                "I1 + I2 >= I3 (not a physical rigid body)")
+        # Note: the triangle inequality of the principal moments (I1 + I2 >= I3) is not
+        # enforced: classic data sets (Corke's Puma 560 link 1: diag(0, 0.35, 0)) violate
+        # it, and Pinocchio accepts them.
 
 
 def inertia_from_6(ixx, iyy, izz, ixy=0, ixz=0, iyz=0):

@@ -1,0 +1,109 @@
+"""Evaluate sympy expressions over the generic scalar (float, batch, Interval, Tracer).
+
+:func:`compile_generic` runs ``sympy.cse`` once and returns a function that evaluates the
+common subexpressions in order with ``+ - * /``, ``np.square`` / integer powers,
+``np.sqrt`` and ``np.sin``/``np.cos`` (:mod:`mbs.scalar`), so tracing it with
+``verified.graph.trace`` gives an expression graph with the sharing cse found.
+"""
+from __future__ import annotations
+
+import numpy as np
+import sympy
+
+from . import scalar as S
+from .errors import ModelError
+
+
+def _pow(b, e):
+    if e == 2:
+        return S.square(b)
+    if e == 1:
+        return b
+    if isinstance(e, int) and e > 2:
+        r = b
+        for _ in range(e - 1):
+            r = r * b
+        return r
+    if isinstance(e, int) and e < 0:
+        return 1.0 / _pow(b, -e)
+    if e == 0.5:
+        return np.sqrt(b)
+    if e == -0.5:
+        return 1.0 / np.sqrt(b)
+    return b ** e
+
+
+def _number(x):
+    if x.is_Integer:
+        return int(x)
+    if x is sympy.pi:
+        return float(sympy.pi)
+    return float(x)
+
+
+class GenericFunction:
+    """f(*args) -> list of values of ``exprs`` at the generic scalars ``args``."""
+
+    def __init__(self, exprs, args, cse=True):
+        self.args = list(args)
+        exprs = [sympy.sympify(e) for e in exprs]
+        if cse:
+            self.repl, self.reduced = sympy.cse(exprs, order="none")
+        else:
+            self.repl, self.reduced = [], exprs
+        free = set().union(*(e.free_symbols for e in exprs)) if exprs else set()
+        missing = free - set(self.args)
+        if missing:
+            raise ModelError(f"expressions depend on {sorted(map(str, missing))}, "
+                             f"which are not inputs {list(map(str, self.args))}")
+
+    def __call__(self, *values):
+        env = dict(zip(self.args, values))
+        memo = {}
+        def ev(e):
+            if e in env:
+                return env[e]
+            r = memo.get(e)
+            if r is not None:
+                return r
+            if e.is_Number or e is sympy.pi or e.is_NumberSymbol:
+                r = _number(e)
+            elif e.is_Add:
+                r = 0
+                for a in e.args:
+                    r = S.add(r, ev(a))
+            elif e.is_Mul:
+                coeff, rest = e.as_coeff_mul()
+                r = 1
+                for a in rest:
+                    r = S.mul(r, ev(a))
+                if coeff != 1:
+                    r = S.mul(_number(coeff), r)
+            elif e.is_Pow:
+                b, x = e.args
+                if x.is_Integer:
+                    r = _pow(ev(b), int(x))
+                elif x == sympy.Rational(1, 2):
+                    r = np.sqrt(ev(b))
+                elif x == sympy.Rational(-1, 2):
+                    r = 1.0 / np.sqrt(ev(b))
+                else:
+                    r = ev(b) ** ev(x)
+            elif isinstance(e, sympy.sin):
+                r = S.sin(ev(e.args[0]))
+            elif isinstance(e, sympy.cos):
+                r = S.cos(ev(e.args[0]))
+            elif isinstance(e, sympy.tan):
+                a = ev(e.args[0])
+                r = S.sin(a) / S.cos(a)
+            else:
+                raise ModelError(f"cannot evaluate {type(e).__name__} over the generic scalar: {e}")
+            memo[e] = r
+            return r
+        for sym, sub in self.repl:
+            env[sym] = ev(sub)
+        return [ev(e) for e in self.reduced]
+
+
+def compile_generic(exprs, args, cse=True) -> GenericFunction:
+    return GenericFunction(exprs, args, cse=cse)

@@ -1,0 +1,57 @@
+"""Simple pendulum of paper sec. 5.1: point mass m on a massless rod of length l.
+
+The paper does not publish the parameters; we use m = 1 kg, l = 1 m, g = 9.81 m/s^2.
+Coordinates: q = phi (angle from the downward vertical) [rad], state x = (q, qd).
+
+- eq. (18): qdd = -(g/l) sin q
+- eq. (19): H = 1/2 m ((l sin q qd)^2 + (l cos q qd)^2) + m g (l - l cos q)
+  (zero level at the lowest point; the chain models put it at the pivot, i.e.
+  H_chain = H_19 - m g l).
+- initial box of sec. 5.1: q(0) in [2.1, 2.2], qd(0) in [3.1, 3.2].
+"""
+from __future__ import annotations
+
+import numpy as np
+
+M, L, G = 1.0, 1.0, 9.81
+#: initial box of sec. 5.1 (these bounds are doubles exactly as printed... see below)
+INITIAL_BOX = ((2.1, 3.1), (2.2, 3.2))
+
+
+def initial_box():
+    """(lo, hi) float arrays enclosing [2.1, 2.2] x [3.1, 3.2] (rounded outward)."""
+    from .double_pendulum import _enclose
+    lo = np.array([_enclose("21/10")[0], _enclose("31/10")[0]])
+    hi = np.array([_enclose("22/10")[1], _enclose("32/10")[1]])
+    return lo, hi
+
+
+def rhs(x, p=None, m=M, l=L, g=G):
+    """eq. (18) over the generic scalar: x = (q, qd) -> (qd, -(g/l) sin q)."""
+    q, qd = x[0], x[1]
+    return [qd, -(g / l) * np.sin(q)]
+
+
+def hamiltonian(x, p=None, m=M, l=L, g=G):
+    """eq. (19), written as in the paper (not simplified)."""
+    q, qd = x[0], x[1]
+    return 0.5 * m * (np.square(l * np.sin(q) * qd) + np.square(l * np.cos(q) * qd)) \
+        + m * g * (l - l * np.cos(q))
+
+
+def sympy_model(m=M, l=L, g=G):
+    """(x symbols, [rhs exprs], H expr) of eqs. (18)-(19)."""
+    import sympy
+    q, qd = sympy.symbols("q qd", real=True)
+    f = [qd, -sympy.Float(g) / sympy.Float(l) * sympy.sin(q)]
+    H = sympy.Rational(1, 2) * m * ((l * sympy.sin(q) * qd) ** 2 + (l * sympy.cos(q) * qd) ** 2) \
+        + m * g * (l - l * sympy.cos(q))
+    return [q, qd], f, H
+
+
+def chain(m=M, l=L, g=G):
+    """The pendulum as a one-link DH chain: a = l, point mass at the tip, gravity along
+    +x of the base frame (so q is the angle from the downward vertical)."""
+    from mbs import Chain
+    return Chain.from_dh([dict(joint="R", a=l, mass=m)], gravity=(g, 0.0, 0.0),
+                         name="pendulum")
