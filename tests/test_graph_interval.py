@@ -1,0 +1,342 @@
+"""Soundness of interval evaluation of graphs: enclosures contain sampled values.
+
+Two oracles:
+
+* float samples: ``graph.eval_float`` at box corners, the center and random points must
+  lie in ``graph.eval_interval(box)`` (with a tiny allowance for the float reference's
+  own rounding error, far below any real bug);
+* exact samples: the same points evaluated in python-flint ``arb`` at 256 bits through
+  a test-only :class:`ArbDomain` (which also shows that evaluators are pluggable);
+  containment is checked with certain comparisons, no allowance. Constants are taken
+  at their double value, a point of their enclosure, so by inclusion isotonicity the
+  interval result must contain the arb result; that constants' enclosures contain the
+  exact constants is tested in test_graph.py.
+"""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+import sympy as sp
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from test_graph import all_ops, double_pendulum_rhs, generic_model, pendulum_energy
+from verified import evaluate as ev
+from verified.graph import trace
+from verified.interval import Interval
+
+flint = pytest.importorskip("flint")
+arb = flint.arb
+
+FLOAT_REF_RTOL = 1e-12  # allowance for rounding errors of the float reference only
+
+GRAPHS = {
+    "double_pendulum": (trace(lambda x, p: double_pendulum_rhs(x), 4), None),
+    "energy": (trace(pendulum_energy, 2, 3), np.array([1.0, 1.0, 9.81])),
+    "all_ops": (trace(all_ops, 2, 1), np.array([0.7])),
+}
+
+
+# --------------------------------------------------------------------------- exact oracle
+
+_f = {name: np.frompyfunc(lambda t, name=name: getattr(t, name)(), 1, 1)
+      for name in ("sqrt", "exp", "log", "sin", "cos", "tan", "atan")}
+_to_arb = np.frompyfunc(lambda v: arb(float(v)), 1, 1)
+
+
+class ArbDomain(ev.Domain):
+    """Reference evaluator: arb balls in numpy object arrays (one Python call per element)."""
+
+    def const(self, lo, hi, value):
+        return arb(value)
+
+    def sqr(self, a):
+        return a * a
+
+    def pow(self, a, k):
+        return a**k
+
+    def sqrt(self, a):
+        return _f["sqrt"](a)
+
+    def exp(self, a):
+        return _f["exp"](a)
+
+    def log(self, a):
+        return _f["log"](a)
+
+    def sin(self, a):
+        return _f["sin"](a)
+
+    def cos(self, a):
+        return _f["cos"](a)
+
+    def tan(self, a):
+        return _f["tan"](a)
+
+    def atan(self, a):
+        return _f["atan"](a)
+
+    def point(self, array):
+        return _to_arb(np.asarray(array, dtype=float))
+
+    def expand(self, a):
+        return _obj(a)[..., None]
+
+    def pack(self, values, shape, axis=-1):
+        return np.stack([np.broadcast_to(_obj(v), shape) for v in values], axis=axis)
+
+
+def _obj(v):
+    if isinstance(v, np.ndarray):
+        return v
+    out = np.empty((), dtype=object)
+    out[()] = v
+    return out
+
+
+_SYMPY_JACOBIANS: dict = {}
+
+
+def sympy_jacobian(graph):
+    """Independent float reference for Jacobians: sympy's diff of graph.to_sympy(), lambdified.
+
+    Returns f(X, P) -> (..., m, n)."""
+    key = id(graph)
+    if key not in _SYMPY_JACOBIANS:
+        xs = sp.symbols(f"x0:{graph.n_inputs}")
+        ps = sp.symbols(f"p0:{graph.n_params}")
+        jac = sp.Matrix(graph.to_sympy(xs, ps)).jacobian(xs)
+        f = sp.lambdify(list(xs) + list(ps), jac.tolist(), "numpy")
+
+        def ref(X, P=None):
+            P = np.zeros((0,)) if P is None else np.asarray(P, dtype=float)
+            shape = np.broadcast_shapes(X.shape[:-1], P.shape[:-1])
+            args = [np.broadcast_to(X[..., i], shape) for i in range(graph.n_inputs)]
+            args += [np.broadcast_to(P[..., j], shape) for j in range(graph.n_params)]
+            cols = [[np.broadcast_to(np.asarray(v, dtype=float), shape) for v in row] for row in f(*args)]
+            return np.moveaxis(np.array(cols), [0, 1], [-2, -1])
+
+        _SYMPY_JACOBIANS[key] = (graph, ref)  # keep graph alive so id() stays unique
+    return _SYMPY_JACOBIANS[key][1]
+
+
+def arb_eval(graph, X, P=None, jacobian=False):
+    """Exact (arb) values (..., m) or Jacobians (..., m, n) at float points X."""
+    X = np.asarray(X, dtype=float)
+    P = np.zeros((0,)) if P is None else np.asarray(P, dtype=float)
+    shape = np.broadcast_shapes(X.shape[:-1], P.shape[:-1])
+    xs = [_to_arb(X[..., i]) for i in range(graph.n_inputs)]
+    ps = [_to_arb(P[..., j]) for j in range(graph.n_params)]
+    dom = ArbDomain()
+    if not jacobian:
+        return dom.pack(ev.evaluate(graph, dom, xs, ps), shape)
+    return ev._jacobian(graph, dom, xs, ps, shape, "x")
+
+
+_le = np.frompyfunc(lambda a, b: bool(a <= b), 2, 1)
+
+
+def _arb_inside(lo, hi, exact):
+    """Elementwise: certainly lo <= exact <= hi (exact: object array of arb)."""
+    lo_a, hi_a = _to_arb(lo), _to_arb(hi)
+    return (_le(lo_a, exact) & _le(exact, hi_a)).astype(bool)
+
+
+# --------------------------------------------------------------------------- sampling
+
+
+def box_samples(lo, hi, n_random, rng):
+    """Points in boxes lo..hi (B, n): all corners (n <= 6), the center, random points -> (S, B, n)."""
+    n = lo.shape[-1]
+    pts = []
+    if n <= 6:
+        for corner in itertools.product((0, 1), repeat=n):
+            pts.append(np.where(np.array(corner, dtype=bool), hi, lo))
+    pts.append(0.5 * (lo + hi))
+    for _ in range(n_random):
+        pts.append(lo + (hi - lo) * rng.uniform(size=lo.shape))
+    return np.clip(np.stack(pts), lo, hi)
+
+
+def assert_encloses_float(Y, y, what=""):
+    """Interval Y (broadcast against y) contains float reference values y (allowance FLOAT_REF_RTOL)."""
+    tol = FLOAT_REF_RTOL * (1.0 + np.abs(y))
+    ok = (Y.lo - tol <= y) & (y <= Y.hi + tol)
+    if not ok.all():
+        idx = tuple(np.argwhere(~ok)[0])
+        raise AssertionError(f"{what}: sample value {y[idx]!r} outside enclosure at {idx}")
+
+
+def assert_encloses_arb(Y, exact, what=""):
+    lo, hi = np.broadcast_to(Y.lo, exact.shape), np.broadcast_to(Y.hi, exact.shape)
+    ok = _arb_inside(lo, hi, exact)
+    if not ok.all():
+        idx = tuple(np.argwhere(~ok)[0])
+        raise AssertionError(f"{what}: exact value {exact[idx]} outside [{lo[idx]!r}, {hi[idx]!r}] at {idx}")
+
+
+def check_graph_enclosure(graph, lo, hi, P=None, *, n_random=8, rng=None, exact=False, jacobian=False):
+    """Assert the graph's interval evaluation (or Jacobian) on boxes [lo, hi] (B, n)
+    contains the values at sampled points (float, or arb if ``exact``)."""
+    rng = rng or np.random.default_rng(0)
+    box = Interval(lo, hi)
+    pts = box_samples(lo, hi, n_random, rng)  # (S, B, n)
+    if jacobian:
+        Y = graph.jacobian_interval(box, P)  # (B, m, n)
+        # exact: arb through the same dual-number rules (checks rounding);
+        # float: sympy's own differentiation (checks the rules themselves)
+        ref = arb_eval(graph, pts, P, jacobian=True) if exact else sympy_jacobian(graph)(pts, P)
+    else:
+        Y = graph.eval_interval(box, P)  # (B, m)
+        ref = arb_eval(graph, pts, P) if exact else graph.eval_float(pts, P)
+    if exact:
+        assert_encloses_arb(Y, ref, "arb oracle")
+    else:
+        assert_encloses_float(Y, ref, "float oracle")
+
+
+def random_boxes(n, count, rng, center_scale=2.0, max_rad=0.3):
+    c = rng.uniform(-center_scale, center_scale, size=(count, n))
+    r = rng.uniform(0, max_rad, size=(count, n)) * (rng.uniform(size=(count, 1)) < 0.9)  # some point boxes
+    return c - r, c + r
+
+
+# --------------------------------------------------------------------------- tests
+
+
+def _box_strategy(n):
+    center = st.lists(st.floats(-2.5, 2.5), min_size=n, max_size=n)
+    rad = st.lists(st.floats(0.0, 0.4), min_size=n, max_size=n)
+    return st.tuples(center, rad)
+
+
+@pytest.mark.parametrize("name", sorted(GRAPHS))
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_interval_eval_contains_float_samples(name, data):
+    graph, P = GRAPHS[name]
+    center, rad = data.draw(_box_strategy(graph.n_inputs))
+    c, r = np.array(center), np.array(rad)
+    lo, hi = (c - r)[None], (c + r)[None]
+    check_graph_enclosure(graph, lo, hi, P, n_random=16, rng=np.random.default_rng(data.draw(st.integers(0, 2**32 - 1))))
+
+
+@pytest.mark.parametrize("name", sorted(GRAPHS))
+def test_interval_eval_contains_exact_samples(name):
+    graph, P = GRAPHS[name]
+    rng = np.random.default_rng(7)
+    lo, hi = random_boxes(graph.n_inputs, 6, rng)
+    check_graph_enclosure(graph, lo, hi, P, n_random=4, rng=rng, exact=True)
+
+
+@pytest.mark.parametrize("name", sorted(GRAPHS))
+def test_interval_jacobian_contains_sampled_jacobians(name):
+    graph, P = GRAPHS[name]
+    rng = np.random.default_rng(11)
+    lo, hi = random_boxes(graph.n_inputs, 20, rng)
+    check_graph_enclosure(graph, lo, hi, P, n_random=8, rng=rng, jacobian=True)
+    lo, hi = random_boxes(graph.n_inputs, 4, rng)
+    check_graph_enclosure(graph, lo, hi, P, n_random=2, rng=rng, jacobian=True, exact=True)
+
+
+def test_double_pendulum_paper_initial_box():
+    """RHS and Jacobian enclosures over the paper's initial box, eq. (25)."""
+    graph = GRAPHS["double_pendulum"][0]
+    lo = np.array([[0.99 * 3 * np.pi / 4, -11 * np.pi / 20, 0.43, 0.67]])
+    hi = np.array([[1.01 * 3 * np.pi / 4, -11 * np.pi / 20, 0.43, 0.67]])
+    check_graph_enclosure(graph, lo, hi, n_random=200)
+    check_graph_enclosure(graph, lo, hi, n_random=20, exact=True)
+    check_graph_enclosure(graph, lo, hi, n_random=50, jacobian=True)
+    Y = graph.eval_interval(Interval(lo, hi))
+    assert np.all(np.isfinite(Y.lo)) and np.all(Y.width() < 1.0)  # the factored determinant keeps it tight
+
+
+def test_interval_eval_with_interval_params_contains_samples():
+    graph = GRAPHS["energy"][0]
+    rng = np.random.default_rng(3)
+    X = Interval(np.array([[2.1, 3.1]]), np.array([[2.2, 3.2]]))
+    Pbox = Interval(np.array([0.9, 0.95, 9.8]), np.array([1.1, 1.05, 9.82]))
+    Y = graph.eval_interval(X, Pbox)
+    xs = box_samples(X.lo, X.hi, 20, rng)[:, 0]  # (S, 2)
+    ps = box_samples(Pbox.lo[None], Pbox.hi[None], 20, rng)[:, 0]  # (S', 3)
+    y = graph.eval_float(xs[:, None, :], ps[None, :, :])  # (S, S', 1)
+    assert_encloses_float(Y[0], y)
+
+
+def test_generic_code_on_intervals_matches_graph():
+    """Model code run directly on Intervals and the traced graph give identical enclosures."""
+    graph = trace(lambda v, p: generic_model(v[0], p[0], p[1], v[1]), 2, 2)
+    q, x = Interval(np.array([0.1, -1.0]), np.array([0.3, 1.0])), Interval(np.array([2.0, 0.5]), np.array([2.5, 0.6]))
+    direct = generic_model(q, 2.0, 3.0, x)
+    box = Interval(np.stack([q.lo, x.lo], -1), np.stack([q.hi, x.hi], -1))
+    via_graph = graph.eval_interval(box, [2.0, 3.0])
+    np.testing.assert_array_equal(via_graph.lo[:, 0], direct.lo)
+    np.testing.assert_array_equal(via_graph.hi[:, 0], direct.hi)
+
+
+def test_point_boxes_are_tight():
+    graph = GRAPHS["double_pendulum"][0]
+    X = np.random.default_rng(5).uniform(-2, 2, size=(50, 4))
+    Y = graph.eval_interval(X)  # floats -> point intervals
+    y = graph.eval_float(X)
+    assert_encloses_float(Y, y)
+    assert np.all(Y.width() <= 1e-12 * (1 + np.abs(y)))
+
+
+def test_sqr_node_is_tight():
+    graph = trace(lambda x, p: x[0] * x[0], 1)
+    Y = graph.eval_interval(Interval(np.array([[-1.0]]), np.array([[2.0]])))
+    assert Y.lo[0, 0] == 0.0 and 4.0 <= Y.hi[0, 0] <= np.nextafter(4.0, 5.0)  # x*x would give [-2, 4]
+
+
+def test_interval_input_errors():
+    graph = GRAPHS["energy"][0]
+    with pytest.raises(ValueError, match="NaN"):
+        graph.eval_interval(np.array([[np.nan, 1.0]]), [1.0, 1.0, 9.81])
+    with pytest.raises(ValueError, match=r"got shape \(1, 3\)"):
+        graph.eval_interval(Interval(np.zeros((1, 3))), [1.0, 1.0, 9.81])
+    with pytest.raises(ValueError, match=r"p must have shape \(\.\.\., 3\)"):
+        graph.jacobian_interval(Interval(np.zeros((1, 2))), Interval(np.zeros(2)))
+
+
+# --------------------------------------------------------------------------- the oracle bites
+
+
+def test_containment_oracles_catch_an_unsound_sin(monkeypatch):
+    """A sin that returns the float sin of the midpoint (no enclosure) must be caught."""
+    graph = trace(lambda x, p: [np.sin(x[0]) * x[1] + x[1]], 2)
+    rng = np.random.default_rng(1)
+    lo, hi = random_boxes(2, 10, rng, max_rad=0.2)
+    check_graph_enclosure(graph, lo, hi)  # sound evaluator passes
+    check_graph_enclosure(graph, lo, hi, exact=True)
+
+    def midpoint_sin(self, a):
+        return Interval(np.sin(a.mid()))
+
+    monkeypatch.setattr(ev.IntervalDomain, "sin", midpoint_sin)
+    with pytest.raises(AssertionError, match="outside"):
+        check_graph_enclosure(graph, lo, hi)
+    with pytest.raises(AssertionError, match="outside"):
+        check_graph_enclosure(graph, lo, hi, exact=True)
+    with pytest.raises(AssertionError, match="outside"):
+        check_graph_enclosure(graph, lo, hi, jacobian=True)
+
+
+def test_containment_oracle_catches_a_wrong_derivative_rule(monkeypatch):
+    """d/dx cos = +sin (sign error) in the dual domain must be caught."""
+    graph = trace(lambda x, p: [np.cos(x[0]) * x[1]], 2)
+    rng = np.random.default_rng(2)
+    lo, hi = random_boxes(2, 10, rng, center_scale=1.0, max_rad=0.1)
+    lo[:, 0], hi[:, 0] = lo[:, 0] + 1.0, hi[:, 0] + 1.0  # sin(x) > 0 there
+
+    def bad_cos(self, a):
+        B = self.base
+        return (B.cos(a[0]), None if a[1] is None else self._scale(B.sin(a[0]), a[1]))
+
+    check_graph_enclosure(graph, lo, hi, jacobian=True)
+    monkeypatch.setattr(ev.DualDomain, "cos", bad_cos)
+    with pytest.raises(AssertionError, match="outside"):
+        check_graph_enclosure(graph, lo, hi, jacobian=True)
