@@ -579,3 +579,17 @@ def test_repr_is_readable():
     assert "pow(%0, 3)" in text and "outputs: y0=" in text
     big = trace(lambda x, p: sum(np.sin(x[0] * k) for k in range(2, 60)), 1)
     assert "more nodes" in repr(big) and len(big.pretty().splitlines()) > len(repr(big).splitlines())
+
+
+def test_tracer_accepts_rigorous_irrational_constants(arb):
+    from verified.interval import Interval
+
+    g = trace(lambda x, p: [x[0] * sp.pi, sp.pi / 3 + x[0], x[0] * sp.sqrt(2), x[0] * Interval(1.0, 1.5)], 1)
+    Y = g.eval_interval(np.array([1.0]))
+    _assert_encloses(arb, float(Y.lo[0]), float(Y.hi[0]), arb.pi())
+    _assert_encloses(arb, float(Y.lo[1]), float(Y.hi[1]), arb.pi() / 3 + 1)
+    _assert_encloses(arb, float(Y.lo[2]), float(Y.hi[2]), arb(2).sqrt())
+    assert 0.999999 < Y.lo[3] <= 1.0 and 1.5 <= Y.hi[3] < 1.500001
+    np.testing.assert_allclose(g.eval_float([1.0]), [np.pi, np.pi / 3 + 1, np.sqrt(2), 1.25])
+    with pytest.raises(TypeError):
+        trace(lambda x, p: x[0] * sp.Symbol("z"), 1)

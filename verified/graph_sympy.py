@@ -25,7 +25,7 @@ import sympy
 
 from .graph import Graph, GraphBuilder, Op, enclose_approximation, enclose_rational
 
-__all__ = ["from_sympy", "graph_to_sympy", "sympy_constant_enclosure"]
+__all__ = ["from_sympy", "graph_to_sympy", "sympy_constant_enclosure", "sympy_number_node"]
 
 # evalf precision for irrational constants, and the relative error we trust of it
 _DIGITS = 40
@@ -187,6 +187,19 @@ class _Converter:
         raise NotImplementedError(
             f"rational exponent {exp} in {self.show(whole)}: only integer and half-integer exponents are supported"
         )
+
+
+def sympy_number_node(builder: GraphBuilder, value) -> int:
+    """Node id of a constant sympy expression (``pi/3``, ``sqrt(2)``, ``Rational(1, 3)``) in ``builder``.
+
+    Raises TypeError for non-numbers (e.g. an expression with free symbols)."""
+    value = sympy.sympify(value)
+    if not value.is_number:
+        raise TypeError(f"cannot use the sympy expression {value} (it has free symbols) as a traced constant")
+    try:
+        return _Converter(builder, {}, {}).node(value)
+    except NotImplementedError as exc:
+        raise TypeError(str(exc)) from None
 
 
 def from_sympy(exprs, inputs, params=(), *, cse: bool = True, output_names: Sequence[str] | None = None) -> Graph:

@@ -8,13 +8,18 @@ scalars, and the numpy ufuncs listed in :data:`SUPPORTED_UFUNCS`. Object arrays 
 Tracers work too (numpy calls the operators / ``.sin()`` ... methods per element).
 
 Python floats in traced code are exact constants (the double itself); ints and
-Fractions are enclosed outward when they are not doubles.
+Fractions are enclosed outward when they are not doubles. Irrational constants can be
+given as sympy numbers (``sympy.pi / 3``, ``sympy.sqrt(2)``: converted like
+:func:`~verified.graph.from_sympy` does) or as a 0-d :class:`~verified.interval.Interval` enclosing
+them; both become rigorous constant enclosures. (A float such as ``math.pi`` is taken
+as the exact double, which is *not* pi.)
 
 Anything that needs a concrete value -- ``bool()``, comparisons, ``float()`` -- raises
 ``TypeError``: data-dependent control flow cannot be traced.
 """
 from __future__ import annotations
 
+import sys
 from fractions import Fraction
 from typing import Callable, Sequence
 
@@ -168,6 +173,13 @@ class Tracer:
 
     __int__ = __index__ = __complex__ = __float__
 
+    def _sympy_(self):
+        # lets ``sympy_number + tracer`` fall back to Tracer.__radd__ (sympy's operators
+        # return NotImplemented on SympifyError) instead of failing in float(tracer)
+        import sympy
+
+        raise sympy.SympifyError(self, "a Tracer is not a sympy expression")
+
     def __abs__(self):
         raise NotImplementedError("abs is not in the graph op set (it is not smooth)")
 
@@ -267,6 +279,15 @@ def _lift(builder: GraphBuilder, value) -> int:
         return builder.const(value)
     if isinstance(value, (float, np.float64, np.float32, np.float16)):
         return builder.const(float(value))
+    interval_mod = sys.modules.get("verified.interval")
+    if interval_mod is not None and isinstance(value, interval_mod.Interval) and value.ndim == 0:
+        # an enclosure of a constant (e.g. of pi) used in generic model code
+        lo, hi = float(value.lo), float(value.hi)
+        return builder.const_enclosure(lo, hi, lo if lo == hi else 0.5 * lo + 0.5 * hi)
+    if type(value).__module__.startswith("sympy"):
+        from .graph_sympy import sympy_number_node
+
+        return sympy_number_node(builder, value)
     raise TypeError(f"cannot use {type(value).__name__} {value!r} in a traced expression")
 
 
