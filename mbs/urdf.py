@@ -62,7 +62,31 @@ def _placement(H, where):
 
 
 def _is_xml(s: str) -> bool:
-    return s.lstrip().startswith("<")
+    return "<" in s
+
+
+def _prevalidate(xml: str) -> None:
+    """Strict XML parse and structural checks, so errors name the element."""
+    import xml.etree.ElementTree as ET
+    try:
+        root = ET.fromstring(xml)
+    except ET.ParseError as e:
+        raise ModelError(f"malformed URDF (XML error: {e})") from None
+    if root.tag != "robot":
+        raise ModelError(f"malformed URDF: root element is <{root.tag}>, expected <robot>")
+    for k, link in enumerate(root.findall("link")):
+        if not link.get("name"):
+            raise ModelError(f"malformed URDF: <link> number {k + 1} has no name")
+    for k, j in enumerate(root.findall("joint")):
+        name = j.get("name")
+        if not name:
+            raise ModelError(f"malformed URDF: <joint> number {k + 1} has no name")
+        if not j.get("type"):
+            raise ModelError(f"joint {name!r}: missing type attribute")
+        for tag in ("parent", "child"):
+            e = j.find(tag)
+            if e is None or not e.get("link"):
+                raise ModelError(f"joint {name!r}: missing <{tag} link=...>")
 
 
 def load_urdf(path_or_xml):
@@ -79,6 +103,7 @@ def load_urdf(path_or_xml):
         xml = path_or_xml.decode()
     else:
         xml = str(path_or_xml)
+    _prevalidate(xml)
     import logging
     log = logging.getLogger("yourdfpy")
     old = log.level

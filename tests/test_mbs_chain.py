@@ -1,0 +1,187 @@
+"""Chain construction: URDF features (trees, fixed-joint merging, inertial rpy, damping,
+continuous/prismatic joints, locking), DH conventions, the robot locator."""
+import math
+
+import numpy as np
+import pytest
+import sympy
+
+import mbs
+from mbs import Chain, RigidInertia, robots
+from mbs.check import compare_with_pinocchio, max_error
+
+TREE_URDF = """<?xml version="1.0"?>
+<robot name="ytree">
+  <link name="world"/>
+  <link name="base"><inertial><origin xyz="0.1 0 0.05" rpy="0 0 0"/><mass value="2.0"/>
+      <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.04"/></inertial></link>
+  <joint name="weld" type="fixed"><parent link="world"/><child link="base"/>
+      <origin xyz="0 0 0.2" rpy="0 0 0.3"/></joint>
+  <link name="trunk"><inertial><origin xyz="0 0.02 0.3" rpy="0.3 -0.2 0.7"/><mass value="1.5"/>
+      <inertia ixx="0.05" ixy="0.001" ixz="-0.002" iyy="0.04" iyz="0.003" izz="0.01"/></inertial></link>
+  <joint name="yaw" type="continuous"><parent link="base"/><child link="trunk"/>
+      <origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/><dynamics damping="0.2"/></joint>
+  <link name="head"><inertial><origin xyz="0.01 0 0.05" rpy="0 0.4 0"/><mass value="0.7"/>
+      <inertia ixx="0.004" ixy="0" ixz="0" iyy="0.005" iyz="0" izz="0.003"/></inertial></link>
+  <joint name="neck" type="fixed"><parent link="trunk"/><child link="head"/>
+      <origin xyz="0 0 0.6" rpy="0.1 0.2 0.3"/></joint>
+  <link name="left"><inertial><origin xyz="0.2 0 0" rpy="0 0 0"/><mass value="0.9"/>
+      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="left_shoulder" type="revolute"><parent link="trunk"/><child link="left"/>
+      <origin xyz="0 0.15 0.5" rpy="1.57079632679 0 0"/><axis xyz="0.6 0 0.8"/>
+      <limit lower="0" upper="0" effort="0" velocity="0"/></joint>
+  <link name="right"><inertial><origin xyz="0.2 0 0" rpy="0 0 0"/><mass value="0.8"/>
+      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="right_slide" type="prismatic"><parent link="trunk"/><child link="right"/>
+      <origin xyz="0 -0.15 0.5" rpy="0 0 0"/><axis xyz="1 0 0"/><dynamics damping="1.5"/>
+      <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <link name="hand"><inertial><mass value="0.3"/>
+      <inertia ixx="0.0003" ixy="0" ixz="0" iyy="0.0003" iyz="0" izz="0.0003"/></inertial></link>
+  <joint name="wrist" type="revolute"><parent link="left"/><child link="hand"/>
+      <origin xyz="0.4 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/>
+      <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>"""
+
+
+@pytest.fixture(scope="module")
+def tree():
+    return Chain.from_urdf(TREE_URDF)
+
+
+def test_tree_structure(tree):
+    assert tree.joint_names == ["yaw", "left_shoulder", "wrist", "right_slide"]
+    assert tree.parents == [-1, 0, 1, 0]
+    assert [b.joint.kind for b in tree.bodies] == ["revolute", "revolute", "revolute", "prismatic"]
+    assert tree.damping == [0.2, 0, 0, 1.5]
+    assert tree.base_name == "world"
+    assert tree.base_inertia.mass == pytest.approx(2.0)
+    assert tree.bodies[0].inertia.mass == pytest.approx(1.5 + 0.7)   # head welded to trunk
+
+
+def test_tree_matches_pinocchio(tree):
+    rep = compare_with_pinocchio(tree, n_states=8, seed=3)
+    assert max_error(rep) <= 1e-10, rep
+
+
+def test_xml_string_and_path_agree(tmp_path, tree):
+    p = tmp_path / "t.urdf"
+    p.write_text(TREE_URDF)
+    assert Chain.from_urdf(p).fingerprint() == tree.fingerprint()
+    assert Chain.from_urdf(str(p)).fingerprint() == tree.fingerprint()
+
+
+def test_merge_two_point_masses_closed_form():
+    a = RigidInertia.point(1.0, (0.0, 0.0, 0.0))
+    b = RigidInertia.point(3.0, (4.0, 0.0, 0.0))
+    m = a.merged(b)
+    assert m.mass == 4.0
+    assert m.com == pytest.approx((3.0, 0.0, 0.0))
+    I = np.array(m.inertia, float)
+    # about the com: 1*3^2 + 3*1^2 = 12 for the y and z axes, 0 for x
+    assert np.allclose(I, np.diag([0.0, 12.0, 12.0]))
+
+
+def test_inertial_rpy_is_honoured():
+    """A rod along the link's x axis written with rpy = (0, 0, pi/2) is a rod along y."""
+    def xml(rpy, ixx, iyy):
+        return f"""<robot name="r"><link name="b"/>
+        <link name="l"><inertial><origin xyz="0 0 0" rpy="{rpy}"/><mass value="1"/>
+        <inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="0.5"/></inertial></link>
+        <joint name="j" type="revolute"><parent link="b"/><child link="l"/><axis xyz="1 0 0"/></joint>
+        </robot>"""
+    c1 = Chain.from_urdf(xml("0 0 1.5707963267948966", "0.1", "0.5"))
+    c2 = Chain.from_urdf(xml("0 0 0", "0.5", "0.1"))
+    assert np.allclose(np.array(c1.bodies[0].inertia.inertia, float),
+                       np.array(c2.bodies[0].inertia.inertia, float), atol=1e-15)
+    assert c1.numeric().mass_matrix([0.0])[0, 0] == pytest.approx(0.5)
+
+
+def test_ur5_pi_half_is_snapped():
+    c = robots.load("ur5")
+    R = c.bodies[1].joint.placement[0]   # shoulder_lift: rpy (0, 1.57079632679, 0)
+    flat = [v for row in R for v in row]
+    assert set(flat) <= {0, 1, -1, 0.0, 1.0, -1.0}
+    M = c.symbolic().M
+    assert not any(isinstance(a, sympy.Float) and abs(a) < 1e-9 for e in M for a in e.atoms(sympy.Float))
+
+
+def test_panda_lock_and_select():
+    full = Chain.from_urdf(robots.urdf_path("panda"), lock={"panda_finger_joint2": 0.0})
+    assert full.n == 8 and full.joint_names[-1] == "panda_finger_joint1"
+    arm = full.lock({"panda_finger_joint1": 0.0})
+    ref = robots.load("panda")
+    assert arm.n == ref.n == 7
+    q = np.linspace(-1, 1, 7)
+    assert np.allclose(arm.numeric().mass_matrix(q), ref.numeric().mass_matrix(q), atol=1e-14)
+    sub = ref.select(["panda_joint1", "panda_joint2"])
+    assert sub.joint_names == ["panda_joint1", "panda_joint2"]
+    rep = compare_with_pinocchio(sub, n_states=3, symbolic=False)
+    assert max_error(rep) <= 1e-10
+
+
+def test_lock_matches_pinocchio_reduced_model(tree):
+    locked = Chain.from_urdf(TREE_URDF, lock={"left_shoulder": 0.4, "right_slide": -0.1})
+    assert locked.joint_names == ["yaw", "wrist"]
+    rep = compare_with_pinocchio(locked, n_states=4, symbolic=False)
+    assert max_error(rep) <= 1e-10, rep
+    # generic lock on the built chain (DH path to Pinocchio) agrees too
+    locked2 = tree.lock({"left_shoulder": 0.4, "right_slide": -0.1})
+    q = [0.3, -0.8]
+    assert np.allclose(locked.numeric().mass_matrix(q), locked2.numeric().mass_matrix(q), atol=1e-14)
+
+
+def test_continuous_joint_urdf_matches_pinocchio():
+    c = Chain.from_urdf(robots.urdf_path("double_pendulum_continuous"))
+    assert max_error(compare_with_pinocchio(c, n_states=4, symbolic=False)) <= 1e-10
+
+
+def test_robot_locator():
+    d = robots.robots_dir()
+    assert d.name == "robots" and d.is_dir()
+    assert robots.urdf_path("ur5").name == "ur5_robot.urdf"
+    assert robots.urdf_path("ur5_gripper").is_file()
+    assert "ur_description/urdf/ur5_robot.urdf" in robots.list_urdfs()
+    with pytest.raises(mbs.ModelError, match="no example-robot-data URDF"):
+        robots.urdf_path("no_such_robot")
+
+
+def test_dh_standard_pendulum_frames():
+    c = Chain.from_dh([dict(joint="R", a=2.0, alpha=math.pi / 2, mass=1.0)])
+    R, p = c.numeric().frame_placement("link1", [math.pi / 2])
+    assert np.allclose(np.array(p, float), [0, 2, 0], atol=1e-15)
+    # alpha = pi/2 snapped: exact rotation entries
+    assert c.frames["link1"][1][0] == ((1, 0, 0), (0, 0, -1), (0, 1, 0))
+
+
+def test_dh_tuple_rows_and_prismatic():
+    rows = [("R", 0.0, 0.3, 0.0, math.pi / 2, 2.0, (0, 0, 0.1), (0.01, 0.01, 0.01)),
+            ("P", 0.0, 0.2, 0.0, 0.0, 1.0, (0, 0, -0.1), (0.02, 0.02, 0.01), 0.5)]
+    for conv in ("standard", "modified"):
+        c = Chain.from_dh(rows, convention=conv)
+        assert [b.joint.kind for b in c.bodies] == ["revolute", "prismatic"]
+        assert c.damping == [0.0, 0.5]
+        assert max_error(compare_with_pinocchio(c, n_states=4)) <= 1e-10
+
+
+def test_symbolic_dh_parameters():
+    """A 2-link planar chain with symbolic lengths and point masses: closed-form M."""
+    l1, l2, m1, m2 = sympy.symbols("l1 l2 m1 m2", positive=True)
+    c = Chain.from_dh([dict(joint="R", a=l1, mass=m1), dict(joint="R", a=l2, mass=m2)],
+                      gravity=(0, -9.81, 0))
+    s = c.symbolic()
+    q2 = s.q[1]
+    M_expected = sympy.Matrix([
+        [(m1 + m2) * l1**2 + m2 * l2**2 + 2 * m2 * l1 * l2 * sympy.cos(q2),
+         m2 * l2**2 + m2 * l1 * l2 * sympy.cos(q2)],
+        [m2 * l2**2 + m2 * l1 * l2 * sympy.cos(q2), m2 * l2**2]])
+    assert sympy.simplify(s.M - M_expected) == sympy.zeros(2, 2)
+    num = c.subs({l1: 0.7, l2: 0.4, m1: 2.0, m2: 1.5})
+    assert max_error(compare_with_pinocchio(num, n_states=3)) <= 1e-10
+
+
+def test_fingerprint_changes_with_content():
+    a = Chain.from_dh([dict(joint="R", a=1.0, mass=1.0)])
+    b = Chain.from_dh([dict(joint="R", a=1.0, mass=1.0 + 1e-12)])
+    c = Chain.from_dh([dict(joint="R", a=1.0, mass=1.0)], gravity=(0, 0, -9.8))
+    assert len({a.fingerprint(), b.fingerprint(), c.fingerprint()}) == 3
+    assert a.fingerprint() == Chain.from_dh([dict(joint="R", a=1.0, mass=1.0)]).fingerprint()
