@@ -478,15 +478,19 @@ def _binary(loop, x, y):
         shape = xl.shape if xl.shape == yl.shape else np.broadcast_shapes(xl.shape, yl.shape)
     except ValueError:
         raise ValueError(f"interval operands of shapes {xl.shape} and {yl.shape} do not broadcast") from None
-    lo, hi = loop(_flat(xl, shape), _flat(xh, shape), _flat(yl, shape), _flat(yh, shape))
-    return Interval._from_bounds(lo.reshape(shape), hi.reshape(shape))
+    lo = np.empty(shape)
+    hi = np.empty(shape)
+    loop(_flat(xl, shape), _flat(xh, shape), _flat(yl, shape), _flat(yh, shape), lo.reshape(-1), hi.reshape(-1))
+    return Interval._from_bounds(lo, hi)
 
 
 def _unary(loop, x):
     xl, xh = _bounds(x)
     shape = xl.shape
-    lo, hi = loop(_flat(xl, shape), _flat(xh, shape))
-    return Interval._from_bounds(lo.reshape(shape), hi.reshape(shape))
+    lo = np.empty(shape)
+    hi = np.empty(shape)
+    loop(_flat(xl, shape), _flat(xh, shape), lo.reshape(-1), hi.reshape(-1))
+    return Interval._from_bounds(lo, hi)
 
 
 def _power(x, exponent):
@@ -564,8 +568,10 @@ def ipow(x, n):
         raise TypeError(f"ipow needs an integer exponent, got {n!r}")
     xl, xh = _bounds(x)
     shape = xl.shape
-    lo, hi = _k.ipow_loop(_flat(xl, shape), _flat(xh, shape), int(n))
-    return Interval._from_bounds(lo.reshape(shape), hi.reshape(shape))
+    lo = np.empty(shape)
+    hi = np.empty(shape)
+    _k.ipow_loop(_flat(xl, shape), _flat(xh, shape), int(n), lo.reshape(-1), hi.reshape(-1))
+    return Interval._from_bounds(lo, hi)
 
 
 def sqrt(x):
