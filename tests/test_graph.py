@@ -593,3 +593,33 @@ def test_tracer_accepts_rigorous_irrational_constants(arb):
     np.testing.assert_allclose(g.eval_float([1.0]), [np.pi, np.pi / 3 + 1, np.sqrt(2), 1.25])
     with pytest.raises(TypeError):
         trace(lambda x, p: x[0] * sp.Symbol("z"), 1)
+
+
+def test_tracer_broadcasts_over_float_arrays():
+    g = trace(lambda x, p: list(np.array([1.0, 2.0]) * x[0] + np.sin(x[1]) * np.array([3, 4])), 2)
+    np.testing.assert_allclose(g.eval_float([0.5, 0.3]), [0.5 + 3 * np.sin(0.3), 1 + 4 * np.sin(0.3)], rtol=1e-15)
+
+
+def test_custom_domain_walks_each_node_once():
+    """Evaluators are pluggable: a Domain subclass that renders expressions as strings."""
+    from verified.evaluate import Domain
+
+    calls = []
+
+    class Render(Domain):
+        def const(self, lo, hi, value):
+            return repr(value)
+
+        def __getattribute__(self, name):
+            attr = object.__getattribute__(self, name)
+            if name in {op.name.lower() for op in Op} - {"const", "input", "param"}:
+                def op(*args):
+                    calls.append(name)
+                    return f"{name}({', '.join(map(str, args))})"
+                return op
+            return attr
+
+    g = trace(lambda x, p: [np.sin(x[0] * p[0]) + x[0] ** 3, np.sin(x[0] * p[0])], 1, 1)
+    out = g.evaluate(Render(), ["q"], ["l"])
+    assert out == ["add(sin(mul(q, l)), pow(q, 3))", "sin(mul(q, l))"]
+    assert sorted(calls) == sorted(["mul", "sin", "pow", "add"])  # shared sin evaluated once

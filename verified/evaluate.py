@@ -180,8 +180,8 @@ class FloatDomain(Domain):
         return np.asarray(a)[..., None]
 
     def pack(self, values, shape, axis=-1):
-        if not values:
-            return np.zeros(shape[: len(shape) + axis + 1] + (0,) + shape[len(shape) + axis + 1 :])
+        if not values:  # np.stack needs at least one array
+            return np.moveaxis(np.zeros(shape + (0,)), -1, axis)
         return np.stack([np.broadcast_to(v, shape) for v in values], axis=axis)
 
 

@@ -288,6 +288,11 @@ class Graph:
         """Forward-mode Jacobian -> (..., m, k); ``wrt`` is "x" (k = n), "p" (k = p) or "xp" (k = n + p)."""
         return _evaluate.jacobian_float(self, x, p, wrt=wrt)
 
+    def evaluate(self, domain, inputs: Sequence, params: Sequence = ()) -> list:
+        """Outputs in any :class:`verified.evaluate.Domain`, given one domain value per
+        input and per parameter (see :func:`verified.evaluate.evaluate`)."""
+        return _evaluate.evaluate(self, domain, inputs, params)
+
     def jacobian_interval(self, x, p=None, *, wrt: str = "x"):
         """Interval enclosure of the Jacobian over the box -> Interval (..., m, k); see :meth:`jacobian_float`."""
         return _evaluate.jacobian_interval(self, x, p, wrt=wrt)
@@ -597,7 +602,7 @@ class GraphBuilder:
         if k == 2:
             return self.sqr(a)
         ca = self._exact(a)
-        if ca is not None and k < 2000:
+        if ca is not None and k <= 64 and abs(ca) <= 2.0**64:  # keep the exact check cheap
             folded = self._fold(Fraction(ca) ** k)
             if folded is not None:
                 return folded
