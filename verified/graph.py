@@ -451,8 +451,10 @@ class GraphBuilder:
     def const(self, value: float | int | Fraction) -> int:
         """Constant of an exact Python number: a float is taken as exact; int and
         Fraction are enclosed outward if not representable."""
-        if isinstance(value, (bool, int, np.integer, Fraction)):
-            return self.const_enclosure(*enclose_rational(Fraction(int(value) if not isinstance(value, Fraction) else value)))
+        if isinstance(value, Fraction):
+            return self.const_enclosure(*enclose_rational(value))
+        if isinstance(value, (bool, int, np.integer)):
+            return self.const_enclosure(*enclose_rational(Fraction(int(value))))
         if isinstance(value, (float, np.floating)) and not isinstance(value, np.longdouble):
             v = float(value)
             return self.const_enclosure(v, v, v)
@@ -668,7 +670,23 @@ class GraphBuilder:
 
 
 def from_sympy(exprs, inputs, params=(), *, cse: bool = True, output_names: Sequence[str] | None = None) -> Graph:
-    """Graph of sympy expression(s); see :func:`verified.graph_sympy.from_sympy`."""
+    """Graph of sympy expression(s) after ``sympy.cse``.
+
+    Args:
+        exprs: a sympy expression, a (nested) list/tuple of them, or a Matrix (flattened
+            row-major into the ``m`` outputs).
+        inputs: the ``n`` input symbols (Symbols, or atoms such as ``q(t)``, ``Derivative(q(t), t)``).
+        params: the ``p`` parameter symbols.
+        cse: run ``sympy.cse`` first.
+        output_names: optional names of the outputs (default ``y0, y1, ...``).
+
+    Supported: ``+ - * /``, integer powers, half-integer powers (via sqrt), sin, cos, tan,
+    atan, exp, log, and numbers (Integer/Rational/Float exactly enclosed; pi, E, ... to
+    40 digits, enclosed outward). Raises ``ValueError`` for symbols that are neither
+    inputs nor params, ``NotImplementedError`` for anything else (Abs, sign, Piecewise,
+    ``x**(1/3)``, ...), naming the offending subexpression. Details in
+    :mod:`verified.graph_sympy`.
+    """
     from .graph_sympy import from_sympy as _from_sympy
 
     return _from_sympy(exprs, inputs, params, cse=cse, output_names=output_names)
