@@ -318,14 +318,20 @@ class Interval:
         pieces = np.broadcast_to(np.asarray(pieces, dtype=int), (n,))
         if (pieces < 1).any():
             raise ValueError(f"pieces must be >= 1, got {pieces.tolist()}")
+        if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+            raise ValueError("cannot subdivide boxes with infinite or empty bounds")
         edges_lo, edges_hi = [], []
         for j in range(n):
             k = int(pieces[j])
             t = np.arange(k + 1) / k
-            e = lo[..., j, None] * (1.0 - t) + hi[..., j, None] * t
+            with np.errstate(invalid="ignore", over="ignore"):
+                e = lo[..., j, None] * (1.0 - t) + hi[..., j, None] * t
+            # Rounding may push an edge outside the box or out of order: clip and
+            # sort so the pieces are subsets whose union is exactly the box.
+            e = np.clip(e, lo[..., j, None], hi[..., j, None])
             e[..., 0] = lo[..., j]
             e[..., -1] = hi[..., j]
-            e = np.maximum.accumulate(e, axis=-1)  # keep edges ordered despite rounding
+            e = np.maximum.accumulate(e, axis=-1)
             edges_lo.append(e[..., :-1])
             edges_hi.append(e[..., 1:])
         grids_lo = np.stack(np.meshgrid(*[np.arange(int(p)) for p in pieces], indexing="ij"), -1).reshape(-1, n)
