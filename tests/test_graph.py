@@ -623,3 +623,22 @@ def test_custom_domain_walks_each_node_once():
     out = g.evaluate(Render(), ["q"], ["l"])
     assert out == ["add(sin(mul(q, l)), pow(q, 3))", "sin(mul(q, l))"]
     assert sorted(calls) == sorted(["mul", "sin", "pow", "add"])  # shared sin evaluated once
+
+
+def test_select_fingerprint_and_pickle():
+    import pickle
+
+    g = trace(lambda x, p: [np.sin(x[0]) * x[1], np.cos(x[1]), x[0] + 1.0], 2, output_names=["a", "b", "c"])
+    sub = g.select(["c", 0])
+    assert sub.output_names == ("c", "a") and sub.n_inputs == 2
+    assert sub.n_ops == 3 and "cos" not in sub.op_counts()
+    X = rand_points(2, 7)
+    np.testing.assert_array_equal(sub.eval_float(X), g.eval_float(X)[:, [2, 0]])
+    with pytest.raises(ValueError, match="no output named 'z'"):
+        g.select(["z"])
+    with pytest.raises(IndexError):
+        g.select([3])
+    assert g.fingerprint() == Graph.from_dict(g.to_dict()).fingerprint() != sub.fingerprint()
+    assert len(g.fingerprint()) == 64
+    g2 = pickle.loads(pickle.dumps(g))
+    assert g2 == g and hash(g2) == hash(g)

@@ -25,6 +25,8 @@ function on :class:`~verified.tracer.Tracer` scalars). Evaluators live in
 from __future__ import annotations
 
 import enum
+import hashlib
+import json
 import math
 from fractions import Fraction
 from typing import Any, Iterable, NamedTuple, Sequence
@@ -336,6 +338,28 @@ class Graph:
             nodes.append((op, args, data))
         return cls(nodes, d["output_nodes"], d["inputs"], d["params"], d["outputs"])
 
+    def fingerprint(self) -> str:
+        """SHA-256 hex digest of the canonical serialized form (a cache key; equal
+        graphs, including names, have equal fingerprints)."""
+        text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def select(self, outputs: Sequence[int | str]) -> "Graph":
+        """Graph of a subset of the outputs (by index or name), pruned to what they need.
+
+        Inputs and parameters are kept (same ``n`` and ``p``), so boxes still fit."""
+        idx = []
+        for o in outputs:
+            if isinstance(o, str):
+                if o not in self.output_names:
+                    raise ValueError(f"no output named {o!r}; outputs are {self.output_names}")
+                o = self.output_names.index(o)
+            if not -self.n_outputs <= int(o) < self.n_outputs:
+                raise IndexError(f"output index {o} out of range (graph has {self.n_outputs} outputs)")
+            idx.append(int(o) % self.n_outputs)
+        nodes, new_outputs = _prune(self.nodes, [self.outputs[i] for i in idx])
+        return Graph(nodes, new_outputs, self.input_names, self.param_names, [self.output_names[i] for i in idx])
+
     def to_sympy(self, inputs=None, params=None) -> list:
         """Debugging aid: list of ``m`` sympy expressions (constants as their float value)."""
         from .graph_sympy import graph_to_sympy
@@ -386,6 +410,21 @@ class Graph:
 
     def __repr__(self) -> str:
         return self.pretty(max_lines=40)
+
+
+def _prune(nodes: Sequence[Node], outputs: Sequence[int]) -> tuple[list[Node], list[int]]:
+    """Keep only the nodes the outputs depend on, renumbered in the same (topological) order."""
+    needed = set()
+    stack = list(outputs)
+    while stack:
+        i = stack.pop()
+        if i not in needed:
+            needed.add(i)
+            stack.extend(nodes[i].args)
+    order = sorted(needed)
+    renumber = {old: new for new, old in enumerate(order)}
+    kept = [Node(nodes[i].op, tuple(renumber[a] for a in nodes[i].args), nodes[i].data) for i in order]
+    return kept, [renumber[o] for o in outputs]
 
 
 # --------------------------------------------------------------------------- builder
@@ -650,20 +689,8 @@ class GraphBuilder:
         """Graph of the given output node ids, keeping only nodes they depend on
         (renumbered, still in topological order)."""
         outputs = [self._check_id(o) for o in outputs]
-        needed = set()
-        stack = list(outputs)
-        while stack:
-            i = stack.pop()
-            if i not in needed:
-                needed.add(i)
-                stack.extend(self._nodes[i].args)
-        order = sorted(needed)
-        renumber = {old: new for new, old in enumerate(order)}
-        nodes = [
-            Node(self._nodes[i].op, tuple(renumber[a] for a in self._nodes[i].args), self._nodes[i].data)
-            for i in order
-        ]
-        return Graph(nodes, [renumber[o] for o in outputs], self.input_names, self.param_names, output_names)
+        nodes, new_outputs = _prune(self._nodes, outputs)
+        return Graph(nodes, new_outputs, self.input_names, self.param_names, output_names)
 
 
 # --------------------------------------------------------------------------- front ends
