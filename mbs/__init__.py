@@ -12,7 +12,8 @@ Main entry points::
 from .errors import ModelError, UnsupportedJointError
 from .inertia import RigidInertia
 from .chain import Chain, Joint, Body, build_tree
-from . import robots
+from . import robots, cache
+from .check import compare_with_pinocchio
 
 __all__ = ["Chain", "Joint", "Body", "RigidInertia", "ModelError", "UnsupportedJointError",
-           "build_tree", "robots"]
+           "build_tree", "robots", "cache", "compare_with_pinocchio"]

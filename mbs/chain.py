@@ -134,6 +134,8 @@ class Chain:
         return f"<Chain {self.name!r}: {self.n} dof ({kinds}), bodies {self.body_names}>"
 
     def _validate(self):
+        if not self.bodies:
+            raise ModelError(f"chain {self.name!r} has no movable joints")
         names = set()
         for i, b in enumerate(self.bodies):
             j = b.joint

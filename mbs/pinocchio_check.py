@@ -221,3 +221,14 @@ def compare_with_pinocchio(chain, n_states=10, seed=0, symbolic=True, numeric=Tr
 
 def max_error(report) -> float:
     return max(v for part in report.values() for v in part.values())
+
+
+def format_report(reports: dict) -> str:
+    """Markdown table of {model name: compare_with_pinocchio report} (max relative errors)."""
+    keys = ("fk", "M", "K", "P", "g", "qdd")
+    lines = ["| model | model kind | " + " | ".join(keys) + " |",
+             "|---|---|" + "---|" * len(keys)]
+    for name, rep in reports.items():
+        for kind, errs in rep.items():
+            lines.append(f"| {name} | {kind} | " + " | ".join(f"{errs[k]:.1e}" for k in keys) + " |")
+    return "\n".join(lines)

@@ -181,3 +181,17 @@ def urdf_chain(m1=M1, m2=M2, l1=L1, l2=L2, g=G):
     """The double pendulum from a small URDF (joints about -y, masses along -z)."""
     from mbs import Chain
     return Chain.from_urdf(urdf_xml(m1, m2, l1, l2), gravity=(0.0, 0.0, -g))
+
+
+def rhs_graph():
+    """eq. (22) traced into a ``verified.graph.Graph`` (x -> x')."""
+    from verified.graph import trace
+    return trace(rhs, 4, input_names=["x1", "x2", "x3", "x4"],
+                 output_names=["dx1", "dx2", "dx3", "dx4"])
+
+
+def energy_graph():
+    """eq. (24) traced: x -> [H] (dH/dt = 0 for this undamped model)."""
+    from verified.graph import trace
+    return trace(lambda x, p: [hamiltonian(x)], 4, input_names=["x1", "x2", "x3", "x4"],
+                 output_names=["H"])

@@ -92,3 +92,36 @@ def test_potential_energy_offset_is_the_fixed_base(urdf_chains):
     expected = -base.mass * np.dot(c.gravity, base.com)
     assert base.mass == pytest.approx(0.10159)
     assert c.numeric().potential_energy(q) - P_pin == pytest.approx(expected, rel=1e-12)
+
+
+from hypothesis import given, settings, strategies as st, HealthCheck
+
+_num = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
+_row = st.fixed_dictionaries({
+    "joint": st.sampled_from(["R", "P"]),
+    "theta": st.floats(-3.0, 3.0), "d": _num, "a": _num,
+    "alpha": st.one_of(st.sampled_from([0.0, 1.5707963267948966, -1.5707963267948966]),
+                       st.floats(-3.0, 3.0)),
+    "mass": st.floats(0.1, 5.0),
+    "com": st.tuples(_num, _num, _num),
+    "inertia": st.tuples(st.floats(0.01, 1.0), st.floats(0.01, 1.0), st.floats(0.01, 1.0)),
+    "damping": st.floats(0.0, 1.0),
+})
+
+
+@settings(max_examples=12, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(rows=st.lists(_row, min_size=1, max_size=4), convention=st.sampled_from(["standard", "modified"]),
+       gravity=st.tuples(_num, _num, st.floats(-10.0, 10.0)))
+def test_random_dh_chains_match_pinocchio(rows, convention, gravity):
+    chain = mbs.Chain.from_dh(rows, convention=convention, gravity=gravity)
+    rep = compare_with_pinocchio(chain, n_states=3, seed=0)
+    assert max_error(rep) <= 1e-9, rep
+
+
+def test_registry_builds_every_model():
+    from models.registry import NAMES, get
+    for name in NAMES:
+        assert get(name).n >= 1
+    with pytest.raises(mbs.ModelError, match="unknown model"):
+        get("nope")

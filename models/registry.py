@@ -1,0 +1,35 @@
+"""Name -> chain factory for every ready model (handy for CLIs and benchmarks).
+
+>>> from models.registry import get, NAMES
+>>> chain = get("ur5")
+"""
+from __future__ import annotations
+
+from . import double_pendulum, pendulum, planar, puma560, robots
+
+FACTORIES = {
+    "pendulum": pendulum.chain,
+    "double_pendulum_paper_dh": double_pendulum.dh_chain,
+    "double_pendulum_paper_urdf": double_pendulum.urdf_chain,
+    "planar2": lambda: planar.planar_chain(2),
+    "planar3": lambda: planar.planar_chain(3),
+    "planar6": lambda: planar.planar_chain(6),
+    "planar2_modified": lambda: planar.planar_chain(2, convention="modified"),
+    "planar3_modified": lambda: planar.planar_chain(3, convention="modified"),
+    "planar6_modified": lambda: planar.planar_chain(6, convention="modified"),
+    "puma560": lambda: puma560.puma560("standard"),
+    "puma560_modified": lambda: puma560.puma560("modified"),
+    "double_pendulum_urdf": robots.double_pendulum,
+    "ur5": robots.ur5,
+    "panda_arm": robots.panda_arm,
+}
+NAMES = tuple(FACTORIES)
+
+
+def get(name: str):
+    """The chain of a ready model (see :data:`NAMES`)."""
+    from mbs import ModelError
+    try:
+        return FACTORIES[name]()
+    except KeyError:
+        raise ModelError(f"unknown model {name!r}; choose one of {', '.join(NAMES)}") from None
