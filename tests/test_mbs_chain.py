@@ -185,3 +185,65 @@ def test_fingerprint_changes_with_content():
     c = Chain.from_dh([dict(joint="R", a=1.0, mass=1.0)], gravity=(0, 0, -9.8))
     assert len({a.fingerprint(), b.fingerprint(), c.fingerprint()}) == 3
     assert a.fingerprint() == Chain.from_dh([dict(joint="R", a=1.0, mass=1.0)]).fingerprint()
+
+
+def _h(R=np.eye(3), p=(0, 0, 0)):
+    H = np.eye(4)
+    H[:3, :3] = R
+    H[:3, 3] = p
+    return H
+
+
+def _rz(t):
+    c, s = np.cos(t), np.sin(t)
+    return _h(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]))
+
+
+def _rx(t):
+    c, s = np.cos(t), np.sin(t)
+    return _h(np.array([[1, 0, 0], [0, c, -s], [0, s, c]]))
+
+
+@pytest.mark.parametrize("convention", ["standard", "modified"])
+def test_dh_forward_kinematics_textbook(convention):
+    """DH frames vs the textbook 4x4 products (independent of our tree construction):
+    standard A_i = Rz(theta+q) Tz(d) Tx(a) Rx(alpha); modified A_i = Rx(alpha) Tx(a) Rz(theta+q) Tz(d)
+    (prismatic: d + q)."""
+    rng = np.random.default_rng(11)
+    rows = []
+    for i in range(5):
+        rows.append(dict(joint="R" if i != 2 else "P", theta=rng.uniform(-3, 3), d=rng.uniform(-1, 1),
+                         a=rng.uniform(-1, 1), alpha=rng.uniform(-3, 3), mass=1.0,
+                         inertia=(0.1, 0.1, 0.1)))
+    c = Chain.from_dh(rows, convention=convention)
+    num = c.numeric()
+    q = rng.uniform(-2, 2, 5)
+    H = np.eye(4)
+    for i, r in enumerate(rows):
+        th = r["theta"] + (q[i] if r["joint"] == "R" else 0.0)
+        d = r["d"] + (q[i] if r["joint"] == "P" else 0.0)
+        if convention == "standard":
+            A = _rz(th) @ _h(p=(0, 0, d)) @ _h(p=(r["a"], 0, 0)) @ _rx(r["alpha"])
+        else:
+            A = _rx(r["alpha"]) @ _h(p=(r["a"], 0, 0)) @ _rz(th) @ _h(p=(0, 0, d))
+        H = H @ A
+        R, p = num.frame_placement(f"link{i + 1}", q)
+        assert np.allclose(np.array(R, float), H[:3, :3], atol=1e-13)
+        assert np.allclose(np.array(p, float), H[:3, 3], atol=1e-13)
+    # the centre of mass given in DH frame i ends up where the textbook frame puts it
+    rows2 = [dict(r, com=(0.1, -0.2, 0.3)) for r in rows]
+    c2 = Chain.from_dh(rows2, convention=convention)
+    P = c2.numeric().potential_energy(q)
+    H = np.eye(4)
+    expected = 0.0
+    for i, r in enumerate(rows):
+        th = r["theta"] + (q[i] if r["joint"] == "R" else 0.0)
+        d = r["d"] + (q[i] if r["joint"] == "P" else 0.0)
+        if convention == "standard":
+            A = _rz(th) @ _h(p=(0, 0, d)) @ _h(p=(r["a"], 0, 0)) @ _rx(r["alpha"])
+        else:
+            A = _rx(r["alpha"]) @ _h(p=(r["a"], 0, 0)) @ _rz(th) @ _h(p=(0, 0, d))
+        H = H @ A
+        com = H @ np.array([0.1, -0.2, 0.3, 1.0])
+        expected += 9.81 * com[2]
+    assert P == pytest.approx(expected, rel=1e-13)
