@@ -317,16 +317,33 @@ class NumericModel:
         n = self.n
         def fn(x, p):
             return self.rhs(list(x))
-        return trace(fn, 2 * n, 0)
+        names = self._names()
+        return trace(fn, 2 * n, 0, input_names=names, output_names=[f"d{s}" for s in names])
+
+    def _names(self):
+        n = self.n
+        return [f"q{i + 1}" for i in range(n)] + [f"qd{i + 1}" for i in range(n)]
 
     def energy_graph(self):
-        """Expression graph (q, qd) -> [H] (H = K + P), for the constraint H_H."""
+        """Expression graph (q, qd) -> [H] (H = K + P from getKineticEnergy /
+        getPotentialEnergy), for the constraint H_H."""
         from verified.graph import trace
         n = self.n
         def fn(x, p):
             x = list(x)
             return [self.hamiltonian(x[:n], x[n:])]
-        return trace(fn, 2 * n, 0)
+        return trace(fn, 2 * n, 0, input_names=self._names(), output_names=["H"])
+
+    def energy_rate_graph(self):
+        """Expression graph (q, qd) -> [dH/dt] = qd^T (-D qd) (eq. (7), tau_ext = 0).
+        (The paper's mode (ii) differentiates H along the ODE by automatic
+        differentiation instead; that is the verified side's job: it has both graphs.)"""
+        from verified.graph import trace
+        n = self.n
+        def fn(x, p):
+            x = list(x)
+            return [self.energy_rate(x[:n], x[n:])]
+        return trace(fn, 2 * n, 0, input_names=self._names(), output_names=["dHdt"])
 
 
 def ldl_solve(M, b):

@@ -385,15 +385,57 @@ def _sym_rhs_graph(self, tau_params=False):
 
 
 def _sym_energy_graph(self):
-    """Expression graph (q, qd) -> [H, dH/dt] with H = K + P (eq. (4)) and the
-    simplified energy rate dH/dt = qd^T (-D qd) (eq. (7), tau_ext = 0).  Cached."""
+    """Expression graph (q, qd) -> [H], H = K + P (eq. (4)), for the constraint H_H.
+    Cached on disk."""
     from verified.graph import from_sympy
     def build():
         inputs = list(self.q) + list(self.qd)
-        rate = (self.qd.T * (-self.D * self.qd))[0, 0] if self.n else sympy.Integer(0)
-        return from_sympy([self.H, rate], inputs, output_names=["H", "dHdt"])
-    return _cached_graph(self.chain, "sym-energy", build)
+        return from_sympy([self.H], inputs, output_names=["H"])
+    return _cached_graph(self.chain, "sym-energy-H", build)
+
+
+def _sym_energy_rate_graph(self, simplified=False):
+    """Expression graph (q, qd) -> [dH/dt] for the constraint H_V (eq. (12)), tau_ext = 0.
+
+    - ``simplified=True``: eq. (7), dH/dt = qd^T (-D qd) (identically 0 without damping);
+    - ``simplified=False`` (the paper's symbolic mode): the chain rule
+      dH/dq . qd + dH/dqd . qdd(q, qd) with qdd from the EOM (LDL^T solve in the graph);
+      equal to eq. (7) in exact arithmetic, but not symbolically simplified, so its
+      interval enclosure is not a point.
+    Cached on disk."""
+    from verified.graph import from_sympy, trace
+    from .numeric import ldl_solve
+    from .sympy_eval import compile_generic
+    n = self.n
+    inputs = list(self.q) + list(self.qd)
+    d = [float(v) for v in self.D.diagonal()] if n else []
+    if simplified:
+        def build():
+            rate = (self.qd.T * (-self.D * self.qd))[0, 0] if n else sympy.Integer(0)
+            return from_sympy([rate], inputs, output_names=["dHdt"])
+        return _cached_graph(self.chain, "sym-energy-rate-simplified", build)
+
+    def build():
+        H = self.H
+        dHdq = [sympy.diff(H, qi) for qi in self.q]
+        dHdqd = list(self.M * self.qd)          # dH/dqd = M qd exactly
+        f = compile_generic(list(self.M) + list(self.bias) + dHdq + dHdqd, inputs)
+        def fn(x, p):
+            x = list(x)
+            vals = f(*x)
+            M = [vals[i * n:(i + 1) * n] for i in range(n)]
+            k = n * n
+            b, gq, gqd = vals[k:k + n], vals[k + n:k + 2 * n], vals[k + 2 * n:k + 3 * n]
+            rhs = [(-b[i] - d[i] * x[n + i]) if d[i] != 0 else -b[i] for i in range(n)]
+            qdd = ldl_solve(M, rhs)
+            r = 0
+            for i in range(n):
+                r = r + gq[i] * x[n + i] + gqd[i] * qdd[i]
+            return [r]
+        return trace(fn, 2 * n, 0, input_names=[str(s) for s in inputs], output_names=["dHdt"])
+    return _cached_graph(self.chain, "sym-energy-rate-chainrule", build)
 
 
 SymbolicModel.rhs_graph = _sym_rhs_graph
 SymbolicModel.energy_graph = _sym_energy_graph
+SymbolicModel.energy_rate_graph = _sym_energy_rate_graph

@@ -138,9 +138,16 @@ def test_graphs_match_numeric(make):
     e = s.energy_graph()
     x = np.random.default_rng(4).normal(size=2 * chain.n)
     assert np.allclose(g.eval_float(x), num.rhs(x), rtol=1e-11, atol=1e-11)
-    H, rate = e.eval_float(x)
+    H, = e.eval_float(x)
     assert H == pytest.approx(num.hamiltonian(x[:chain.n], x[chain.n:]), rel=1e-12)
-    assert rate == pytest.approx(num.energy_rate(x[:chain.n], x[chain.n:]), abs=1e-14)
+    rate = num.energy_rate(x[:chain.n], x[chain.n:])
+    assert s.energy_rate_graph(simplified=True).eval_float(x)[0] == pytest.approx(rate, abs=1e-14)
+    un = s.energy_rate_graph()
+    assert un.eval_float(x)[0] == pytest.approx(rate, abs=1e-9 * max(1.0, abs(H)))
+    # unsimplified: the interval enclosure is not a point even without damping
+    if chain.n == 6:
+        w = un.eval_interval(Interval(x - 1e-6, x + 1e-6))
+        assert float(w.hi[0] - w.lo[0]) > 0 and bool(w.contains(rate)[0])
     box = Interval(x - 1e-8, x + 1e-8)
     enc = g.eval_interval(box)
     assert np.all(enc.contains(g.eval_float(x)))
