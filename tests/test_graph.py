@@ -334,6 +334,29 @@ def test_exact_simplifications(fn, n_ops):
     np.testing.assert_array_equal(g.eval_float(X)[:, 0], [fn(v) for v in X[:, 0]])
 
 
+@pytest.mark.parametrize(
+    "fn, ops",
+    [
+        (lambda a, b: b + (-a), {"sub": 1}),
+        (lambda a, b: (-a) + b, {"sub": 1}),
+        (lambda a, b: b - (-a), {"add": 1}),
+        (lambda a, b: (-a) * b, {"mul": 1, "neg": 1}),
+        (lambda a, b: (-a) * (-b), {"mul": 1}),
+        (lambda a, b: (-a) / b, {"div": 1, "neg": 1}),
+        (lambda a, b: a / (-b), {"div": 1, "neg": 1}),
+        (lambda a, b: b - 2.0 * (-a), {"add": 1, "mul": 1}),
+        (lambda a, b: np.square(-a) + b * b, {"sqr": 2, "add": 1}),
+        (lambda a, b: a * b - b * a, {}),
+    ],
+)
+def test_negation_rules_are_exact(fn, ops):
+    g = trace(lambda x, p: fn(x[0], x[1]), 2)
+    counts = {k: v for k, v in g.op_counts().items() if k not in ("input", "const")}
+    assert counts == ops, g
+    X = np.random.default_rng(9).uniform(-3, 3, size=(100, 2))
+    np.testing.assert_array_equal(g.eval_float(X)[:, 0], np.broadcast_to(fn(X[:, 0], X[:, 1]), (100,)))
+
+
 def test_constant_folding_only_when_exact():
     folded = trace(lambda x, p: 0.5 + 0.25 * 2, 0)
     assert folded.n_ops == 0 and _const_of(folded)[2] == 1.0

@@ -340,3 +340,66 @@ def test_containment_oracle_catches_a_wrong_derivative_rule(monkeypatch):
     monkeypatch.setattr(ev.DualDomain, "cos", bad_cos)
     with pytest.raises(AssertionError, match="outside"):
         check_graph_enclosure(graph, lo, hi, jacobian=True)
+
+
+# --------------------------------------------------------------------------- random programs
+
+_CONSTS = [0.0, 1.0, -1.0, 2.0, 0.5, 0.1, 3.0, 0.25]
+_OPS = ["add", "sub", "mul", "neg", "sqr", "pow3", "sin", "cos", "atan", "divc", "expsin", "self_sub", "const"]
+
+
+def run_program(program, x0, x1):
+    """Straight-line generic-scalar code: each instruction appends one value."""
+    vals = [x0, x1]
+    for op, i, j, c in program:
+        # operands counted back from the newest value: programs build on their own results
+        a, b = vals[-1 - i % len(vals)], vals[-1 - j % len(vals)]
+        k = _CONSTS[c % len(_CONSTS)]
+        if op == "add":
+            v = a + b
+        elif op == "sub":
+            v = a - b
+        elif op == "mul":
+            v = a * b
+        elif op == "neg":
+            v = -a
+        elif op == "sqr":
+            v = np.square(a)
+        elif op == "pow3":
+            v = a**3
+        elif op == "sin":
+            v = np.sin(a)
+        elif op == "cos":
+            v = np.cos(a)
+        elif op == "atan":
+            v = np.arctan(a)
+        elif op == "divc":
+            v = a / (2.0 + np.cos(b))
+        elif op == "expsin":
+            v = np.exp(np.sin(a))
+        elif op == "self_sub":
+            v = a - a
+        else:
+            v = a * k + k
+        vals.append(v)
+    return vals[2:]  # every value is an output, so no instruction is dead code
+
+
+_program = st.lists(
+    st.tuples(st.sampled_from(_OPS), st.integers(0, 8), st.integers(0, 8), st.integers(0, 7)), min_size=1, max_size=25
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(program=_program, seed=st.integers(0, 2**32 - 1))
+def test_random_programs_float_exact_and_interval_sound(program, seed):
+    """Build-time simplifications are exact: the graph's float evaluation is bit-identical
+    to running the same code on numpy arrays; interval evaluation contains the samples."""
+    graph = trace(lambda x, p: run_program(program, x[0], x[1]), 2)
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-1.5, 1.5, size=(64, 2))
+    want = np.array([np.broadcast_to(v, (64,)) for v in run_program(program, X[:, 0], X[:, 1])]).T
+    assert want.shape == (64, graph.n_outputs)
+    np.testing.assert_array_equal(graph.eval_float(X), want)
+    lo, hi = random_boxes(2, 4, rng, center_scale=1.0, max_rad=0.2)
+    check_graph_enclosure(graph, lo, hi, n_random=8, rng=rng)
