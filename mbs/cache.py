@@ -1,5 +1,8 @@
 """Disk cache for derived models (expression graphs, sympy expressions).
 
+Keys also include :func:`code_fingerprint` (the source of the modules that derive and
+build the graphs, and the sympy version), so editing the code invalidates old entries.
+
 Location: ``$MBS_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/mbs-verified``, else
 ``~/.cache/mbs-verified`` (never inside the repository).  Entries are keyed by
 ``Chain.fingerprint()`` (sha256 of the chain's content: joints, placements, inertias,
@@ -16,6 +19,7 @@ import os
 import pickle
 import tempfile
 from contextlib import contextmanager
+from functools import lru_cache
 from pathlib import Path
 
 #: bump when the derivation changes so old entries are not reused
@@ -57,8 +61,38 @@ def enabled(flag: bool = True, directory=None):
         _override.update(old)
 
 
+#: modules whose source defines what a cached artefact contains
+CODE_MODULES = ("mbs.scalar", "mbs.spatial", "mbs.chain", "mbs.symbolic", "mbs.numeric",
+                "mbs.sympy_eval", "verified.graph", "verified.graph_sympy", "verified.tracer")
+
+
+@lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """sha256 of the source of :data:`CODE_MODULES` and the sympy version, so that a
+    change of the derivation or of the graph builder never reuses stale entries."""
+    import importlib.util
+    h = hashlib.sha256()
+    try:
+        import sympy
+        h.update(sympy.__version__.encode())
+    except ImportError:  # pragma: no cover
+        pass
+    for name in CODE_MODULES:
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError):
+            spec = None
+        h.update(name.encode())
+        if spec is not None and spec.origin and os.path.isfile(spec.origin):
+            with open(spec.origin, "rb") as f:
+                h.update(f.read())
+    return h.hexdigest()
+
+
 def key(fingerprint: str, kind: str) -> str:
-    return hashlib.sha256(f"{CACHE_VERSION}|{kind}|{fingerprint}".encode()).hexdigest()[:40]
+    """Cache key of artefact ``kind`` of the chain with content ``fingerprint``."""
+    raw = f"{CACHE_VERSION}|{code_fingerprint()}|{kind}|{fingerprint}"
+    return hashlib.sha256(raw.encode()).hexdigest()[:40]
 
 
 def _path(k: str, ext: str) -> Path | None:
