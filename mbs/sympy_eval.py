@@ -7,6 +7,8 @@ common subexpressions in order with ``+ - * /``, ``np.square`` / integer powers,
 """
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 import sympy
 
@@ -33,12 +35,25 @@ def _pow(b, e):
     return b ** e
 
 
-def _number(x):
+def _number(x, exact=False):
+    """A sympy number as int / float / Fraction.  Integers and dyadic rationals and
+    (53-bit) Floats are exact doubles; other rationals become ``Fraction`` when
+    ``exact`` (Interval and Tracer enclose them outward).  Irrational constants (pi, ...)
+    are rounded to the nearest double -- the chains never produce them (angles near
+    multiples of pi/2 are snapped to exact cos/sin values)."""
     if x.is_Integer:
         return int(x)
-    if x is sympy.pi:
-        return float(sympy.pi)
+    if x.is_Rational:
+        q = Fraction(int(x.p), int(x.q))
+        if exact and (q.denominator & (q.denominator - 1)) != 0:
+            return q
+        return float(q)
     return float(x)
+
+
+def _is_plain(v):
+    return isinstance(v, (int, float, np.floating, np.integer)) or (
+        isinstance(v, np.ndarray) and v.dtype.kind in "fiu")
 
 
 class GenericFunction:
@@ -59,6 +74,7 @@ class GenericFunction:
 
     def __call__(self, *values):
         env = dict(zip(self.args, values))
+        exact = not all(_is_plain(v) for v in values)
         memo = {}
         def ev(e):
             if e in env:
@@ -66,8 +82,8 @@ class GenericFunction:
             r = memo.get(e)
             if r is not None:
                 return r
-            if e.is_Number or e is sympy.pi or e.is_NumberSymbol:
-                r = _number(e)
+            if e.is_Number or e.is_NumberSymbol:
+                r = _number(e, exact)
             elif e.is_Add:
                 r = 0
                 for a in e.args:
@@ -78,7 +94,7 @@ class GenericFunction:
                 for a in rest:
                     r = S.mul(r, ev(a))
                 if coeff != 1:
-                    r = S.mul(_number(coeff), r)
+                    r = S.mul(_number(coeff, exact), r)
             elif e.is_Pow:
                 b, x = e.args
                 if x.is_Integer:

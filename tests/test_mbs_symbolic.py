@@ -154,3 +154,19 @@ def test_graphs_match_numeric(make):
     # the graph can be serialized (used by the disk cache)
     from verified.graph import Graph
     assert Graph.from_dict(g.to_dict()) == g
+
+
+def test_compile_generic_rationals_exact_on_intervals():
+    pytest.importorskip("verified.interval")
+    from verified.interval import Interval
+    from mbs.sympy_eval import compile_generic
+    x, y = sympy.symbols("x y")
+    f = compile_generic([x / 3 + y**2 / 2, sympy.cos(x) * sympy.Rational(1, 10)], [x, y])
+    assert f(1.0, 2.0)[0] == pytest.approx(1 / 3 + 2)
+    batch = f(np.array([1.0, 2.0]), np.array([2.0, 3.0]))[0]
+    assert batch.dtype == float and np.allclose(batch, [1 / 3 + 2, 2 / 3 + 4.5])
+    enc = f(Interval(1.0, 1.0), Interval(2.0, 2.0))[0]
+    # 1/3 is not a double: the enclosure must be a proper interval around 7/3
+    assert float(enc.lo) < 7 / 3 < float(enc.hi) or float(enc.lo) < float(enc.hi)
+    from fractions import Fraction
+    assert Fraction(float(enc.lo)) <= Fraction(7, 3) <= Fraction(float(enc.hi))
