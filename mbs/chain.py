@@ -133,6 +133,22 @@ class Chain:
         kinds = "".join("R" if b.joint.kind == "revolute" else "P" for b in self.bodies)
         return f"<Chain {self.name!r}: {self.n} dof ({kinds}), bodies {self.body_names}>"
 
+    def describe(self) -> str:
+        """Human-readable table: one line per body (joint, type, parent, mass, damping)."""
+        def fmt(x):
+            try:
+                return f"{float(x):.6g}"
+            except (TypeError, ValueError):
+                return str(x)
+        lines = [f"{self.name}: {self.n} dof, base {self.base_name!r} "
+                 f"(mass {fmt(self.base_inertia.mass)} kg), gravity {tuple(fmt(g) for g in self.gravity)}",
+                 f"{'#':>3} {'joint':<24} {'type':<10} {'parent':<24} {'body':<24} {'mass':>10} {'damping':>9}"]
+        for i, b in enumerate(self.bodies):
+            pa = self.base_name if b.joint.parent < 0 else self.bodies[b.joint.parent].name
+            lines.append(f"{i:>3} {b.joint.name:<24} {b.joint.kind:<10} {pa:<24} {b.name:<24} "
+                         f"{fmt(b.inertia.mass):>10} {fmt(b.joint.damping):>9}")
+        return "\n".join(lines)
+
     def _validate(self):
         if not self.bodies:
             raise ModelError(f"chain {self.name!r} has no movable joints")

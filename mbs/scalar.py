@@ -17,19 +17,20 @@ traced expression graph does not fill up with ``0*x`` nodes.  These tests look a
 from __future__ import annotations
 
 import numbers
+import sys
 
 import numpy as np
 
-try:  # sympy is a hard dependency, but keep the numeric path importable without it
-    import sympy as _sp
-    _SYMPY_BASIC = _sp.Basic
-except ImportError:  # pragma: no cover
-    _sp = None
-    _SYMPY_BASIC = ()
+
+def _sympy():
+    """The sympy module if it has been imported (a sympy object can only exist then);
+    keeps ``import mbs`` and the numeric path free of the sympy import cost."""
+    return sys.modules.get("sympy")
 
 
 def is_sympy(x) -> bool:
-    return isinstance(x, _SYMPY_BASIC)
+    sp = _sympy()
+    return sp is not None and isinstance(x, sp.Basic)
 
 
 def is_const(x) -> bool:
@@ -55,13 +56,13 @@ def is_minus_one(x) -> bool:
 
 def sin(x):
     if is_sympy(x):
-        return _sp.sin(x)
+        return _sympy().sin(x)
     return np.sin(x)
 
 
 def cos(x):
     if is_sympy(x):
-        return _sp.cos(x)
+        return _sympy().cos(x)
     return np.cos(x)
 
 
@@ -83,7 +84,7 @@ def sub(a, b):
 
 def mul(a, b):
     if is_zero(a) or is_zero(b):
-        return _sp.S.Zero if (is_sympy(a) or is_sympy(b)) else 0.0
+        return _sympy().S.Zero if (is_sympy(a) or is_sympy(b)) else 0.0
     if is_one(a):
         return b
     if is_one(b):

@@ -56,6 +56,8 @@ def test_tree_structure(tree):
     assert tree.base_name == "world"
     assert tree.base_inertia.mass == pytest.approx(2.0)
     assert tree.bodies[0].inertia.mass == pytest.approx(1.5 + 0.7)   # head welded to trunk
+    text = tree.describe()
+    assert "right_slide" in text and "prismatic" in text and "4 dof" in text
 
 
 def test_tree_matches_pinocchio(tree):
