@@ -5,7 +5,8 @@ The same code runs on
 
 - Python floats / numpy float vectors ``q`` of shape ``(n,)``,
 - batches: ``q`` of shape ``(n, B)`` (each ``q[i]`` is a numpy array of shape ``(B,)``),
-- ``verified.interval.Interval`` scalars (pass lists of intervals),
+- ``verified.interval.Interval``: lists of interval scalars, or one Interval array of
+  shape ``(n,)`` / ``(n, B)`` (rows are iterated like numpy arrays),
 - ``verified.graph.Tracer`` scalars: :meth:`NumericModel.rhs_graph` and
   :meth:`NumericModel.energy_graph` turn the algorithms into expression graphs for the
   verified solver without sympy.

@@ -94,3 +94,16 @@ def test_rnea_inverts_acceleration():
     q, qd, tau = rng.normal(size=6), rng.normal(size=6), rng.normal(size=6)
     qdd = num.acceleration(q, qd, tau)
     assert np.allclose(num.rnea(q, qd, qdd), tau, atol=1e-12)
+
+
+def test_interval_batch_arrays(ur5):
+    """x as one Interval array of shape (2n, B): each row is a batch of intervals."""
+    pytest.importorskip("verified.interval")
+    from verified.interval import Interval
+    num = ur5.numeric()
+    x = np.random.default_rng(8).normal(size=(12, 4))
+    X = Interval(x - 1e-9, x + 1e-9)
+    r = num.rhs(X)
+    f = num.rhs(x)
+    assert len(r) == 12 and r[6].shape == (4,)
+    assert all(bool(np.all(ri.contains(fi))) for ri, fi in zip(r, f))
