@@ -309,6 +309,21 @@ class Chain:
             raise ModelError(f"unknown joint(s) {sorted(unknown)}; joints are {self.joint_names}")
         return self.lock({n: 0.0 for n in self.joint_names if n not in keep})
 
+    def subtree(self, joint: str) -> "Chain":
+        """Keep ``joint`` and every joint below it movable; lock all others at 0
+        (e.g. one arm of a two-armed robot)."""
+        if joint not in self.joint_names:
+            raise ModelError(f"unknown joint {joint!r}; joints are {self.joint_names}")
+        root = self.joint_names.index(joint)
+        keep = set()
+        for i in range(self.n):
+            j = i
+            while j >= 0 and j != root:
+                j = self.bodies[j].joint.parent
+            if j == root:
+                keep.add(self.bodies[i].joint.name)
+        return self.select(keep)
+
     # ------------------------------------------------------------------ models
     def symbolic(self):
         """The sympy model (:class:`mbs.symbolic.SymbolicModel`), built lazily and cached."""

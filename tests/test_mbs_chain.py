@@ -121,6 +121,15 @@ def test_panda_lock_and_select():
     assert max_error(rep) <= 1e-10
 
 
+def test_subtree(tree):
+    left = tree.subtree("left_shoulder")
+    assert left.joint_names == ["left_shoulder", "wrist"]
+    assert max_error(compare_with_pinocchio(left, n_states=3, symbolic=False)) <= 1e-10
+    assert tree.subtree("yaw").n == 4
+    with pytest.raises(mbs.ModelError, match="unknown joint"):
+        tree.subtree("nope")
+
+
 def test_lock_matches_pinocchio_reduced_model(tree):
     locked = Chain.from_urdf(TREE_URDF, lock={"left_shoulder": 0.4, "right_slide": -0.1})
     assert locked.joint_names == ["yaw", "wrist"]
