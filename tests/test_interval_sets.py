@@ -107,3 +107,13 @@ def test_indexing_setitem_stack_concatenate_sum():
     assert c.shape == (6, 2)
     t = x.sum(axis=0)
     assert t.shape == (2,) and t.contains([3.0, 3.0]).all() and t.lo[0] <= -2.0 and t.hi[0] >= 7.0
+
+
+def test_fraction_and_big_int_operands_are_enclosed_not_rounded():
+    from fractions import Fraction
+
+    third = Interval(1.0) * Fraction(1, 3)
+    assert Fraction(float(third.lo)) <= Fraction(1, 3) <= Fraction(float(third.hi))
+    big = 2**60 + 1
+    s = Interval(0.0) + big
+    assert Fraction(float(s.lo)) <= big <= Fraction(float(s.hi))

@@ -1,6 +1,9 @@
-"""Everything rigorous: interval arithmetic, the expression graph evaluators, the
-verified ODE solver and the consistency tests. Knows nothing about robots."""
+"""Everything rigorous: interval arithmetic, the expression graph and its evaluators,
+Taylor coefficients of ODE solutions, and (later) the verified ODE solver and the
+consistency tests. Knows nothing about robots."""
 
+from .graph import Graph, GraphBuilder, Op, Tracer, from_sympy, trace
 from .interval import Interval, IntervalError
+from .taylor import TaylorODE
 
-__all__ = ["Interval", "IntervalError"]
+__all__ = ["Interval", "IntervalError", "Graph", "GraphBuilder", "Op", "Tracer", "from_sympy", "trace", "TaylorODE"]

@@ -45,7 +45,7 @@ _CACHE = True  # numba on-disk cache next to this file (falls back to a user dir
 # --------------------------------------------------------------------------
 # Rounding
 # --------------------------------------------------------------------------
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def rd(x):
     """Lower bound of the exact value of one correctly rounded operation with result ``x``."""
     if x == INF:  # the exact value overflowed: it is at least MAXF
@@ -53,7 +53,7 @@ def rd(x):
     return x - (abs(x) * EPS + ETA)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def ru(x):
     """Upper bound of the exact value of one correctly rounded operation with result ``x``."""
     if x == -INF:
@@ -61,7 +61,7 @@ def ru(x):
     return x + (abs(x) * EPS + ETA)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def rd_t(x):
     """Lower bound of the exact value of a libm transcendental with result ``x``."""
     if x == INF:
@@ -69,7 +69,7 @@ def rd_t(x):
     return x - (abs(x) * TRANS_REL + TRANS_ABS)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def ru_t(x):
     """Upper bound of the exact value of a libm transcendental with result ``x``."""
     if x == -INF:
@@ -80,26 +80,26 @@ def ru_t(x):
 # --------------------------------------------------------------------------
 # Scalar interval operations: endpoints in, (lo, hi) out
 # --------------------------------------------------------------------------
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def is_empty(a, b):
     return not (a <= b)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def add(a, b, c, d):
     if is_empty(a, b) or is_empty(c, d):
         return INF, -INF
     return rd(a + c), ru(b + d)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def sub(a, b, c, d):
     if is_empty(a, b) or is_empty(c, d):
         return INF, -INF
     return rd(a - d), ru(b - c)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _prod(x, y):
     # 0 * inf is NaN in IEEE arithmetic but 0 times any real number is 0.
     p = x * y
@@ -108,7 +108,7 @@ def _prod(x, y):
     return p
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def mul(a, b, c, d):
     if is_empty(a, b) or is_empty(c, d):
         return INF, -INF
@@ -121,7 +121,7 @@ def mul(a, b, c, d):
     return rd(lo), ru(hi)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def div(a, b, c, d):
     """``[a, b] / [c, d]``; the hull of the exact image when ``0 in [c, d]`` (IEEE 1788)."""
     if is_empty(a, b) or is_empty(c, d):
@@ -151,7 +151,7 @@ def div(a, b, c, d):
     return -INF, INF
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def sqr(a, b):
     if is_empty(a, b):
         return INF, -INF
@@ -163,7 +163,7 @@ def sqr(a, b):
     return 0.0, ru(m * m)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _pow_pos_lo(x, n):
     # x >= 0: a product of lower bounds of non-negative factors is a lower bound.
     r = 1.0
@@ -172,7 +172,7 @@ def _pow_pos_lo(x, n):
     return r
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _pow_pos_hi(x, n):
     r = 1.0
     for _ in range(n):
@@ -180,7 +180,7 @@ def _pow_pos_hi(x, n):
     return r
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def ipow(a, b, n):
     """``[a, b] ** n`` for an integer ``n`` (``n < 0`` goes through division)."""
     if is_empty(a, b):
@@ -193,7 +193,7 @@ def ipow(a, b, n):
     return _ipow_nonneg(a, b, n)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _ipow_nonneg(a, b, n):
     if n % 2 == 1:  # odd powers are increasing
         lo = _pow_pos_lo(a, n) if a >= 0.0 else -_pow_pos_hi(-a, n)
@@ -206,7 +206,7 @@ def _ipow_nonneg(a, b, n):
     return 0.0, _pow_pos_hi(max(-a, b), n)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def sqrt(a, b):
     """Square root restricted to its domain ``[0, inf]`` (empty if ``b < 0``)."""
     if is_empty(a, b) or b < 0.0:
@@ -215,14 +215,14 @@ def sqrt(a, b):
     return lo, ru(math.sqrt(b))
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def exp(a, b):
     if is_empty(a, b):
         return INF, -INF
     return max(rd_t(math.exp(a)), 0.0), ru_t(math.exp(b))
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def log(a, b):
     """Natural logarithm restricted to its domain ``(0, inf]`` (empty if ``b <= 0``)."""
     if is_empty(a, b) or b <= 0.0:
@@ -231,19 +231,19 @@ def log(a, b):
     return lo, ru_t(math.log(b))
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def atan(a, b):
     if is_empty(a, b):
         return INF, -INF
     return rd_t(math.atan(a)), ru_t(math.atan(b))
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _err_t(y):
     return abs(y) * TRANS_REL + TRANS_ABS
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _periodic_narrow(fa, fb, da, db):
     """Range of sin or cos over ``[a, b]`` with ``b - a <= 3 < pi``.
 
@@ -270,12 +270,12 @@ def _periodic_narrow(fa, fb, da, db):
     return max(lo, -1.0), min(hi, 1.0)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _sin_narrow(a, b):
     return _periodic_narrow(math.sin(a), math.sin(b), math.cos(a), math.cos(b))
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _cos_narrow(a, b):
     return _periodic_narrow(math.cos(a), math.cos(b), -math.sin(a), -math.sin(b))
 
@@ -283,7 +283,7 @@ def _cos_narrow(a, b):
 _FULL_PERIOD = 6.2831853  # just below 2 pi: wider intervals map onto [-1, 1]
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def _periodic(a, b, is_cos):
     if is_empty(a, b):
         return INF, -INF
@@ -304,17 +304,17 @@ def _periodic(a, b, is_cos):
     return lo, hi
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def sin(a, b):
     return _periodic(a, b, False)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def cos(a, b):
     return _periodic(a, b, True)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def tan(a, b):
     """Tangent; the whole real line when ``[a, b]`` may contain a pole."""
     if is_empty(a, b):
@@ -329,7 +329,7 @@ def tan(a, b):
     return rd_t(math.tan(a)), ru_t(math.tan(b))
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def iabs(a, b):
     if is_empty(a, b):
         return INF, -INF
@@ -340,14 +340,14 @@ def iabs(a, b):
     return 0.0, max(-a, b)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def imin(a, b, c, d):
     if is_empty(a, b) or is_empty(c, d):
         return INF, -INF
     return min(a, c), min(b, d)
 
 
-@njit(cache=_CACHE, inline='always')
+@njit(cache=_CACHE)
 def imax(a, b, c, d):
     if is_empty(a, b) or is_empty(c, d):
         return INF, -INF

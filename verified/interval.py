@@ -6,8 +6,10 @@ is an ``Interval`` whose last axis indexes the state components: shape ``(..., n
 
 Every operation returns an enclosure of the exact image of its operands (see
 :mod:`verified._kernels` for the rounding model). Floats and arrays mixed into an
-operation are taken as exact point values; to enclose a decimal constant such as
-``0.1`` use ``Interval(0.1).widen_ulps(1)`` or build it from a rational.
+operation are taken as exact point values; ints and ``fractions.Fraction`` values
+are enclosed exactly (``Interval(1.0) / 3`` is exact to rounding, ``Interval(1.0) *
+Fraction(1, 3)`` encloses one third). To enclose a decimal such as ``0.1`` use
+``Fraction("0.1")`` or ``Interval(0.1).widen_ulps(1)``.
 
 Conventions:
 
@@ -29,6 +31,7 @@ floats, float arrays and intervals alike.
 from __future__ import annotations
 
 import numbers
+from fractions import Fraction
 
 import numpy as np
 
@@ -463,6 +466,11 @@ def _bounds(x):
         v = float(x)
         if v != v or v in (np.inf, -np.inf):
             raise IntervalError(f"non-finite number {x!r} used in interval arithmetic")
+        if isinstance(x, numbers.Rational) and Fraction(v) != x:
+            # an int beyond 2**53 or a Fraction such as 1/3: enclose, do not round
+            lo = v if Fraction(v) <= x else float(np.nextafter(v, -np.inf))
+            hi = v if Fraction(v) >= x else float(np.nextafter(v, np.inf))
+            return np.asarray(lo), np.asarray(hi)
         arr = np.asarray(v)
         return arr, arr
     arr = _as_float_array(x, "operand")

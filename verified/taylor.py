@@ -1,0 +1,347 @@
+"""Interval Taylor coefficients of ODE solutions by automatic differentiation.
+
+For an autonomous ODE ``x' = f(x, p)`` given as an expression :class:`~verified.graph.Graph`
+with ``n`` inputs and ``n`` outputs, :class:`TaylorODE` computes enclosures of the
+normalized Taylor coefficients ``x_[k] = x^(k)(t0) / k!`` of every solution through a
+box of initial values, for a whole batch of boxes at once:
+
+    x_[0] = x(t0),      x_[k+1] = f_[k] / (k + 1),
+
+where ``f_[k]`` is the k-th Taylor coefficient of ``t -> f(x(t), p)``, obtained node by
+node with the classical recurrences (Moore 1966; Griewank & Walther, ch. 13):
+
+    (u v)_[k]   = sum_j u_[j] v_[k-j]
+    (u / v)_[k] = (u_[k] - sum_{j>=1} v_[j] w_[k-j]) / v_[0]
+    exp:  w_[k] = (1/k) sum_{j>=1} j u_[j] w_[k-j]
+    sin, cos together:  s_[k] = (1/k) sum j u_[j] c_[k-j],  c_[k] = -(1/k) sum j u_[j] s_[k-j]
+    ...
+
+The graph is flattened once into a *tape* of integer arrays, and one compiled (numba)
+interpreter runs any tape, so no model needs compiling of its own. Every arithmetic
+step is an outward-rounded interval operation from :mod:`verified._kernels`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from . import _kernels as _k
+from .graph import Graph, Op
+from .interval import Interval, _as_interval
+
+__all__ = ["TaylorODE"]
+
+# Tape opcodes (independent of Op's numbering).
+T_CONST, T_INPUT, T_PARAM, T_ADD, T_SUB, T_MUL, T_DIV, T_NEG, T_SQR = range(9)
+T_SQRT, T_EXP, T_LOG, T_SIN, T_COS, T_TAN, T_ATAN, T_AUX = range(9, 17)
+
+_SIMPLE = {
+    Op.ADD: T_ADD,
+    Op.SUB: T_SUB,
+    Op.MUL: T_MUL,
+    Op.DIV: T_DIV,
+    Op.NEG: T_NEG,
+    Op.SQR: T_SQR,
+    Op.SQRT: T_SQRT,
+    Op.EXP: T_EXP,
+    Op.LOG: T_LOG,
+}
+
+
+class _Tape:
+    """Flat arrays describing the recurrences of one graph (see :func:`_taylor_kernel`)."""
+
+    def __init__(self, graph: Graph):
+        op, a0, a1, aux, idx, clo, chi = [], [], [], [], [], [], []
+
+        def emit(o, x=-1, y=-1, index=-1, lo=0.0, hi=0.0):
+            op.append(o)
+            a0.append(x)
+            a1.append(y)
+            aux.append(-1)
+            idx.append(index)
+            clo.append(lo)
+            chi.append(hi)
+            return len(op) - 1
+
+        slot = {}  # graph node -> tape slot
+        partner = {}  # (kind, arg slot) -> slot of an existing sin/cos of that argument
+        for i, node in enumerate(graph.nodes):
+            o, args, data = node.op, [slot[a] for a in node.args], node.data
+            if o == Op.CONST:
+                slot[i] = emit(T_CONST, lo=data[0], hi=data[1])
+            elif o == Op.INPUT:
+                slot[i] = emit(T_INPUT, index=data)
+            elif o == Op.PARAM:
+                slot[i] = emit(T_PARAM, index=data)
+            elif o in _SIMPLE:
+                slot[i] = emit(_SIMPLE[o], *args)
+            elif o == Op.POW:
+                slot[i] = self._emit_pow(emit, args[0], data)
+            elif o in (Op.SIN, Op.COS):
+                kind, other = ("sin", "cos") if o == Op.SIN else ("cos", "sin")
+                existing = partner.get((other, args[0]))
+                if existing is not None and op[existing] == T_AUX:
+                    # The partner already computes this series: reuse its auxiliary slot.
+                    slot[i] = existing
+                    partner[(kind, args[0])] = existing
+                    continue
+                s = emit(T_SIN if o == Op.SIN else T_COS, args[0])
+                a = emit(T_AUX)
+                aux[s] = a
+                slot[i] = s
+                partner[(kind, args[0])] = s
+                partner[(other, args[0])] = a
+            elif o in (Op.TAN, Op.ATAN):
+                s = emit(T_TAN if o == Op.TAN else T_ATAN, args[0])
+                aux[s] = emit(T_AUX)
+                slot[i] = s
+            else:  # pragma: no cover - every Op is handled above
+                raise NotImplementedError(f"no Taylor recurrence for {o.name}")
+        self.op = np.array(op, dtype=np.int64)
+        self.a0 = np.array(a0, dtype=np.int64)
+        self.a1 = np.array(a1, dtype=np.int64)
+        self.aux = np.array(aux, dtype=np.int64)
+        self.idx = np.array(idx, dtype=np.int64)
+        self.clo = np.array(clo, dtype=np.float64)
+        self.chi = np.array(chi, dtype=np.float64)
+        self.outputs = np.array([slot[o] for o in graph.outputs], dtype=np.int64)
+
+    @staticmethod
+    def _emit_pow(emit, base, m):
+        """``base ** m`` as squarings and products (binary powering)."""
+        result = None
+        square = base
+        while True:
+            if m & 1:
+                result = square if result is None else emit(T_MUL, result, square)
+            m >>= 1
+            if not m:
+                return result
+            square = emit(T_SQR, square)
+
+
+# --------------------------------------------------------------------------
+# The interpreter. T[s, k, b] holds coefficient k of tape slot s for box b.
+# --------------------------------------------------------------------------
+@njit(cache=True)
+def _conv(tlo, thi, u, v, k, j0, b):
+    """sum_{j=j0}^{k} T[u, j] * T[v, k-j] for box b."""
+    sl = 0.0
+    sh = 0.0
+    for j in range(j0, k + 1):
+        pl, ph = _k.mul(tlo[u, j, b], thi[u, j, b], tlo[v, k - j, b], thi[v, k - j, b])
+        sl, sh = _k.add(sl, sh, pl, ph)
+    return sl, sh
+
+
+@njit(cache=True)
+def _wconv(tlo, thi, u, v, k, j1, b):
+    """sum_{j=1}^{j1} j * T[u, j] * T[v, k-j] for box b (j is exact)."""
+    sl = 0.0
+    sh = 0.0
+    for j in range(1, j1 + 1):
+        pl, ph = _k.mul(tlo[u, j, b], thi[u, j, b], tlo[v, k - j, b], thi[v, k - j, b])
+        pl, ph = _k.mul(float(j), float(j), pl, ph)
+        sl, sh = _k.add(sl, sh, pl, ph)
+    return sl, sh
+
+
+@njit(cache=True)
+def _sqrconv(tlo, thi, u, k, j0, b):
+    """sum_{j=j0}^{k-j0} T[u, j] T[u, k-j], pairing equal terms (the middle one squared)."""
+    sl = 0.0
+    sh = 0.0
+    for j in range(j0, (k + 1) // 2):
+        pl, ph = _k.mul(tlo[u, j, b], thi[u, j, b], tlo[u, k - j, b], thi[u, k - j, b])
+        sl, sh = _k.add(sl, sh, pl, ph)
+    sl, sh = _k.mul(2.0, 2.0, sl, sh)
+    if k % 2 == 0 and k // 2 >= j0:
+        ql, qh = _k.sqr(tlo[u, k // 2, b], thi[u, k // 2, b])
+        sl, sh = _k.add(sl, sh, ql, qh)
+    return sl, sh
+
+
+@njit(cache=True)
+def _taylor_kernel(op, a0, a1, aux, idx, clo, chi, outputs, xlo, xhi, plo, phi, order):
+    """Coefficients x_[0..order] for boxes ``x`` (shape (n, B)) and params (p, B).
+
+    Returns lo, hi arrays of shape (n, order + 1, B).
+    """
+    nslots = op.size
+    n, nb = xlo.shape
+    tlo = np.zeros((nslots, order + 1, nb))
+    thi = np.zeros((nslots, order + 1, nb))
+    clo_x = np.empty((n, order + 1, nb))
+    chi_x = np.empty((n, order + 1, nb))
+    clo_x[:, 0, :] = xlo
+    chi_x[:, 0, :] = xhi
+    for k in range(order):
+        fk = float(k)
+        for s in range(nslots):
+            o = op[s]
+            u = a0[s]
+            v = a1[s]
+            if o == T_AUX:
+                continue
+            for b in range(nb):
+                if o == T_CONST:
+                    if k == 0:
+                        tlo[s, 0, b] = clo[s]
+                        thi[s, 0, b] = chi[s]
+                elif o == T_PARAM:
+                    if k == 0:
+                        tlo[s, 0, b] = plo[idx[s], b]
+                        thi[s, 0, b] = phi[idx[s], b]
+                elif o == T_INPUT:
+                    tlo[s, k, b] = clo_x[idx[s], k, b]
+                    thi[s, k, b] = chi_x[idx[s], k, b]
+                elif o == T_ADD:
+                    tlo[s, k, b], thi[s, k, b] = _k.add(tlo[u, k, b], thi[u, k, b], tlo[v, k, b], thi[v, k, b])
+                elif o == T_SUB:
+                    tlo[s, k, b], thi[s, k, b] = _k.sub(tlo[u, k, b], thi[u, k, b], tlo[v, k, b], thi[v, k, b])
+                elif o == T_NEG:
+                    tlo[s, k, b] = -thi[u, k, b]
+                    thi[s, k, b] = -tlo[u, k, b]
+                elif o == T_MUL:
+                    tlo[s, k, b], thi[s, k, b] = _conv(tlo, thi, u, v, k, 0, b)
+                elif o == T_SQR:
+                    tlo[s, k, b], thi[s, k, b] = _sqrconv(tlo, thi, u, k, 0, b)
+                elif o == T_DIV:
+                    # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
+                    sl, sh = _conv(tlo, thi, v, s, k, 1, b)
+                    sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+                    tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[v, 0, b], thi[v, 0, b])
+                elif o == T_SQRT:
+                    if k == 0:
+                        tlo[s, 0, b], thi[s, 0, b] = _k.sqrt(tlo[u, 0, b], thi[u, 0, b])
+                    else:
+                        # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
+                        sl, sh = _sqrconv(tlo, thi, s, k, 1, b)
+                        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+                        dl, dh = _k.mul(2.0, 2.0, tlo[s, 0, b], thi[s, 0, b])
+                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, dl, dh)
+                elif o == T_EXP:
+                    if k == 0:
+                        tlo[s, 0, b], thi[s, 0, b] = _k.exp(tlo[u, 0, b], thi[u, 0, b])
+                    else:
+                        sl, sh = _wconv(tlo, thi, u, s, k, k, b)
+                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, fk, fk)
+                elif o == T_LOG:
+                    if k == 0:
+                        tlo[s, 0, b], thi[s, 0, b] = _k.log(tlo[u, 0, b], thi[u, 0, b])
+                    else:
+                        # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
+                        sl, sh = _wconv(tlo, thi, s, u, k, k - 1, b)
+                        sl, sh = _k.div(sl, sh, fk, fk)
+                        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[u, 0, b], thi[u, 0, b])
+                elif o == T_SIN or o == T_COS:
+                    ss = s if o == T_SIN else aux[s]
+                    cs = aux[s] if o == T_SIN else s
+                    if k == 0:
+                        tlo[ss, 0, b], thi[ss, 0, b] = _k.sin(tlo[u, 0, b], thi[u, 0, b])
+                        tlo[cs, 0, b], thi[cs, 0, b] = _k.cos(tlo[u, 0, b], thi[u, 0, b])
+                    else:
+                        sl, sh = _wconv(tlo, thi, u, cs, k, k, b)
+                        tlo[ss, k, b], thi[ss, k, b] = _k.div(sl, sh, fk, fk)
+                        sl, sh = _wconv(tlo, thi, u, ss, k, k, b)
+                        tlo[cs, k, b], thi[cs, k, b] = _k.div(-sh, -sl, fk, fk)
+                elif o == T_TAN:
+                    vs = aux[s]  # v = 1 + tan^2 = tan'
+                    if k == 0:
+                        tl, th = _k.tan(tlo[u, 0, b], thi[u, 0, b])
+                        tlo[s, 0, b] = tl
+                        thi[s, 0, b] = th
+                        ql, qh = _k.sqr(tl, th)
+                        tlo[vs, 0, b], thi[vs, 0, b] = _k.add(1.0, 1.0, ql, qh)
+                    else:
+                        sl, sh = _wconv(tlo, thi, u, vs, k, k, b)
+                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, fk, fk)
+                        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, s, k, 0, b)
+                elif o == T_ATAN:
+                    vs = aux[s]  # v = 1 + u^2, atan(u)' = u' / v
+                    if k == 0:
+                        tlo[s, 0, b], thi[s, 0, b] = _k.atan(tlo[u, 0, b], thi[u, 0, b])
+                        ql, qh = _k.sqr(tlo[u, 0, b], thi[u, 0, b])
+                        tlo[vs, 0, b], thi[vs, 0, b] = _k.add(1.0, 1.0, ql, qh)
+                    else:
+                        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, u, k, 0, b)
+                        sl, sh = _wconv(tlo, thi, s, vs, k, k - 1, b)
+                        sl, sh = _k.div(sl, sh, fk, fk)
+                        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[vs, 0, b], thi[vs, 0, b])
+        # x_[k+1] = f_[k] / (k + 1)
+        for i in range(n):
+            o = outputs[i]
+            for b in range(nb):
+                clo_x[i, k + 1, b], chi_x[i, k + 1, b] = _k.div(tlo[o, k, b], thi[o, k, b], fk + 1.0, fk + 1.0)
+    return clo_x, chi_x
+
+
+class TaylorODE:
+    """Taylor-coefficient evaluator for the autonomous ODE ``x' = f(x, p)``.
+
+    Parameters
+    ----------
+    graph : Graph
+        ``f`` with ``n`` inputs (the state) and ``n`` outputs (its derivative), and
+        ``p`` parameters (constant in time).
+    """
+
+    def __init__(self, graph: Graph):
+        if graph.n_outputs != graph.n_inputs:
+            raise ValueError(
+                f"an ODE right-hand side needs as many outputs as inputs, got {graph.n_inputs} "
+                f"inputs and {graph.n_outputs} outputs"
+            )
+        self.graph = graph
+        self.n = graph.n_inputs
+        self.n_params = graph.n_params
+        self._tape = _Tape(graph)
+
+    def coefficients(self, x, order, params=None):
+        """Enclosures of ``x_[0..order]`` for all solutions starting in the boxes ``x``.
+
+        Parameters
+        ----------
+        x : Interval or float array, shape ``(..., n)``
+        order : int >= 1
+        params : Interval or float array, shape ``(..., p)`` or ``(p,)``; required if p > 0
+
+        Returns
+        -------
+        Interval of shape ``(..., order + 1, n)``; entry ``[..., k, i]`` encloses
+        ``x_i^(k)(t0) / k!``.
+        """
+        order = int(order)
+        if order < 1:
+            raise ValueError(f"order must be >= 1, got {order}")
+        x = _as_interval(x)
+        if x.ndim < 1 or x.shape[-1] != self.n:
+            raise ValueError(f"state boxes must have shape (..., {self.n}), got {x.shape}")
+        batch = x.shape[:-1]
+        if self.n_params:
+            if params is None:
+                raise ValueError(f"this ODE has {self.n_params} parameters {self.graph.param_names}; pass params")
+            p = _as_interval(params)
+            if p.shape[-1:] != (self.n_params,):
+                raise ValueError(f"params must have shape (..., {self.n_params}), got {p.shape}")
+            try:
+                p = p.broadcast_to(batch + (self.n_params,))
+            except ValueError:
+                raise ValueError(f"params of shape {p.shape} do not broadcast to the batch {batch}") from None
+        else:
+            p = Interval._from_bounds(np.zeros(batch + (0,)), np.zeros(batch + (0,)))
+        nb = int(np.prod(batch, dtype=int))
+        xlo = np.ascontiguousarray(x.lo.reshape(nb, self.n).T)
+        xhi = np.ascontiguousarray(x.hi.reshape(nb, self.n).T)
+        plo = np.ascontiguousarray(p.lo.reshape(nb, self.n_params).T)
+        phi = np.ascontiguousarray(p.hi.reshape(nb, self.n_params).T)
+        t = self._tape
+        lo, hi = _taylor_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.clo, t.chi, t.outputs, xlo, xhi, plo, phi, order)
+        # (n, order+1, B) -> (..., order+1, n)
+        lo = np.moveaxis(lo, 2, 0).transpose(0, 2, 1).reshape(batch + (order + 1, self.n))
+        hi = np.moveaxis(hi, 2, 0).transpose(0, 2, 1).reshape(batch + (order + 1, self.n))
+        return Interval._from_bounds(np.ascontiguousarray(lo), np.ascontiguousarray(hi))
