@@ -258,3 +258,51 @@ def test_dh_forward_kinematics_textbook(convention):
         com = H @ np.array([0.1, -0.2, 0.3, 1.0])
         expected += 9.81 * com[2]
     assert P == pytest.approx(expected, rel=1e-13)
+
+
+from hypothesis import given, settings, strategies as st, HealthCheck
+
+_f = st.floats(-1.0, 1.0, allow_nan=False)
+_ang = st.floats(-3.1, 3.1, allow_nan=False)
+
+
+@st.composite
+def random_urdf(draw):
+    """A random kinematic tree: 2..6 joints (revolute / continuous / prismatic / fixed),
+    random origins (xyz, rpy), axes, inertial origins with rpy, masses, inertias."""
+    n = draw(st.integers(2, 6))
+    links, joints = [], []
+    def inertial(k):
+        m = draw(st.floats(0.1, 3.0))
+        a, b, c = (draw(st.floats(0.01, 0.2)) for _ in range(3))
+        xyz = " ".join(str(draw(_f)) for _ in range(3))
+        rpy = " ".join(str(draw(_ang)) for _ in range(3))
+        return (f'<inertial><origin xyz="{xyz}" rpy="{rpy}"/><mass value="{m}"/>'
+                f'<inertia ixx="{a + b}" ixy="0" ixz="0" iyy="{b + c}" iyz="0" izz="{a + c}"/></inertial>')
+    links.append(f'<link name="l0">{inertial(0)}</link>')
+    for k in range(1, n + 1):
+        parent = draw(st.integers(0, k - 1))
+        kind = draw(st.sampled_from(["revolute", "continuous", "prismatic", "fixed"]))
+        if k == 1:
+            kind = "revolute"
+        links.append(f'<link name="l{k}">{inertial(k)}</link>')
+        xyz = " ".join(str(draw(_f)) for _ in range(3))
+        rpy = " ".join(str(draw(_ang)) for _ in range(3))
+        ax = [draw(st.floats(-1, 1)) for _ in range(3)]
+        if sum(a * a for a in ax) < 0.1:
+            ax = [0.0, 0.0, 1.0]
+        axis = " ".join(map(str, ax))
+        limit = '<limit lower="-1" upper="1" effort="1" velocity="1"/>' if kind in ("revolute", "prismatic") else ""
+        damp = f'<dynamics damping="{draw(st.floats(0, 1))}"/>'
+        joints.append(f'<joint name="j{k}" type="{kind}"><parent link="l{parent}"/><child link="l{k}"/>'
+                      f'<origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>{limit}{damp}</joint>')
+    return '<robot name="rnd">' + "".join(links) + "".join(joints) + "</robot>"
+
+
+@settings(max_examples=6, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(xml=random_urdf())
+def test_random_urdf_trees_match_pinocchio(xml):
+    chain = Chain.from_urdf(xml)
+    rep = compare_with_pinocchio(chain, n_states=3, seed=0)
+    assert max_error(rep) <= 1e-9, rep
