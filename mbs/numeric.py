@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ModelError
-from .scalar import add, sub, mul, div, neg, dot, square, total, is_sympy
+from .scalar import add, sub, mul, div, neg, dot, square, total, is_sympy, is_zero
 from . import spatial as sp3
 
 
@@ -273,7 +273,10 @@ class NumericModel:
         return tau
 
     def bias(self, q, qd):
-        """Bias forces c(q, qd) + g(q) = rnea(q, qd, 0) (Pinocchio ``nonLinearEffects``)."""
+        """Bias forces c(q, qd) + g(q) = rnea(q, qd, 0) (Pinocchio ``nonLinearEffects``).
+        (Gravity enters as the base acceleration -g, Featherstone's trick; in interval
+        arithmetic this body-frame recursion encloses tighter than a world-frame
+        Jacobian-transpose gravity term, whose rotation products lose correlation.)"""
         return self.rnea(q, qd, [0] * self.n)
 
     def coriolis(self, q, qd):
@@ -348,31 +351,39 @@ class NumericModel:
 
 
 def ldl_solve(M, b):
-    """Solve M x = b for symmetric positive definite M (list of rows) by an LDL^T
-    factorization without pivoting, over the generic scalar."""
+    """Solve M x = b for symmetric positive definite M (list of rows) over the generic
+    scalar: symmetric Gaussian elimination without pivoting (an LDL^T factorization
+    kept as U = D L^T), so it traces into a fixed graph.
+
+    Written for tight interval enclosures: the diagonal updates are
+    ``A_ii - U_ki^2 / D_k`` (a square, each pivot used once per term) rather than
+    ``A_ii - L_ik^2 D_k`` with ``L_ik = U_ki / D_k``, which uses the pivot twice."""
     n = len(b)
-    L = [[0] * n for _ in range(n)]
+    A = [list(row) for row in M]
+    U = [[0] * n for _ in range(n)]
     D = [0] * n
-    for j in range(n):
-        s = M[j][j]
-        for k in range(j):
-            s = sub(s, mul(square(L[j][k]), D[k]))
-        D[j] = s
-        for i in range(j + 1, n):
-            s = M[i][j]
-            for k in range(j):
-                s = sub(s, mul(mul(L[i][k], L[j][k]), D[k]))
-            L[i][j] = div(s, D[j])
+    for k in range(n):
+        D[k] = A[k][k]
+        for j in range(k + 1, n):
+            U[k][j] = A[k][j]
+        for i in range(k + 1, n):
+            if is_zero(U[k][i]):
+                continue
+            A[i][i] = sub(A[i][i], div(square(U[k][i]), D[k]))
+            for j in range(i + 1, n):
+                if not is_zero(U[k][j]):
+                    A[i][j] = sub(A[i][j], div(mul(U[k][i], U[k][j]), D[k]))
     y = [0] * n
     for i in range(n):
         s = b[i]
         for k in range(i):
-            s = sub(s, mul(L[i][k], y[k]))
+            if not is_zero(U[k][i]):
+                s = sub(s, div(mul(U[k][i], y[k]), D[k]))
         y[i] = s
     x = [0] * n
     for i in reversed(range(n)):
-        s = div(y[i], D[i])
-        for k in range(i + 1, n):
-            s = sub(s, mul(L[k][i], x[k]))
-        x[i] = s
+        s = y[i]
+        for j in range(i + 1, n):
+            s = sub(s, mul(U[i][j], x[j]))
+        x[i] = div(s, D[i])
     return x
