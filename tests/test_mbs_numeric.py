@@ -107,3 +107,23 @@ def test_interval_batch_arrays(ur5):
     f = num.rhs(x)
     assert len(r) == 12 and r[6].shape == (4,)
     assert all(bool(np.all(ri.contains(fi))) for ri, fi in zip(r, f))
+
+
+def test_ldl_solve_intervals_are_sound():
+    pytest.importorskip("verified.interval")
+    from verified.interval import Interval
+    rng = np.random.default_rng(12)
+    A = rng.normal(size=(5, 5))
+    M = A @ A.T + 5 * np.eye(5)
+    b = rng.normal(size=5)
+    r = 1e-3 * np.abs(M)
+    Mi = [[Interval(M[i, j] - r[i, j], M[i, j] + r[i, j]) for j in range(5)] for i in range(5)]
+    bi = [Interval(v - 1e-3, v + 1e-3) for v in b]
+    x = ldl_solve(Mi, bi)
+    for _ in range(200):
+        E = rng.uniform(-1, 1, size=(5, 5))
+        E = (E + E.T) / 2           # symmetric samples (the solver reads the upper triangle)
+        Ms = M + E * r
+        bs = b + rng.uniform(-1e-3, 1e-3, 5)
+        xs = np.linalg.solve(Ms, bs)
+        assert all(bool(xi.contains(v)) for xi, v in zip(x, xs))
