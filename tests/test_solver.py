@@ -1,0 +1,138 @@
+"""Soundness of verified.solve: exact solutions and densely sampled trajectories
+lie inside the enclosures at every output time and inside the tube between them."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sampling import misses, sample_initial_points, trajectories
+from verified.graph import trace
+from verified.interval import Interval
+from verified.solver import VerifiedODE, solve
+
+
+def test_harmonic_oscillator_exact_solution_inside_and_tight():
+    g = trace(lambda x, p: [x[1], -x[0]], 2)
+    box = Interval([0.9, -0.1], [1.1, 0.1])
+    sol = solve(g, box, (0.0, 10.0), t_eval=np.linspace(0, 10, 21))
+    assert sol.status == "completed" and sol.t[-1] == 10.0
+    lo, hi = box.lo, box.hi
+    for t, h in zip(sol.t, sol.hull):
+        c, s = math.cos(t), math.sin(t)
+        for x0 in sample_initial_points(lo, hi, 20):
+            exact = np.array([c * x0[0] + s * x0[1], -s * x0[0] + c * x0[1]])
+            assert h.contains(exact).all()
+        # the exact reachable set is the rotated box: its hull width is known
+        true_w = 0.2 * (abs(c) + abs(s))
+        assert (h.width() <= true_w * (1 + 1e-6) + 1e-9).all()
+    for j, tube in enumerate(sol.tube):
+        for t in np.linspace(sol.tube_t[j], sol.tube_t[j + 1], 5):
+            exact = np.array([math.cos(t), -math.sin(t)])  # from the box centre (1, 0)
+            assert tube.contains(exact).all()
+
+
+def test_exponential_decay_with_uncertain_rate():
+    g = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
+    # a wide box: containment
+    sol = solve(g, Interval([1.0], [2.0]), (0.0, 3.0), params=Interval([0.5], [0.7]), t_eval=[1.0, 2.0, 3.0])
+    assert sol.success
+    for t, h in zip(sol.t, sol.hull):
+        for x0 in (1.0, 1.5, 2.0):
+            for a in (0.5, 0.6, 0.7):
+                assert h.contains(x0 * math.exp(-a * t)).all()
+    # a narrow box, where the first-order set representation is nearly exact: tightness
+    sol = solve(g, Interval([1.0], [1.01]), (0.0, 3.0), params=Interval([0.5], [0.51]), t_eval=[1.0, 2.0, 3.0])
+    for t, h in zip(sol.t, sol.hull):
+        true = 1.01 * math.exp(-0.5 * t) - 1.0 * math.exp(-0.51 * t)
+        assert h.contains([1.01 * math.exp(-0.5 * t), math.exp(-0.51 * t)]).all()
+        assert h.width()[0] <= true * 1.1  # first-order (mean-value) sets: a few % on this curved set
+
+
+def test_pendulum_sampled_trajectories_inside():
+    from models import pendulum as pd
+
+    lo, hi = pd.initial_box()
+    g = trace(pd.rhs, 2)
+    sol = solve(g, Interval(lo, hi), (0.0, 0.8), t_eval=np.linspace(0, 0.8, 9), subdivision=[4, 4])
+    assert sol.success, sol.reason
+    sols = trajectories(lambda x: pd.rhs(x), sample_initial_points(lo, hi, 30), 0.8)
+    assert misses(sol, sols) == []
+
+
+def test_double_pendulum_sampled_trajectories_inside():
+    from models import double_pendulum as dp
+
+    lo, hi = dp.initial_box()
+    g = trace(dp.rhs, 4)
+    sol = solve(g, Interval(lo, hi), (0.0, 0.5), t_eval=[0.25, 0.5], subdivision=[8, 1, 1, 1])
+    assert sol.success, sol.reason
+    sols = trajectories(lambda x: dp.rhs(x), sample_initial_points(lo, hi, 20), 0.5)
+    assert misses(sol, sols, per_step=3) == []
+
+
+def test_oracle_bites_when_the_error_term_is_dropped(monkeypatch):
+    """Dropping the accumulated error vector r (keeping only the linear image
+    c + C r0) is unsound for a nonlinear ODE; the sampling oracle must notice."""
+    from verified import lohner
+    from verified.interval import point
+
+    from models import pendulum as pd
+
+    real_step = lohner.LohnerStepper.step
+
+    def broken_step(self, sets, h, X, E, cE):
+        new = real_step(self, sets, h, X, E, cE)
+        new.r = point(np.zeros(new.r.shape))
+        return new
+
+    monkeypatch.setattr(lohner.LohnerStepper, "step", broken_step)
+    lo, hi = pd.initial_box()
+    sol = solve(trace(pd.rhs, 2), Interval(lo, hi), (0.0, 0.8), t_eval=[0.4, 0.8])
+    sols = trajectories(lambda x: pd.rhs(x), sample_initial_points(lo, hi, 30), 0.8)
+    assert misses(sol, sols) != []
+
+
+def test_oracle_bites_when_the_remainder_is_dropped(monkeypatch):
+    from verified import lohner
+
+    from models import pendulum as pd
+
+    real_step = lohner.LohnerStepper.step
+
+    def no_remainder(self, sets, h, X, E, cE):
+        return real_step(self, sets, h, X, E, cE * 0.0)
+
+    monkeypatch.setattr(lohner.LohnerStepper, "step", no_remainder)
+    lo, hi = pd.initial_box()
+    g = trace(pd.rhs, 2)
+    # a low order and loose tolerance make the remainder matter
+    sol = solve(g, Interval(lo, lo), (0.0, 0.8), t_eval=[0.8], order=4, tol=1e-3)
+    sols = trajectories(lambda x: pd.rhs(x), np.array([lo]), 0.8)
+    assert misses(sol, sols) != []
+
+
+def test_breakdown_is_a_result_with_reason():
+    from models import pendulum as pd
+
+    lo, hi = pd.initial_box()
+    sol = solve(trace(pd.rhs, 2), Interval(lo, hi), (0.0, 5.0), t_eval=np.linspace(0, 5, 11))
+    assert sol.status == "breakdown" and sol.reason
+    assert 0.0 < sol.t_reached < 5.0
+    assert len(sol.boxes) == len(sol.t) >= 2 and sol.t[-1] <= sol.t_reached
+    assert sol.tube_t[-1] == sol.t_reached
+
+
+def test_input_validation():
+    g = trace(lambda x, p: [x[1], -x[0]], 2)
+    with pytest.raises(ValueError, match="t1 > t0"):
+        solve(g, Interval([0.0, 0.0]), (1.0, 0.0))
+    with pytest.raises(ValueError, match="2 components"):
+        solve(g, Interval([0.0, 0.0, 1.0]), (0.0, 1.0))
+    with pytest.raises(ValueError, match="t_eval"):
+        solve(g, Interval([0.0, 0.0]), (0.0, 1.0), t_eval=[2.0])
+    gp = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
+    with pytest.raises(ValueError, match="parameters"):
+        solve(gp, Interval([1.0]), (0.0, 1.0))
+    with pytest.raises(TypeError, match="Graph"):
+        VerifiedODE(lambda x: x)

@@ -1,0 +1,272 @@
+"""``verified.solve``: enclosures of every solution of an ODE from a set of initial values.
+
+In the spirit of ``scipy.integrate.solve_ivp``::
+
+    sol = verified.solve(graph, x0, (0.0, 1.0), t_eval=np.linspace(0, 1, 11))
+    sol.hull[-1]          # Interval (n,): encloses x(1) for every x(0) in x0
+    sol.tube_hull         # Interval (steps, n): encloses x(t) on each step interval
+    sol.status, sol.reason
+
+The ODE is an autonomous expression :class:`~verified.graph.Graph` ``x' = f(x, p)``;
+``x0`` a box (or a batch of boxes, or a list of them); ``params`` exact floats or
+intervals (uncertain parameters, constant in time). The initial boxes may be split
+into a uniform grid (``subdivision``). All boxes advance together with one common step
+size through the batched QR-Lohner step of :mod:`verified.lohner`.
+
+A break-down is a result, not an exception: everything up to the last verified time is
+returned with ``status = "breakdown"`` and the reason.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .graph import Graph
+from .interval import Interval, _as_interval, concatenate, hull
+from .lohner import DoubletonSets, LohnerStepper
+from .taylor import TaylorODE
+from .variational import params_as_states, variational_graph
+
+__all__ = ["solve", "Solution", "VerifiedODE"]
+
+
+class VerifiedODE:
+    """An ODE graph prepared for verified integration (Taylor tapes built once).
+
+    Reuse one instance across :func:`solve` calls to skip the preparation.
+    """
+
+    def __init__(self, graph: Graph):
+        if not isinstance(graph, Graph):
+            raise TypeError(f"expected a verified.graph.Graph, got {type(graph).__name__}")
+        self.graph = graph
+        self.taylor = TaylorODE(graph)
+        self.variational = TaylorODE(variational_graph(graph))
+        self.n = graph.n_inputs
+        self._augmented = None
+
+    def with_params_as_states(self) -> "VerifiedODE":
+        """The same ODE with its parameters as extra constant states (built once)."""
+        if self._augmented is None:
+            self._augmented = VerifiedODE(params_as_states(self.graph))
+        return self._augmented
+
+
+@dataclass
+class Solution:
+    """Result of :func:`solve`.
+
+    Attributes
+    ----------
+    t : ndarray (k,)
+        Output times reached (the requested ``t_eval`` up to ``t_reached``).
+    boxes : list of Interval (B_j, n)
+        For each output time, boxes whose union encloses every solution.
+    hull : Interval (k, n)
+        The hull of ``boxes`` at each output time.
+    tube_t : ndarray (s + 1,)
+        Step boundaries ``t_0 < t_1 < ... < t_s``.
+    tube : list of Interval (B_j, n)
+        For each step, boxes whose union encloses every solution on ``[t_j, t_j+1]``.
+    tube_hull : Interval (s, n)
+    t_reached : float
+        The last time up to which the enclosure is verified.
+    status : "completed" or "breakdown"
+    reason : str
+        Why the integration stopped early ("" when completed).
+    stats : dict
+        steps, boxes, rejected steps, Taylor evaluations, wall time (s).
+    """
+
+    t: np.ndarray
+    boxes: list
+    hull: Interval
+    tube_t: np.ndarray
+    tube: list
+    tube_hull: Interval
+    t_reached: float
+    status: str
+    reason: str
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.status == "completed"
+
+    def __repr__(self):
+        return (
+            f"Solution(status={self.status!r}, t_reached={self.t_reached:g}, outputs={len(self.t)}, "
+            f"steps={self.stats.get('steps')}, boxes={self.stats.get('boxes')}, reason={self.reason!r})"
+        )
+
+
+def _initial_boxes(x0, n, subdivision):
+    if isinstance(x0, (list, tuple)) and x0 and isinstance(x0[0], Interval):
+        boxes = concatenate([_as_interval(b).reshape(-1, n) for b in x0], axis=0)
+    else:
+        boxes = _as_interval(x0)
+    if boxes.shape[-1] != n:
+        raise ValueError(f"initial boxes must have {n} components (last axis), got shape {boxes.shape}")
+    boxes = boxes.reshape(-1, n)
+    if boxes.is_empty().any():
+        raise ValueError("an initial box is empty")
+    if not (np.isfinite(boxes.lo).all() and np.isfinite(boxes.hi).all()):
+        raise ValueError("initial boxes must be bounded")
+    if subdivision is not None:
+        boxes = boxes.subdivide(subdivision).reshape(-1, n)
+    return boxes
+
+
+def solve(
+    ode,
+    x0,
+    t_span,
+    *,
+    params=None,
+    t_eval=None,
+    order: int = 20,
+    tol: float = 1e-12,
+    subdivision=None,
+    h_max: float | None = None,
+    h_min: float = 1e-9,
+    max_steps: int = 100_000,
+    max_width: float = 1e3,
+) -> Solution:
+    """Verified enclosure of all solutions of ``x' = f(x, p)`` from ``x0``.
+
+    Parameters
+    ----------
+    ode : Graph or VerifiedODE
+        The right-hand side (``n`` inputs, ``n`` outputs, ``p`` parameters).
+    x0 : Interval (n,) or (B, n), or a list of them
+        Initial boxes (their union is the initial set).
+    t_span : (t0, t1) with t1 > t0
+    params : Interval or floats, shape (p,) (or (B, p) per initial box)
+    t_eval : array of output times in [t0, t1] (default: t1 only; t0 is always included)
+    order : Taylor order K
+    tol : target size of the order-K term per step (absolute, state units)
+    subdivision : int or sequence of int: split each initial box into a uniform grid
+    h_max, h_min : step-size bounds; a step that cannot be validated above h_min breaks down
+    max_steps : break down after this many steps
+    max_width : break down when a component's enclosure gets wider than this
+
+    Returns
+    -------
+    Solution
+    """
+    wall0 = time.perf_counter()
+    prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(ode)
+    n = prob.n
+    t0, t1 = (float(v) for v in t_span)
+    if not (np.isfinite(t0) and np.isfinite(t1)) or not t1 > t0:
+        raise ValueError(f"t_span must be finite with t1 > t0, got {t_span}")
+    if order < 2:
+        raise ValueError(f"order must be >= 2, got {order}")
+    outs = np.array([t1] if t_eval is None else np.asarray(t_eval, dtype=float).ravel())
+    if outs.size and (outs.min() < t0 or outs.max() > t1 or np.any(np.diff(outs) < 0)):
+        raise ValueError("t_eval must be sorted and lie within t_span")
+    outs = np.unique(np.concatenate([[t0], outs]))
+    boxes = _initial_boxes(x0, n, subdivision)
+    nb = boxes.shape[0]
+    if prob.graph.n_params:
+        if params is None:
+            raise ValueError(f"the ODE has parameters {prob.graph.param_names}: pass params")
+        params = _as_interval(params)
+        if params.shape[-1] != prob.graph.n_params:
+            raise ValueError(f"params must have {prob.graph.n_params} components, got shape {params.shape}")
+        if params.ndim == 2 and params.shape[0] != nb:
+            if subdivision is not None:
+                raise ValueError("per-box params cannot be combined with subdivision")
+            raise ValueError(f"per-box params need one row per initial box ({nb}), got {params.shape[0]}")
+    n_state = n
+    if params is not None and (params.width() > 0).any():
+        # Uncertain parameters become constant states, so their influence is carried
+        # by the linear part of the set instead of being wrapped every step.
+        prob = prob.with_params_as_states()
+        p_boxes = params.broadcast_to((nb, params.shape[-1])) if params.ndim == 1 else params
+        boxes = concatenate([boxes, p_boxes], axis=1)
+        params = None
+    stepper = LohnerStepper(prob.taylor, prob.variational, order, params)
+    sets = DoubletonSets.from_boxes(boxes)
+    h_max = (t1 - t0) if h_max is None else float(h_max)
+
+    out_t, out_boxes = [t0], [boxes[:, :n_state]]
+    tube_t, tube = [t0], []
+    t = t0
+    next_out = 1
+    status, reason = "completed", ""
+    steps = rejected = evaluations = 0
+    while next_out < outs.size:
+        if steps >= max_steps:
+            status, reason = "breakdown", f"maximum number of steps ({max_steps}) reached"
+            break
+        X = sets.hull()
+        if not (np.isfinite(X.lo).all() and np.isfinite(X.hi).all()):
+            status, reason = "breakdown", "enclosure is not finite (division by an interval containing zero?)"
+            break
+        if (X.width() > max_width).any():
+            status, reason = "breakdown", f"enclosure too wide (a component exceeds width {max_width:g})"
+            break
+        cX = stepper.coefficients(X)
+        evaluations += 1
+        if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
+            status, reason = "breakdown", "Taylor coefficients are unbounded (division by an interval containing zero)"
+            break
+        h = min(stepper.suggest_step(cX, tol), h_max, outs[next_out] - t)
+        validated = None
+        while h >= h_min or h == outs[next_out] - t:
+            validated = stepper.apriori(X, cX, h)
+            evaluations += 1
+            if validated is not None:
+                break
+            rejected += 1
+            h *= 0.5
+            if h < h_min:
+                break
+        if validated is None:
+            status, reason = "breakdown", f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}"
+            break
+        E, cE = validated
+        landing = h == outs[next_out] - t
+        new_sets = stepper.step(sets, h, X, E, cE)
+        evaluations += 2
+        t_new = outs[next_out] if landing else t + h
+        sets = new_sets
+        tube.append(E[:, :n_state])
+        tube_t.append(t_new)
+        t = t_new
+        steps += 1
+        if landing:
+            out_t.append(t)
+            out_boxes.append(sets.hull()[:, :n_state])
+            next_out += 1
+    n_tube = len(tube)
+    result = Solution(
+        t=np.array(out_t),
+        boxes=out_boxes,
+        hull=_stack_hulls(out_boxes, n),
+        tube_t=np.array(tube_t),
+        tube=tube,
+        tube_hull=_stack_hulls(tube, n) if n_tube else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))),
+        t_reached=t,
+        status=status,
+        reason=reason,
+        stats=dict(
+            steps=steps,
+            rejected_steps=rejected,
+            boxes=nb,
+            taylor_evaluations=evaluations,
+            order=order,
+            wall_s=time.perf_counter() - wall0,
+        ),
+    )
+    return result
+
+
+def _stack_hulls(list_of_boxes, n):
+    from .interval import stack
+
+    return stack([hull(b, axis=0) for b in list_of_boxes], axis=0)
