@@ -38,9 +38,8 @@ def _pow(b, e):
 def _number(x, exact=False):
     """A sympy number as int / float / Fraction.  Integers and dyadic rationals and
     (53-bit) Floats are exact doubles; other rationals become ``Fraction`` when
-    ``exact`` (Interval and Tracer enclose them outward).  Irrational constants (pi, ...)
-    are rounded to the nearest double -- the chains never produce them (angles near
-    multiples of pi/2 are snapped to exact cos/sin values)."""
+    ``exact`` (Interval and Tracer enclose them outward).  Irrational constants are
+    enclosed by the caller in exact mode (see ``_enclosure``); here they are rounded."""
     if x.is_Integer:
         return int(x)
     if x.is_Rational:
@@ -49,6 +48,15 @@ def _number(x, exact=False):
             return q
         return float(q)
     return float(x)
+
+
+def _enclosure(x):
+    """0-d Interval enclosing the exact value of a constant sympy expression."""
+    from verified.graph import from_sympy
+    from verified.interval import Interval
+    # interval evaluation of the expression tree (sqrt(3) is sqrt of [3, 3], ...)
+    y = from_sympy([x], inputs=[]).eval_interval(Interval([]))
+    return Interval(float(y.lo[0]), float(y.hi[0]))
 
 
 def _is_plain(v):
@@ -82,7 +90,11 @@ class GenericFunction:
             r = memo.get(e)
             if r is not None:
                 return r
-            if e.is_Number or e.is_NumberSymbol:
+            if exact and e.is_number and not e.is_Rational:
+                # pi, sqrt(3)/2, ...: a rigorous enclosure, never a rounded double,
+                # when evaluating over intervals or tracing into a graph
+                r = _enclosure(e)
+            elif e.is_Number or e.is_NumberSymbol:
                 r = _number(e, exact)
             elif e.is_Add:
                 r = 0
