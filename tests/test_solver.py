@@ -136,3 +136,40 @@ def test_input_validation():
         solve(gp, Interval([1.0]), (0.0, 1.0))
     with pytest.raises(TypeError, match="Graph"):
         VerifiedODE(lambda x: x)
+
+
+def test_split_halves_cover_the_parent_set():
+    """Points of a doubleton set (sampled in its a, b coordinates) lie in one of the
+    halves produced by split(), for splits along r0 and along the error box r."""
+    from verified.lohner import DoubletonSets
+
+    rng = np.random.default_rng(5)
+    n, nb = 3, 6
+    C = rng.normal(size=(nb, n, n))
+    Q, _ = np.linalg.qr(rng.normal(size=(nb, n, n)))
+    r0w = rng.uniform(0, 1, (nb, n))
+    rw = rng.uniform(0, 1, (nb, n)) * np.array([1, 1, 1, 1e-3, 1e-3, 10])[:, None]  # some sets split r
+    sets = DoubletonSets(c=rng.normal(size=(nb, n)), C=C, r0=Interval(-r0w, r0w), Q=Q, r=Interval(-rw, rw))
+    halves = sets.split(np.ones(nb, dtype=bool))
+    assert halves.n_sets == 2 * nb
+    h = halves.hull()
+    for b in range(nb):
+        a = rng.uniform(-1, 1, (500, n)) * r0w[b]
+        e = rng.uniform(-1, 1, (500, n)) * rw[b]
+        pts = sets.c[b] + a @ C[b].T + e @ Q[b].T
+        in_left = np.all((h.lo[b] <= pts) & (pts <= h.hi[b]), axis=1)
+        in_right = np.all((h.lo[nb + b] <= pts) & (pts <= h.hi[nb + b]), axis=1)
+        assert (in_left | in_right).all()
+
+
+def test_adaptive_splitting_is_sound_on_the_double_pendulum():
+    from models import double_pendulum as dp
+
+    lo, hi = dp.initial_box()
+    g = trace(dp.rhs, 4)
+    sol = solve(g, Interval(lo, hi), (0.0, 0.6), t_eval=[0.3, 0.6], subdivision=[4, 1, 1, 1],
+                adaptive=True, split_ratio=0.003, order=12, tol=1e-10)
+    assert sol.success, sol.reason
+    assert sol.stats["splits"] > 0 and sol.stats["final_boxes"] > 4
+    sols = trajectories(lambda x: dp.rhs(x), sample_initial_points(lo, hi, 20), 0.6)
+    assert misses(sol, sols, per_step=3) == []

@@ -66,6 +66,71 @@ class DoubletonSets:
     def take(self, index) -> "DoubletonSets":
         return DoubletonSets(self.c[index], self.C[index], self.r0[index], self.Q[index], self.r[index])
 
+    def linear_width(self) -> np.ndarray:
+        """Width of the linear part ``C r0`` per box and component, shape (B, n)."""
+        return linalg.matvec(self.C, self.r0).width()
+
+    def error_width(self) -> np.ndarray:
+        """Width of the error part ``Q r`` per box and component, shape (B, n)."""
+        return linalg.matvec(self.Q, self.r).width()
+
+    def split(self, mask: np.ndarray) -> "DoubletonSets":
+        """Split the sets selected by ``mask`` in two along their widest direction.
+
+        A set is ``{c + C a + Q b : a in r0, b in r}``; the direction is the component of
+        ``a`` or of ``b`` contributing most to the set's width (``|C_j| w(r0_j)`` or
+        ``|Q_j| w(r_j)``), so accumulated error can be split as well as the initial box.
+        Each half is recentred: its piece is shifted to be centred and the shift moves
+        into the centre ``c``; the rounding of that float centre is enclosed and folded
+        into the error vector (``r += Q^-1 d``). The union of the halves covers the set.
+        """
+        idx = np.flatnonzero(mask)
+        if idx.size == 0:
+            return self
+        part = self.take(idx)
+        nb, n = part.c.shape
+        rows = np.arange(nb)
+        contribution = np.concatenate(
+            [np.abs(part.C).sum(axis=1) * part.r0.width(), np.abs(part.Q).sum(axis=1) * part.r.width()], axis=1
+        )
+        pick = np.argmax(contribution, axis=1)
+        in_r0 = pick < n
+        j = np.where(in_r0, pick, pick - n)
+        halves = []
+        for side in (0, 1):
+            r0 = part.r0.copy()
+            r = part.r.copy()
+            shift = np.empty(nb)
+            for vec, sel in ((r0, in_r0), (r, ~in_r0)):
+                rr = rows[sel]
+                lo = vec.lo[rr, j[sel]]
+                hi = vec.hi[rr, j[sel]]
+                m = 0.5 * lo + 0.5 * hi
+                a, b = (lo, m) if side == 0 else (m, hi)
+                sh = 0.5 * a + 0.5 * b
+                piece = Interval._from_bounds(a, b) - sh  # outward rounded: contains the centred half
+                vec.lo[rr, j[sel]] = piece.lo
+                vec.hi[rr, j[sel]] = piece.hi
+                shift[sel] = sh
+            column = np.where(in_r0[:, None], part.C[rows, :, j], part.Q[rows, :, j])
+            exact_c = part.c + Interval._from_bounds(column, column) * shift[:, None]
+            c_new = exact_c.mid()
+            d = exact_c - c_new  # the float centre's rounding, enclosed
+            r = r + linalg.solve(part.Q, d)
+            halves.append(DoubletonSets(c_new, part.C.copy(), r0, part.Q.copy(), r))
+        keep = self.take(np.flatnonzero(~mask))
+        return DoubletonSets.concatenate([keep, *halves])
+
+    @staticmethod
+    def concatenate(parts) -> "DoubletonSets":
+        return DoubletonSets(
+            c=np.concatenate([p.c for p in parts]),
+            C=np.concatenate([p.C for p in parts]),
+            r0=concatenate([p.r0 for p in parts], axis=0),
+            Q=np.concatenate([p.Q for p in parts]),
+            r=concatenate([p.r for p in parts], axis=0),
+        )
+
 
 def horner(coeffs: Interval, h) -> Interval:
     """``sum_i coeffs[:, i] * h^i`` along axis 1 (``h`` a float or an Interval such as [0, h])."""
@@ -148,9 +213,9 @@ class LohnerStepper:
         Q_new = self._orthonormal_basis(JQ.mid(), sets.r)
         Q_inv = linalg.solve(Q_new[:, None, :, :], point(np.broadcast_to(np.eye(n), (nb, n, n))))  # rows: columns of inverse
         Q_inv = Q_inv.swapaxes(-1, -2)
-        r_new = linalg.matvec(linalg.matmul(Q_inv, JQ), sets.r) + linalg.matvec(
-            Q_inv, linalg.matvec(dC, sets.r0) + s
-        )
+        nonlinear = linalg.matvec(dC, sets.r0)
+        r_new = linalg.matvec(linalg.matmul(Q_inv, JQ), sets.r) + linalg.matvec(Q_inv, nonlinear + s)
+        self.last_nonlinear_width = nonlinear.width()  # (B, n): drives adaptive splitting
         return DoubletonSets(c=c_new, C=C_new, r0=sets.r0, Q=Q_new, r=r_new)
 
     @staticmethod
