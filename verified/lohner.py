@@ -22,7 +22,8 @@ vector. A step of size ``h``:
 5. New set: ``c' = mid(y)``, ``C' = mid(J C)``,
    ``r' = (Q'^-1 J Q) r + Q'^-1 ((J C - C') r0 + y - c')`` with ``Q'`` from the QR
    factorization of ``mid(J Q)`` (columns sorted by their share of the set's size),
-   ``Q'^-1`` enclosed rigorously.
+   ``Q'^-1`` enclosed rigorously -- or ``Q' = I`` when that encloses the error part
+   more tightly (per set).
 
 Everything is batched: the Taylor coefficients run in the compiled interpreter over all
 boxes at once, the interval matrix products in compiled kernels.
@@ -214,9 +215,21 @@ class LohnerStepper:
         Q_inv = linalg.solve(Q_new[:, None, :, :], point(np.broadcast_to(np.eye(n), (nb, n, n))))  # rows: columns of inverse
         Q_inv = Q_inv.swapaxes(-1, -2)
         nonlinear = linalg.matvec(dC, sets.r0)
-        r_new = linalg.matvec(linalg.matmul(Q_inv, JQ), sets.r) + linalg.matvec(Q_inv, nonlinear + s)
+        incoming = nonlinear + s
+        r_qr = linalg.matvec(linalg.matmul(Q_inv, JQ), sets.r) + linalg.matvec(Q_inv, incoming)
+        # The QR basis can smear an error that lies along a coordinate axis into the
+        # other axes (for example into an uncertain parameter that never changes);
+        # the plain box J Q r + incoming cannot. Keep, per set, whichever encloses the
+        # error part more tightly (both are valid).
+        r_box = linalg.matvec(JQ, sets.r) + incoming
+        eye = np.broadcast_to(np.eye(n), (nb, n, n))
+        use_box = r_box.width().sum(axis=1) <= linalg.matvec(Q_new, r_qr).width().sum(axis=1)
+        Q_out = np.where(use_box[:, None, None], eye, Q_new)
+        r_new = Interval._from_bounds(
+            np.where(use_box[:, None], r_box.lo, r_qr.lo), np.where(use_box[:, None], r_box.hi, r_qr.hi)
+        )
         self.last_nonlinear_width = nonlinear.width()  # (B, n): drives adaptive splitting
-        return DoubletonSets(c=c_new, C=C_new, r0=sets.r0, Q=Q_new, r=r_new)
+        return DoubletonSets(c=c_new, C=C_new, r0=sets.r0, Q=Q_out, r=r_new)
 
     @staticmethod
     def _orthonormal_basis(A: np.ndarray, r: Interval) -> np.ndarray:

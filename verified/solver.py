@@ -127,8 +127,8 @@ def solve(
     *,
     params=None,
     t_eval=None,
-    order: int = 20,
-    tol: float = 1e-12,
+    order: int = 12,
+    tol: float = 1e-10,
     subdivision=None,
     h_max: float | None = None,
     h_min: float = 1e-9,
@@ -137,6 +137,7 @@ def solve(
     adaptive: bool = False,
     split_ratio: float = 0.01,
     max_boxes: int = 4096,
+    wrap_target: float = 0.03,
 ) -> Solution:
     """Verified enclosure of all solutions of ``x' = f(x, p)`` from ``x0``.
 
@@ -149,8 +150,12 @@ def solve(
     t_span : (t0, t1) with t1 > t0
     params : Interval or floats, shape (p,) (or (B, p) per initial box)
     t_eval : array of output times in [t0, t1] (default: t1 only; t0 is always included)
-    order : Taylor order K
-    tol : target size of the order-K term per step (absolute, state units)
+    order : Taylor order K (default 12)
+    tol : target size of the order-K term per step (absolute, state units; default
+        1e-10). Defaults chosen from the double pendulum's work-precision table
+        (benchmarks/bench_solver.py --work-precision): higher orders with loose
+        tolerances take long steps over which the Jacobian of a wide set varies
+        too much.
     subdivision : int or sequence of int: split each initial box into a uniform grid
     h_max, h_min : step-size bounds; a step that cannot be validated above h_min breaks down
     max_steps : break down after this many steps
@@ -160,6 +165,9 @@ def solve(
         width of the union of all sets, i.e. when one linearization no longer
         follows the curved reachable set closely enough
     max_boxes : adaptive splitting stops (break-down) beyond this many boxes
+    wrap_target : wrapping control: the next step is shortened when a step injected
+        more than this fraction of a set's linear size through the spread of the
+        Jacobian over the set (np.inf turns the control off)
 
     Returns
     -------
@@ -207,6 +215,7 @@ def solve(
     next_out = 1
     status, reason = "completed", ""
     steps = rejected = evaluations = splits = 0
+    h_wrap = np.inf  # step limit from wrapping control (see below)
     while next_out < outs.size:
         if steps >= max_steps:
             status, reason = "breakdown", f"maximum number of steps ({max_steps}) reached"
@@ -223,7 +232,7 @@ def solve(
         if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
             status, reason = "breakdown", "Taylor coefficients are unbounded (division by an interval containing zero)"
             break
-        h = min(stepper.suggest_step(cX, tol), h_max, outs[next_out] - t)
+        h = min(stepper.suggest_step(cX, tol), h_max, h_wrap, outs[next_out] - t)
         validated = None
         while h >= h_min or h == outs[next_out] - t:
             validated = stepper.apriori(X, cX, h)
@@ -245,6 +254,14 @@ def solve(
         tube.append(E[:, :n_state])
         tube_t.append(t)
         steps += 1
+        # Wrapping control: the error a step injects through the spread of the
+        # Jacobian over a wide set grows faster than the step itself, so keep it at
+        # about wrap_target times the set's linear size by adapting the next step.
+        ratio = float(np.max(stepper.last_nonlinear_width.max(axis=1) / (sets.linear_width().max(axis=1) + 1e-300)))
+        if ratio > wrap_target:
+            h_wrap = h * max(0.2, np.sqrt(wrap_target / ratio))
+        elif ratio < 0.25 * wrap_target:
+            h_wrap = 2.0 * h_wrap if np.isfinite(h_wrap) else h_wrap
         if landing:
             out_t.append(t)
             out_boxes.append(sets.hull()[:, :n_state])
