@@ -173,3 +173,20 @@ def test_adaptive_splitting_is_sound_on_the_double_pendulum():
     assert sol.stats["splits"] > 0 and sol.stats["final_boxes"] > 4
     sols = trajectories(lambda x: dp.rhs(x), sample_initial_points(lo, hi, 20), 0.6)
     assert misses(sol, sols, per_step=3) == []
+
+
+def test_merged_sets_cover_both_parents():
+    from verified.lohner import DoubletonSets
+
+    rng = np.random.default_rng(7)
+    # a set and a small one near its centre merge; two disjoint sets do not
+    boxes = Interval(np.array([[0.0, 0.0], [0.5, 0.5], [5.0, 5.0], [6.5, 5.0]]),
+                     np.array([[1.0, 1.0], [0.5001, 0.5001], [6.0, 6.0], [7.5, 6.0]]))
+    sets = DoubletonSets.from_boxes(boxes)
+    merged, count = sets.merge_overlapping(slack=0.05)
+    assert count == 1 and merged.n_sets == 3
+    h = merged.hull()
+    for b in range(4):
+        pts = boxes.lo[b] + rng.uniform(0, 1, (300, 2)) * (boxes.hi[b] - boxes.lo[b])
+        inside = ((h.lo[:, None, :] <= pts[None]) & (pts[None] <= h.hi[:, None, :])).all(-1).any(0)
+        assert inside.all()

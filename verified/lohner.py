@@ -122,6 +122,38 @@ class DoubletonSets:
         keep = self.take(np.flatnonzero(~mask))
         return DoubletonSets.concatenate([keep, *halves])
 
+    def merge_overlapping(self, slack: float = 0.05) -> tuple["DoubletonSets", int]:
+        """Merge neighbouring sets whose union is covered by one of them, nearly.
+
+        Sets are ordered along the direction in which their centres spread most, and
+        each pair of neighbours ``(A, B)`` (disjoint pairs, greedily) is tested: A's
+        error box is widened to ``r' = hull(r_A, Q_A^-1 (hull(B) - c_A))``, which covers
+        B (take ``a = 0`` in ``r0_A``, which contains 0). The pair becomes that one set
+        when its hull is at most ``1 + slack`` times as wide (in every component) as
+        the hull of ``A ∪ B``: heavily overlapping sets cost one set instead of two.
+
+        Returns the merged batch and the number of merges.
+        """
+        nb, n = self.c.shape
+        if nb < 2:
+            return self, 0
+        spread = self.c.max(axis=0) - self.c.min(axis=0)
+        order = np.argsort(self.c[:, int(np.argmax(spread))], kind="stable")
+        a_idx, b_idx = order[0:-1:2], order[1::2]
+        A, B = self.take(a_idx), self.take(b_idx)
+        XA, XB = A.hull(), B.hull()
+        cover = linalg.solve(A.Q, XB - A.c, on_failure="entire")
+        r_new = A.r.hull(cover)
+        merged = DoubletonSets(A.c, A.C, A.r0, A.Q, r_new)
+        ok = (merged.hull().width() <= (1.0 + slack) * XA.hull(XB).width() + 1e-300).all(axis=1)
+        ok &= np.isfinite(r_new.lo).all(axis=1) & np.isfinite(r_new.hi).all(axis=1)
+        if not ok.any():
+            return self, 0
+        keep = np.ones(nb, dtype=bool)
+        keep[b_idx[ok]] = False
+        keep[a_idx[ok]] = False
+        return DoubletonSets.concatenate([self.take(np.flatnonzero(keep)), merged.take(np.flatnonzero(ok))]), int(ok.sum())
+
     @staticmethod
     def concatenate(parts) -> "DoubletonSets":
         return DoubletonSets(

@@ -138,6 +138,7 @@ def solve(
     split_ratio: float = 0.01,
     max_boxes: int = 4096,
     wrap_target: float = 0.03,
+    merge_slack: float | None = None,
 ) -> Solution:
     """Verified enclosure of all solutions of ``x' = f(x, p)`` from ``x0``.
 
@@ -165,6 +166,11 @@ def solve(
         width of the union of all sets, i.e. when one linearization no longer
         follows the curved reachable set closely enough
     max_boxes : adaptive splitting stops (break-down) beyond this many boxes
+    merge_slack : with ``adaptive``, merge neighbouring sets when one set covering
+        both is at most ``1 + merge_slack`` times as wide as their union's hull
+        (default None: never). Off by default: on the double pendulum merging turned
+        linear parts into wrapped error boxes and made enclosures wider
+        (T = 1, 64 pieces adaptive: worst ratio 1.010 unmerged, 5.9 with slack 0.1).
     wrap_target : wrapping control: the next step is shortened when a step injected
         more than this fraction of a set's linear size through the spread of the
         Jacobian over the set (np.inf turns the control off)
@@ -214,7 +220,7 @@ def solve(
     t = t0
     next_out = 1
     status, reason = "completed", ""
-    steps = rejected = evaluations = splits = 0
+    steps = rejected = evaluations = splits = merges = 0
     h_wrap = np.inf  # step limit from wrapping control (see below)
     while next_out < outs.size:
         if steps >= max_steps:
@@ -281,6 +287,9 @@ def solve(
                     break
                 sets = sets.split(grow)
                 splits += int(grow.sum())
+            if merge_slack is not None and sets.n_sets > 1:
+                sets, merged = sets.merge_overlapping(merge_slack)
+                merges += merged
     n_tube = len(tube)
     result = Solution(
         t=np.array(out_t),
@@ -298,6 +307,7 @@ def solve(
             boxes=nb,
             final_boxes=sets.n_sets,
             splits=splits,
+            merges=merges,
             taylor_evaluations=evaluations,
             order=order,
             wall_s=time.perf_counter() - wall0,
