@@ -111,14 +111,15 @@ def main(argv=None):
     p.add_argument("--adaptive", type=int, nargs="*", default=[16, 64],
                    help="initial pieces for runs with adaptive splitting (none: skip)")
     p.add_argument("--split-ratio", type=float, default=0.001)
+    p.add_argument("--error-basis", choices=["qr", "auto"], default="qr")
     p.add_argument("--samples", type=int, default=2001)
     args = p.parse_args(argv)
     ode = VerifiedODE(trace(dp.rhs, 4))
     run_pieces(ode, 0.05, 2)  # load compiled kernels before timing
     true_w = true_hull_widths(args.T, args.samples)
-    options = dict(order=args.order, tol=args.tol)
+    options = dict(order=args.order, tol=args.tol, error_basis=args.error_basis)
     rows = pieces_table(ode, args.T, args.pieces, true_w, **options)
-    print(f"order {args.order}, tol {args.tol:g}")
+    print(f"order {args.order}, tol {args.tol:g}, error basis {args.error_basis}")
     print_pieces_table(args.T, rows, true_w)
     if args.adaptive:
         rows = pieces_table(ode, args.T, args.adaptive, true_w, adaptive=True, split_ratio=args.split_ratio, **options)

@@ -22,8 +22,9 @@ vector. A step of size ``h``:
 5. New set: ``c' = mid(y)``, ``C' = mid(J C)``,
    ``r' = (Q'^-1 J Q) r + Q'^-1 ((J C - C') r0 + y - c')`` with ``Q'`` from the QR
    factorization of ``mid(J Q)`` (columns sorted by their share of the set's size),
-   ``Q'^-1`` enclosed rigorously -- or ``Q' = I`` when that encloses the error part
-   more tightly (per set).
+   ``Q'^-1`` enclosed rigorously. With ``error_basis="auto"``, ``Q' = I`` (a plain
+   box) is used instead for the sets where that encloses the error part more tightly
+   at this step: better on short horizons and wide sets, worse on long ones.
 
 Everything is batched: the Taylor coefficients run in the compiled interpreter over all
 boxes at once, the interval matrix products in compiled kernels.
@@ -181,7 +182,10 @@ def _inflate(x: Interval, factor=0.1, absolute=1e-14) -> Interval:
 class LohnerStepper:
     """Verified steps of order ``order`` for the ODE behind ``taylor`` (and its variational ODE)."""
 
-    def __init__(self, taylor, variational, order: int, params=None):
+    def __init__(self, taylor, variational, order: int, params=None, error_basis: str = "qr"):
+        if error_basis not in ("qr", "auto"):
+            raise ValueError(f"error_basis must be 'qr' or 'auto', got {error_basis!r}")
+        self.error_basis = error_basis
         self.taylor = taylor
         self.variational = variational
         self.order = int(order)
@@ -243,19 +247,25 @@ class LohnerStepper:
         C_new = JC.mid()
         dC = JC - C_new
         JQ = linalg.matmul(J, sets.Q)
-        Q_new = self._orthonormal_basis(JQ.mid(), sets.r)
-        Q_inv = linalg.solve(Q_new[:, None, :, :], point(np.broadcast_to(np.eye(n), (nb, n, n))))  # rows: columns of inverse
-        Q_inv = Q_inv.swapaxes(-1, -2)
         nonlinear = linalg.matvec(dC, sets.r0)
         incoming = nonlinear + s
+        # width each Q column will carry: the old error plus the error arriving now
+        # (expressed in the old basis)
+        carried = sets.r.width() + np.einsum("bij,bi->bj", np.abs(sets.Q), incoming.width())
+        Q_new = self._orthonormal_basis(JQ.mid(), carried)
+        Q_inv = linalg.solve(Q_new[:, None, :, :], point(np.broadcast_to(np.eye(n), (nb, n, n))))  # rows: columns of inverse
+        Q_inv = Q_inv.swapaxes(-1, -2)
         r_qr = linalg.matvec(linalg.matmul(Q_inv, JQ), sets.r) + linalg.matvec(Q_inv, incoming)
-        # The QR basis can smear an error that lies along a coordinate axis into the
-        # other axes (for example into an uncertain parameter that never changes);
-        # the plain box J Q r + incoming cannot. Keep, per set, whichever encloses the
-        # error part more tightly (both are valid).
         r_box = linalg.matvec(JQ, sets.r) + incoming
         eye = np.broadcast_to(np.eye(n), (nb, n, n))
-        use_box = r_box.width().sum(axis=1) <= linalg.matvec(Q_new, r_qr).width().sum(axis=1)
+        if self.error_basis == "auto":
+            # The QR basis can smear an error lying along a coordinate axis into the
+            # other axes (for example into an uncertain parameter that never changes);
+            # the plain box J Q r + incoming cannot. "auto" keeps, per set, whichever
+            # encloses the error part more tightly now (both are valid enclosures).
+            use_box = r_box.width().sum(axis=1) <= linalg.matvec(Q_new, r_qr).width().sum(axis=1)
+        else:
+            use_box = np.zeros(nb, dtype=bool)
         Q_out = np.where(use_box[:, None, None], eye, Q_new)
         r_new = Interval._from_bounds(
             np.where(use_box[:, None], r_box.lo, r_qr.lo), np.where(use_box[:, None], r_box.hi, r_qr.hi)
@@ -264,11 +274,10 @@ class LohnerStepper:
         return DoubletonSets(c=c_new, C=C_new, r0=sets.r0, Q=Q_out, r=r_new)
 
     @staticmethod
-    def _orthonormal_basis(A: np.ndarray, r: Interval) -> np.ndarray:
-        """Q of the QR factorization of A with columns sorted by |A_j| * width(r_j) (Lohner)."""
-        size = np.linalg.norm(A, axis=1) * (r.width() + 1e-300)
-        order = np.argsort(-size, axis=1)
+    def _orthonormal_basis(A: np.ndarray, widths: np.ndarray) -> np.ndarray:
+        """Q of the QR factorization of A with columns sorted by |A_j| * widths_j (Lohner)."""
+        size = np.linalg.norm(A, axis=1) * widths
+        order = np.argsort(-size, axis=1, kind="stable")
         A_sorted = np.take_along_axis(A, order[:, None, :], axis=2)
-        Q, R = np.linalg.qr(A_sorted)
-        # A singular mid(JQ) (all-zero r at the start) still gives an orthogonal Q.
+        Q, _ = np.linalg.qr(A_sorted)
         return Q
