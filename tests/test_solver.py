@@ -190,3 +190,17 @@ def test_merged_sets_cover_both_parents():
         pts = boxes.lo[b] + rng.uniform(0, 1, (300, 2)) * (boxes.hi[b] - boxes.lo[b])
         inside = ((h.lo[:, None, :] <= pts[None]) & (pts[None] <= h.hi[:, None, :])).all(-1).any(0)
         assert inside.all()
+
+
+def test_output_times_are_exact_even_when_the_remaining_gap_is_not_a_float():
+    """t = 0.1 then 1.0: 1.0 - 0.1 is not a double, so the landing step must use an
+    interval step size; the enclosure at t = 1 must contain the exact solution."""
+    g = trace(lambda x, p: [x[1], -x[0]], 2)
+    sol = solve(g, Interval([1.0, 0.0]), (0.0, 1.0), t_eval=[0.1, 1.0])
+    assert list(sol.t) == [0.0, 0.1, 1.0]
+    import flint
+
+    exact_cos = flint.arb(1).cos()
+    assert bool(flint.arb(float(sol.hull.lo[-1, 0])) <= exact_cos) and bool(flint.arb(float(sol.hull.hi[-1, 0])) >= exact_cos)
+    exact_cos01 = flint.arb(0.1).cos()  # 0.1 as the double the user passed
+    assert bool(flint.arb(float(sol.hull.lo[1, 0])) <= exact_cos01) and bool(flint.arb(float(sol.hull.hi[1, 0])) >= exact_cos01)

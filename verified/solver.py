@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from fractions import Fraction
 
 import numpy as np
 
@@ -224,6 +225,10 @@ def solve(
 
     out_t, out_boxes = [t0], [boxes[:, :n_state]]
     tube_t, tube = [t0], []
+    # Time is kept exactly (a sum of float steps) so that every enclosure belongs to
+    # the time it is reported at; a step landing on an output time uses an interval
+    # step [h] that encloses the exact remaining gap.
+    t_exact = Fraction(t0)
     t = t0
     next_out = 1
     status, reason = "completed", ""
@@ -245,25 +250,33 @@ def solve(
         if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
             status, reason = "breakdown", "Taylor coefficients are unbounded (division by an interval containing zero)"
             break
-        h = min(stepper.suggest_step(cX, tol), h_max, h_wrap, outs[next_out] - t)
+        gap = Fraction(float(outs[next_out])) - t_exact
+        gap_lo, gap_hi = _round_down(gap), _round_up(gap)
+        h = min(stepper.suggest_step(cX, tol), h_max, h_wrap, gap_hi)
+        if h >= gap_lo:
+            h = gap_hi  # land on the output time; validate the enclosure up to gap_hi
         validated = None
-        while h >= h_min or h == outs[next_out] - t:
+        while True:
             validated = stepper.apriori(X, cX, h)
             evaluations += 1
-            if validated is not None:
+            if validated is not None or h < h_min:
                 break
             rejected += 1
             h *= 0.5
-            if h < h_min:
-                break
         if validated is None:
             status, reason = "breakdown", f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}"
             break
         E, cE = validated
-        landing = h == outs[next_out] - t
-        sets = stepper.step(sets, h, X, E, cE)
+        landing = h == gap_hi
+        if landing:
+            h_step = h if gap_lo == gap_hi else Interval(gap_lo, gap_hi)  # encloses the exact gap
+            t_exact = Fraction(float(outs[next_out]))
+        else:
+            h_step = h
+            t_exact += Fraction(h)
+        sets = stepper.step(sets, h_step, X, E, cE)
         evaluations += 2
-        t = outs[next_out] if landing else t + h
+        t = float(outs[next_out]) if landing else float(t_exact)
         tube.append(E[:, :n_state])
         tube_t.append(t)
         steps += 1
@@ -321,6 +334,16 @@ def solve(
         ),
     )
     return result
+
+
+def _round_up(q: Fraction) -> float:
+    f = float(q)
+    return f if Fraction(f) >= q else float(np.nextafter(f, np.inf))
+
+
+def _round_down(q: Fraction) -> float:
+    f = float(q)
+    return f if Fraction(f) <= q else float(np.nextafter(f, -np.inf))
 
 
 def _stack_hulls(list_of_boxes, n):
