@@ -34,9 +34,15 @@ def test_harmonic_oscillator_exact_solution_inside_and_tight():
 
 def test_exponential_decay_with_uncertain_rate():
     g = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
-    # a wide box: containment
-    sol = solve(g, Interval([1.0], [2.0]), (0.0, 3.0), params=Interval([0.5], [0.7]), t_eval=[1.0, 2.0, 3.0])
-    assert sol.success
+    # a wide box: containment (also with adaptive splitting, which must carry the
+    # parameter boxes along)
+    for kw in ({}, {"adaptive": True}, {"error_basis": "auto"}):
+        sol = solve(g, Interval([1.0], [2.0]), (0.0, 3.0), params=Interval([0.5], [0.7]), t_eval=[1.0, 2.0, 3.0], **kw)
+        assert sol.success, (kw, sol.reason)
+        for t, h in zip(sol.t, sol.hull):
+            for x0 in (1.0, 1.5, 2.0):
+                for a in (0.5, 0.6, 0.7):
+                    assert h.contains(x0 * math.exp(-a * t)).all()
     for t, h in zip(sol.t, sol.hull):
         for x0 in (1.0, 1.5, 2.0):
             for a in (0.5, 0.6, 0.7):

@@ -249,9 +249,14 @@ class LohnerStepper:
         JQ = linalg.matmul(J, sets.Q)
         nonlinear = linalg.matvec(dC, sets.r0)
         incoming = nonlinear + s
-        # width each Q column will carry: the old error plus the error arriving now
-        # (expressed in the old basis)
-        carried = sets.r.width() + np.einsum("bij,bi->bj", np.abs(sets.Q), incoming.width())
+        # Lohner's ordering: by the error each column carries. Before any error has
+        # accumulated (r = 0, the first step) use the error arriving now instead: the
+        # column norms alone can put a parameter's column first and smear the error
+        # across axes. (Adding the arriving error at every step was measured to be
+        # much worse on long horizons: T = 3 ratio 7.2 instead of 1.23.)
+        r_w = sets.r.width()
+        arriving = np.einsum("bij,bi->bj", np.abs(sets.Q), incoming.width())
+        carried = np.where((r_w.sum(axis=1) > 0)[:, None], r_w, arriving) + 1e-300
         Q_new = self._orthonormal_basis(JQ.mid(), carried)
         Q_inv = linalg.solve(Q_new[:, None, :, :], point(np.broadcast_to(np.eye(n), (nb, n, n))))  # rows: columns of inverse
         Q_inv = Q_inv.swapaxes(-1, -2)
