@@ -20,7 +20,7 @@ from numba import njit
 from . import _kernels as _k
 from .interval import Interval, _as_interval
 
-__all__ = ["matmul", "matvec", "solve", "SingularMatrixError", "inv_midpoint"]
+__all__ = ["matmul", "matvec", "solve", "SingularMatrixError"]
 
 
 class SingularMatrixError(np.linalg.LinAlgError, ValueError):
@@ -283,16 +283,3 @@ def solve(a, b, *, on_failure="raise"):
         xhi[bad] = np.inf
     shape = batch + (n,)
     return Interval._from_bounds(xlo.reshape(shape), xhi.reshape(shape))
-
-
-def inv_midpoint(a):
-    """Float inverse of the midpoint of each interval matrix (a preconditioner).
-
-    Raises :class:`SingularMatrixError` if a midpoint matrix is singular.
-    """
-    a = _as_interval(a)
-    m = a.mid()
-    try:
-        return np.linalg.inv(m)
-    except np.linalg.LinAlgError:
-        raise SingularMatrixError("midpoint matrix is singular") from None

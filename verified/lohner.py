@@ -72,10 +72,6 @@ class DoubletonSets:
         """Width of the linear part ``C r0`` per box and component, shape (B, n)."""
         return linalg.matvec(self.C, self.r0).width()
 
-    def error_width(self) -> np.ndarray:
-        """Width of the error part ``Q r`` per box and component, shape (B, n)."""
-        return linalg.matvec(self.Q, self.r).width()
-
     def split(self, mask: np.ndarray) -> "DoubletonSets":
         """Split the sets selected by ``mask`` in two along their widest direction.
 

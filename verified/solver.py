@@ -26,7 +26,7 @@ from fractions import Fraction
 import numpy as np
 
 from .graph import Graph
-from .interval import Interval, _as_interval, concatenate, hull
+from .interval import Interval, _as_interval, concatenate, hull, stack
 from .lohner import DoubletonSets, LohnerStepper
 from .taylor import TaylorODE
 from .variational import params_as_states, variational_graph
@@ -362,6 +362,4 @@ def _round_down(q: Fraction) -> float:
 
 
 def _stack_hulls(list_of_boxes, n):
-    from .interval import stack
-
     return stack([hull(b, axis=0) for b in list_of_boxes], axis=0)
