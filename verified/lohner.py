@@ -231,9 +231,12 @@ class LohnerStepper:
         # 3. centre polynomial plus remainder
         cP = self.coefficients(point(sets.c))
         y = horner(cP[:, :K], h) + cE[:, K] * (Interval(h) ** K)
-        # 4. Jacobian of the Taylor map over X
-        eye = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
-        vc = self.variational.coefficients(concatenate([X, eye], axis=1), K - 1, self._params(nb))
+        # 4. Jacobian of the Taylor map over X. The mean value form needs it on every
+        # segment from c to a point of the set; c lies in X whenever r0 and r contain
+        # 0 (they do by construction), and the hull below makes that unconditional.
+        Xc = X.hull(point(sets.c))
+        v0 = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
+        vc = self.variational.coefficients(concatenate([Xc, v0], axis=1), K - 1, self._params(nb))
         V = vc[:, :, n:].reshape((nb, K, n, n))
         J = horner(V, h)
         # 5. doubleton update
@@ -257,20 +260,18 @@ class LohnerStepper:
         Q_inv = linalg.solve(Q_new[:, None, :, :], point(np.broadcast_to(np.eye(n), (nb, n, n))))  # rows: columns of inverse
         Q_inv = Q_inv.swapaxes(-1, -2)
         r_qr = linalg.matvec(linalg.matmul(Q_inv, JQ), sets.r) + linalg.matvec(Q_inv, incoming)
-        r_box = linalg.matvec(JQ, sets.r) + incoming
-        eye = np.broadcast_to(np.eye(n), (nb, n, n))
+        Q_out, r_new = Q_new, r_qr
         if self.error_basis == "auto":
             # The QR basis can smear an error lying along a coordinate axis into the
             # other axes (for example into an uncertain parameter that never changes);
             # the plain box J Q r + incoming cannot. "auto" keeps, per set, whichever
             # encloses the error part more tightly now (both are valid enclosures).
+            r_box = linalg.matvec(JQ, sets.r) + incoming
             use_box = r_box.width().sum(axis=1) <= linalg.matvec(Q_new, r_qr).width().sum(axis=1)
-        else:
-            use_box = np.zeros(nb, dtype=bool)
-        Q_out = np.where(use_box[:, None, None], eye, Q_new)
-        r_new = Interval._from_bounds(
-            np.where(use_box[:, None], r_box.lo, r_qr.lo), np.where(use_box[:, None], r_box.hi, r_qr.hi)
-        )
+            Q_out = np.where(use_box[:, None, None], np.eye(n), Q_new)
+            r_new = Interval._from_bounds(
+                np.where(use_box[:, None], r_box.lo, r_qr.lo), np.where(use_box[:, None], r_box.hi, r_qr.hi)
+            )
         self.last_nonlinear_width = nonlinear.width()  # (B, n): drives adaptive splitting
         return DoubletonSets(c=c_new, C=C_new, r0=sets.r0, Q=Q_out, r=r_new)
 

@@ -328,10 +328,10 @@ def solve(
     result = Solution(
         t=np.array(out_t),
         boxes=out_boxes,
-        hull=_stack_hulls(out_boxes, n),
+        hull=_stack_hulls(out_boxes),
         tube_t=np.array(tube_t),
         tube=tube,
-        tube_hull=_stack_hulls(tube, n) if n_tube else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))),
+        tube_hull=_stack_hulls(tube) if n_tube else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))),
         t_reached=t,
         status=status,
         reason=reason,
@@ -361,5 +361,5 @@ def _round_down(q: Fraction) -> float:
     return f if Fraction(f) <= q else float(np.nextafter(f, -np.inf))
 
 
-def _stack_hulls(list_of_boxes, n):
+def _stack_hulls(list_of_boxes):
     return stack([hull(b, axis=0) for b in list_of_boxes], axis=0)
