@@ -1,0 +1,151 @@
+"""result.json: the enclosures of a simulation, written so that reading back never
+narrows them.
+
+Layout (keys exactly as issue 7 asks)::
+
+    {
+      "scene": "models/scenes/double_pendulum_paper.toml",
+      "mode": "ii",
+      "state_names": ["x1", "x2", "x3", "x4"],
+      "t_end": 1.0, "t_reached": 1.0,
+      "status": "completed",          # or "breakdown"
+      "reason": "",                   # why it broke down ("" when completed)
+      "outputs": [                    # one entry per output time (k * output_dt)
+        {"t": 0.05,
+         "boxes": [[[lo, hi], [lo, hi], ...], ...],   # boxes whose union encloses x(t)
+         "hull":  [[lo, hi], ...]},                  # their hull, per state
+        ...
+      ],
+      "stats": {"wall_s": ..., "steps": ..., "max_boxes": ..., "pruned_boxes": ..., ...}
+    }
+
+Bounds are JSON numbers written with Python's ``repr`` (17 significant digits at
+most, the shortest string that reads back as the same double), so
+``float(text) == bound`` exactly, for subnormals and huge values alike, and ``-0.0``
+keeps its sign. Infinite bounds are not JSON numbers: they are written as the strings
+``"-inf"`` / ``"inf"`` (read back as floats); a NaN bound is refused
+(:class:`ResultError`): an enclosure containing NaN encloses nothing.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["ResultError", "solution_to_dict", "write_result", "read_result", "bound_to_json",
+           "bound_from_json", "result_boxes"]
+
+
+class ResultError(ValueError):
+    """A result that cannot be written soundly (a NaN bound) or read back."""
+
+
+def bound_to_json(x):
+    """A float bound as a JSON value that reads back as exactly the same double."""
+    x = float(x)
+    if math.isnan(x):
+        raise ResultError("a bound is NaN: refusing to write an enclosure that encloses nothing")
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return x  # json writes float.__repr__: round-trips exactly
+
+
+def bound_from_json(v) -> float:
+    if isinstance(v, str):
+        if v in ("inf", "-inf"):
+            return float(v)
+        raise ResultError(f"unexpected bound {v!r} (numbers, 'inf' or '-inf')")
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ResultError(f"unexpected bound {v!r}")
+    return float(v)
+
+
+def _pairs(lo, hi):
+    """[[lo, hi], ...] for 1-d bound arrays."""
+    return [[bound_to_json(a), bound_to_json(b)] for a, b in zip(np.ravel(lo), np.ravel(hi))]
+
+
+def _jsonable(v):
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return [_jsonable(x) for x in v.tolist()]
+    if isinstance(v, (np.bool_, bool)):
+        return bool(v)
+    if isinstance(v, (np.integer, int)):
+        return int(v)
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return f if math.isfinite(f) else repr(f)  # statistics, not bounds: just readable
+    if v is None or isinstance(v, str):
+        return v
+    return str(v)
+
+
+def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=None,
+                     t_end: float | None = None, extra_stats: dict | None = None) -> dict:
+    """The result.json dict of a :class:`verified.solver.Solution` (see module doc)."""
+    names = list(state_names if state_names is not None else getattr(sol, "state_names", ()) or
+                 [f"x{i + 1}" for i in range(sol.hull.shape[-1])])
+    outputs = []
+    for t, boxes in zip(sol.t, sol.boxes):
+        lo, hi = np.asarray(boxes.lo, float), np.asarray(boxes.hi, float)
+        lo2, hi2 = lo.reshape(-1, len(names)), hi.reshape(-1, len(names))
+        outputs.append({
+            "t": float(t),
+            "boxes": [_pairs(a, b) for a, b in zip(lo2, hi2)],
+            "hull": _pairs(lo2.min(axis=0), hi2.max(axis=0)),
+        })
+    stats = dict(getattr(sol, "stats", {}) or {})
+    stats.setdefault("max_boxes", max((len(np.asarray(b.lo).reshape(-1, len(names))) for b in sol.boxes),
+                                      default=0))
+    stats.setdefault("pruned_boxes", 0)
+    if extra_stats:
+        stats.update(extra_stats)
+    return {
+        "scene": str(scene),
+        "mode": mode if mode is not None else getattr(sol, "mode", ""),
+        "state_names": names,
+        "t_end": float(t_end if t_end is not None else (sol.t[-1] if len(sol.t) else 0.0)),
+        "t_reached": float(sol.t_reached),
+        "status": sol.status,
+        "reason": sol.reason or "",
+        "outputs": outputs,
+        "stats": _jsonable(stats),
+    }
+
+
+def write_result(path, sol=None, *, data: dict | None = None, **kwargs) -> Path:
+    """Write result.json for a solution (or an already built dict ``data``)."""
+    if data is None:
+        data = solution_to_dict(sol, **kwargs)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(data, indent=1, allow_nan=False)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(text + "\n")
+    tmp.replace(path)
+    return path
+
+
+def read_result(path) -> dict:
+    """Read result.json; bounds come back as floats (exactly the written doubles)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ResultError(f"{path}: cannot read result: {e}") from None
+    for out in data.get("outputs", []):
+        out["boxes"] = [[[bound_from_json(a), bound_from_json(b)] for a, b in box] for box in out["boxes"]]
+        out["hull"] = [[bound_from_json(a), bound_from_json(b)] for a, b in out["hull"]]
+    return data
+
+
+def result_boxes(data: dict, k: int):
+    """Output ``k``'s boxes as an Interval (B, n)."""
+    from verified.interval import Interval
+    arr = np.array(data["outputs"][k]["boxes"], dtype=float)  # (B, n, 2)
+    return Interval(arr[..., 0], arr[..., 1], allow_unbounded=True)

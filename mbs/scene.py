@@ -1,0 +1,600 @@
+"""Scene files: one TOML file describes a whole guaranteed simulation.
+
+``python -m mbs simulate SCENE --out DIR`` reads a scene with :func:`load_scene`
+(standard-library ``tomllib``), runs :func:`mbs.simulate.simulate` and writes
+``DIR/result.json`` and the figures. A scene::
+
+    name = "double pendulum, paper eq. (22)"     # optional: title in reports
+    description = "..."                          # optional
+
+    [model]                 # exactly one of name / urdf / dh
+    name = "double_pendulum_paper"       # a ready model (models.registry.NAMES, plus
+                                         # "pendulum_paper", "double_pendulum_paper")
+    # urdf = "robots/arm.urdf"           # a URDF file, relative to the scene file, or
+    # urdf = "example-robot-data:ur5"    # a robot shipped with example-robot-data
+    # dh = [ {joint = "R", a = "l1", mass = "m1"}, {joint = "R", a = 1.0, mass = 1.0} ]
+    # convention = "standard"            # dh only: "standard" or "modified"
+    # lock = { wrist_3_joint = 0.0 }     # urdf/dh: weld joints at fixed positions
+    # gravity = [0.0, 0.0, -9.81]        # urdf/dh: gravity in the base frame [m/s^2]
+
+    [parameters]            # optional; numbers, expressions or [lo, hi] intervals
+    m1 = 1.0                # DH entries may name a parameter ("l1"); numbers are
+    l1 = [0.99, 1.01]       # substituted, intervals are passed on as uncertain
+                            # parameters (simulate(params=...))
+
+    [initial]               # the initial box, required: one entry per state
+    x1 = ["0.99*3*pi/4", "1.01*3*pi/4"]   # [lo, hi]
+    x2 = "-11*pi/20"                      # a point
+    x3 = 0.43
+    x4 = 0.67
+    # or, in state order:  box = [[lo, hi], [lo, hi], ...]
+
+    [simulation]
+    t_end = 1.0             # required [s]
+    output_dt = 0.1         # outputs at exactly k * output_dt (and at t_end)
+    mode = "ii"             # "i" | "ii" | "iii" (paper sec. 5.2)
+
+    [solver]                # passed to verified.solver.solve
+    order = 12
+    tol = 1e-10
+    subdivision = [64, 1, 1, 1]   # per state (list in state order or {x1 = 64}), or one int
+    h_max = 0.05
+    max_boxes = 4096
+
+    [consistency]           # the energy consistency test (modes ii and iii)
+    test_interval = 0.1
+    test_splits = 10
+    split_strategy = "gradient"
+    backward_depth = 0
+    energy_rate = "unsimplified"  # mode iii: "unsimplified" | "simplified"
+
+Numbers are enclosed rigorously, never rounded inward:
+
+* An integer, or a float that is exactly a double (``2.5``), is taken as is.
+* A float that is not a double (``0.43``) stands for its decimal literal (the
+  shortest decimal that reads back as that float, i.e. what was written): it is
+  replaced by the tightest pair of doubles enclosing that decimal (one ulp wide).
+* A string is an exact expression of decimal numbers, ``pi``, ``+ - * /``, unary
+  minus and parentheses, linear in ``pi`` (``"0.99*3*pi/4"``, ``"-11*pi/20"``,
+  ``"43/100"``). It is evaluated exactly (rational + rational * pi) and enclosed by
+  the two doubles around it.
+
+A bad scene raises :class:`SceneError` whose message names the file and the key:
+unknown keys, a missing or empty initial box, inverted intervals, NaN or infinite
+numbers, an unknown model, an unreadable URDF, bad solver settings.
+"""
+from __future__ import annotations
+
+import ast
+import math
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+import numpy as np
+
+from .errors import ModelError
+
+__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "enclose_number", "PAPER_MODELS",
+           "MODES", "scene_dir"]
+
+#: models built by mbs.simulate in addition to models.registry.NAMES
+PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
+MODES = ("i", "ii", "iii")
+ERD_PREFIX = "example-robot-data:"
+
+_TOP = {"name", "description", "model", "parameters", "initial", "simulation", "solver", "consistency"}
+_MODEL = {"name", "urdf", "dh", "convention", "lock", "gravity"}
+_SIMULATION = {"t_end", "output_dt", "mode"}
+# solver settings: name -> (type check, description)
+_SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_min": float,
+           "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
+           "split_ratio": float, "error_basis": str, "wrap_target": float}
+_CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
+                "backward_depth": int, "energy_rate": str}
+_ENERGY_RATES = ("unsimplified", "simplified")
+
+
+class SceneError(ValueError):
+    """A scene file that cannot be used; the message names the file and the key."""
+
+
+def scene_dir() -> Path:
+    """The directory of the scenes shipped with the package (models/scenes)."""
+    import models
+    return Path(models.__file__).parent / "scenes"
+
+
+# --------------------------------------------------------------------------- numbers
+def _enclose_fraction(q: Fraction) -> tuple[float, float]:
+    f = float(q)
+    lo = f if Fraction(f) <= q else math.nextafter(f, -math.inf)
+    hi = f if Fraction(f) >= q else math.nextafter(f, math.inf)
+    return lo, hi
+
+
+def _eval_expr(text: str, where: str) -> tuple[Fraction, Fraction]:
+    """Exact value ``a + b * pi`` of an expression string, as (a, b)."""
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError:
+        raise SceneError(f"{where}: cannot parse expression {text!r}") from None
+
+    def ev(node):
+        if isinstance(node, ast.Expression):
+            return ev(node.body)
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
+                and not isinstance(node.value, bool):
+            seg = ast.get_source_segment(text.strip(), node)
+            return (Fraction(seg.replace("_", "")), Fraction(0))
+        if isinstance(node, ast.Name) and node.id == "pi":
+            return (Fraction(0), Fraction(1))
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            a, b = ev(node.operand)
+            return (-a, -b) if isinstance(node.op, ast.USub) else (a, b)
+        if isinstance(node, ast.BinOp):
+            (a1, b1), (a2, b2) = ev(node.left), ev(node.right)
+            if isinstance(node.op, ast.Add):
+                return a1 + a2, b1 + b2
+            if isinstance(node.op, ast.Sub):
+                return a1 - a2, b1 - b2
+            if isinstance(node.op, ast.Mult):
+                if b1 and b2:
+                    raise SceneError(f"{where}: {text!r} is not linear in pi")
+                return a1 * a2, a1 * b2 + b1 * a2
+            if isinstance(node.op, ast.Div):
+                if b2:
+                    raise SceneError(f"{where}: {text!r} divides by a multiple of pi")
+                if a2 == 0:
+                    raise SceneError(f"{where}: {text!r} divides by zero")
+                return a1 / a2, b1 / a2
+        raise SceneError(f"{where}: {text!r}: only numbers, pi, + - * / and parentheses are allowed")
+
+    return ev(tree)
+
+
+def enclose_number(value, where: str = "value") -> tuple[float, float]:
+    """(lo, hi) doubles enclosing a scene number (see the module docstring)."""
+    if isinstance(value, bool):
+        raise SceneError(f"{where}: expected a number, got a boolean")
+    if isinstance(value, int):
+        return _enclose_fraction(Fraction(value))
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise SceneError(f"{where}: {value!r} is not a finite number")
+        return _enclose_fraction(Fraction(repr(value)))
+    if isinstance(value, str):
+        a, b = _eval_expr(value, where)
+        if b == 0:
+            return _enclose_fraction(a)
+        import mpmath
+        with mpmath.workprec(200):
+            v = mpmath.mpf(a.numerator) / a.denominator + mpmath.mpf(b.numerator) / b.denominator * mpmath.pi
+            f = float(v)
+        # the 200-bit value is within 2^-190 (relative) of the true one, far less than
+        # half an ulp, and a + b pi (b != 0) is irrational: one ulp each side encloses it
+        return math.nextafter(f, -math.inf), math.nextafter(f, math.inf)
+    raise SceneError(f"{where}: expected a number, an expression string or [lo, hi], "
+                     f"got {type(value).__name__}")
+
+
+def _interval(value, where: str) -> tuple[float, float]:
+    """(lo, hi) of a number, an expression or a [lo, hi] pair."""
+    if isinstance(value, list):
+        if len(value) != 2:
+            raise SceneError(f"{where}: an interval is [lo, hi], got {len(value)} entries")
+        lo = enclose_number(value[0], f"{where}[0]")[0]
+        hi = enclose_number(value[1], f"{where}[1]")[1]
+        if lo > hi:
+            raise SceneError(f"{where}: inverted interval [{value[0]!r}, {value[1]!r}] (lo > hi)")
+        return lo, hi
+    return enclose_number(value, where)
+
+
+def _number(value, where, kind=float, positive=False):
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    if not ok:
+        raise SceneError(f"{where}: expected {'an integer' if kind is int else 'a number'}, got {value!r}")
+    if not math.isfinite(value):
+        raise SceneError(f"{where}: {value!r} is not a finite number")
+    if positive and not value > 0:
+        raise SceneError(f"{where}: must be > 0, got {value!r}")
+    return kind(value)
+
+
+def _unknown(table: dict, allowed, where: str):
+    extra = sorted(set(table) - set(allowed))
+    if extra:
+        raise SceneError(f"{where}: unknown key{'s' if len(extra) > 1 else ''} "
+                         f"{', '.join(repr(k) for k in extra)}; allowed: {', '.join(sorted(allowed))}")
+
+
+def _table(data, key, where, required=False):
+    if key not in data:
+        if required:
+            raise SceneError(f"{where}: missing [{key}] table")
+        return {}
+    t = data[key]
+    if not isinstance(t, dict):
+        raise SceneError(f"{where}: [{key}] must be a table, got {type(t).__name__}")
+    return t
+
+
+# --------------------------------------------------------------------------- scene
+@dataclass
+class Scene:
+    """A parsed, validated scene (see the module docstring).
+
+    ``model`` is what :func:`mbs.simulate.simulate` accepts: a model name or an
+    :class:`mbs.Chain` (built by :meth:`build_model`, lazily).
+    """
+
+    source: str                         # file path or "<string>"
+    name: str
+    description: str
+    model_spec: dict                    # the [model] table (urdf resolved to a path)
+    parameters: dict                    # name -> (lo, hi)
+    initial: dict | list                # name -> (lo, hi), or list of (lo, hi) in state order
+    t_end: float
+    output_dt: float | None
+    mode: str
+    solver: dict = field(default_factory=dict)
+    consistency: dict = field(default_factory=dict)
+    _model: object = field(default=None, repr=False)
+
+    # ---------------------------------------------------------------- model
+    @property
+    def model_label(self) -> str:
+        s = self.model_spec
+        if "name" in s:
+            return s["name"]
+        if "urdf" in s:
+            return f"urdf:{s['urdf']}"
+        return f"dh:{len(s['dh'])} rows"
+
+    def point_params(self) -> dict:
+        return {k: lo for k, (lo, hi) in self.parameters.items() if lo == hi}
+
+    def interval_params(self) -> dict:
+        return {k: (lo, hi) for k, (lo, hi) in self.parameters.items() if lo != hi}
+
+    def build_model(self):
+        """The model argument for simulate: a name (str) or a Chain."""
+        if self._model is None:
+            self._model = _build_model(self)
+        return self._model
+
+    # ---------------------------------------------------------------- initial box
+    def initial_box(self, state_names):
+        """The initial box as an Interval (n,) in the order of ``state_names``."""
+        from verified.interval import Interval
+        names = tuple(state_names)
+        where = f"{self.source}: [initial]"
+        if isinstance(self.initial, list):
+            if len(self.initial) != len(names):
+                raise SceneError(f"{where}: box has {len(self.initial)} entries, the model has "
+                                 f"{len(names)} states ({', '.join(names)})")
+            pairs = list(self.initial)
+        else:
+            missing = [s for s in names if s not in self.initial]
+            unknown = [s for s in self.initial if s not in names]
+            if unknown:
+                raise SceneError(f"{where}: unknown state{'s' if len(unknown) > 1 else ''} "
+                                 f"{', '.join(map(repr, unknown))}; the model's states are {', '.join(names)}")
+            if missing:
+                raise SceneError(f"{where}: missing initial value for {', '.join(map(repr, missing))} "
+                                 f"(states: {', '.join(names)})")
+            pairs = [self.initial[s] for s in names]
+        lo = np.array([p[0] for p in pairs])
+        hi = np.array([p[1] for p in pairs])
+        return Interval(lo, hi)
+
+    def subdivision_for(self, state_names):
+        sub = self.solver.get("subdivision")
+        if sub is None or isinstance(sub, int):
+            return sub
+        names = tuple(state_names)
+        where = f"{self.source}: [solver] subdivision"
+        if isinstance(sub, list):
+            if len(sub) != len(names):
+                raise SceneError(f"{where}: {len(sub)} entries for {len(names)} states ({', '.join(names)})")
+            return list(sub)
+        unknown = [s for s in sub if s not in names]
+        if unknown:
+            raise SceneError(f"{where}: unknown state(s) {', '.join(map(repr, unknown))}; states: {', '.join(names)}")
+        return [sub.get(s, 1) for s in names]
+
+    def t_eval(self, t_end: float | None = None, output_dt: float | None = None):
+        """Output times: exactly k * output_dt (decimal, rounded to nearest) for
+        k = 1, 2, ... up to t_end, plus t_end itself."""
+        return output_times(self.t_end if t_end is None else t_end,
+                            self.output_dt if output_dt is None else output_dt)
+
+    def simulate_kwargs(self, state_names=None) -> dict:
+        """Keyword arguments of :func:`mbs.simulate.simulate` (besides model, x0, t_end)."""
+        kw = dict(self.consistency)
+        for k, v in self.solver.items():
+            if k == "subdivision":
+                v = self.subdivision_for(state_names) if state_names is not None else v
+            kw[k] = v
+        # Point parameters of DH tables are substituted into the chain; for named
+        # models all parameters go to simulate, intervals always do.
+        params = dict(self.point_params()) if "name" in self.model_spec else {}
+        params.update(self.interval_params())
+        if params:
+            kw["params"] = params
+        kw["mode"] = self.mode
+        return kw
+
+
+def output_times(t_end: float, output_dt: float | None) -> list:
+    """[k * dt for k = 1.. while k dt < t_end] + [t_end]; k * dt is computed exactly
+    from dt's decimal literal and rounded to the nearest double (3 * 0.1 -> 0.3)."""
+    if output_dt is None:
+        return [float(t_end)]
+    dt = Fraction(repr(float(output_dt)))
+    T = Fraction(repr(float(t_end)))
+    n = int(T / dt)
+    ts = [float(k * dt) for k in range(1, n + 1)]
+    if not ts or Fraction(ts[-1]) != Fraction(float(t_end)):
+        if ts and ts[-1] > t_end:
+            ts.pop()
+        ts.append(float(t_end))
+    return ts
+
+
+def _resolve_urdf(spec: str, base: Path | None, where: str) -> str:
+    if spec.startswith(ERD_PREFIX):
+        from . import robots
+        name = spec[len(ERD_PREFIX):]
+        try:
+            return str(robots.urdf_path(name))
+        except ModelError as e:
+            raise SceneError(f"{where}: {e}") from None
+    p = Path(spec)
+    if not p.is_absolute() and base is not None:
+        p = base / p
+    if not p.is_file():
+        raise SceneError(f"{where}: URDF file {str(p)!r} not found")
+    try:
+        with open(p, "rb") as fh:
+            fh.read(1)
+    except OSError as e:
+        raise SceneError(f"{where}: cannot read URDF file {str(p)!r}: {e.strerror}") from None
+    return str(p)
+
+
+def _build_model(scene: Scene):
+    spec = scene.model_spec
+    where = f"{scene.source}: [model]"
+    if "name" in spec:
+        return spec["name"]
+    from .chain import Chain
+    try:
+        if "urdf" in spec:
+            chain = Chain.from_urdf(spec["urdf"], lock=spec.get("lock"),
+                                    **({"gravity": spec["gravity"]} if "gravity" in spec else {}))
+            return chain
+        import sympy
+        rows = []
+        symbols = {}
+        for i, row in enumerate(spec["dh"]):
+            r = {}
+            for k, v in row.items():
+                if isinstance(v, str) and k not in ("joint", "name"):
+                    if v not in scene.parameters:
+                        raise SceneError(f"{where} dh row {i}: {k} = {v!r} names no parameter "
+                                         f"(known: {', '.join(scene.parameters) or 'none'})")
+                    v = symbols.setdefault(v, sympy.Symbol(v, real=True))
+                r[k] = v
+            rows.append(r)
+        kw = {"convention": spec.get("convention", "standard")}
+        if "gravity" in spec:
+            kw["gravity"] = tuple(spec["gravity"])
+        chain = Chain.from_dh(rows, **kw)
+        points = {symbols[k]: v for k, v in scene.point_params().items() if k in symbols}
+        if points:
+            chain = chain.subs(points)
+        if spec.get("lock"):
+            chain = chain.lock(spec["lock"])
+        return chain
+    except SceneError:
+        raise
+    except (ModelError, ValueError, TypeError, KeyError, OSError) as e:
+        what = f"URDF {spec['urdf']!r}" if "urdf" in spec else "DH table"
+        raise SceneError(f"{where}: cannot build the model from the {what}: {e}") from None
+    except Exception as e:  # yourdfpy/lxml parse errors and the like
+        what = f"URDF {spec['urdf']!r}" if "urdf" in spec else "DH table"
+        raise SceneError(f"{where}: cannot build the model from the {what}: "
+                         f"{type(e).__name__}: {e}") from None
+
+
+def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) -> Scene:
+    """Validate a scene given as a dict (the parsed TOML); see :func:`load_scene`."""
+    _unknown(data, _TOP, source)
+    name = data.get("name", Path(source).stem if source != "<string>" else "scene")
+    description = data.get("description", "")
+    if not isinstance(name, str) or not isinstance(description, str):
+        raise SceneError(f"{source}: 'name' and 'description' must be strings")
+
+    # [model]
+    where = f"{source}: [model]"
+    model = _table(data, "model", source, required=True)
+    _unknown(model, _MODEL, where)
+    kinds = [k for k in ("name", "urdf", "dh") if k in model]
+    if len(kinds) != 1:
+        raise SceneError(f"{where}: give exactly one of name, urdf, dh (got "
+                         f"{', '.join(kinds) or 'none'})")
+    spec = dict(model)
+    if "name" in model:
+        from models.registry import NAMES
+        known = tuple(NAMES) + PAPER_MODELS
+        if model["name"] not in known:
+            raise SceneError(f"{where} name: unknown model {model['name']!r}; choose one of "
+                             f"{', '.join(known)}")
+        extra = [k for k in ("lock", "gravity", "convention") if k in model]
+        if extra:
+            raise SceneError(f"{where}: {', '.join(extra)} only apply to urdf and dh models")
+    if "urdf" in model:
+        if not isinstance(model["urdf"], str):
+            raise SceneError(f"{where} urdf: expected a path string")
+        spec["urdf"] = _resolve_urdf(model["urdf"], base, f"{where} urdf")
+    if "dh" in model:
+        rows = model["dh"]
+        if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
+            raise SceneError(f"{where} dh: expected a non-empty list of tables (one per joint)")
+    elif "convention" in model:
+        raise SceneError(f"{where} convention: only applies to dh models")
+    if "lock" in model:
+        if not isinstance(model["lock"], dict):
+            raise SceneError(f"{where} lock: expected a table joint = position")
+        spec["lock"] = {k: _number(v, f"{where} lock.{k}") for k, v in model["lock"].items()}
+    if "gravity" in model:
+        g = model["gravity"]
+        if not isinstance(g, list) or len(g) != 3:
+            raise SceneError(f"{where} gravity: expected [gx, gy, gz]")
+        spec["gravity"] = [_number(v, f"{where} gravity[{i}]") for i, v in enumerate(g)]
+
+    # [parameters]
+    params = {}
+    for k, v in _table(data, "parameters", source).items():
+        params[k] = _interval(v, f"{source}: [parameters] {k}")
+
+    # [initial]
+    where = f"{source}: [initial]"
+    if "initial" not in data:
+        raise SceneError(f"{source}: missing [initial] table (the initial box)")
+    init = _table(data, "initial", source, required=True)
+    if not init:
+        raise SceneError(f"{where}: the initial box is empty; give [lo, hi] per state")
+    if "box" in init:
+        if len(init) > 1:
+            raise SceneError(f"{where}: give either box = [...] or one entry per state, not both")
+        box = init["box"]
+        if not isinstance(box, list) or not box:
+            raise SceneError(f"{where} box: expected a non-empty list of [lo, hi] (one per state)")
+        initial = [_interval(v, f"{where} box[{i}]") for i, v in enumerate(box)]
+    else:
+        initial = {k: _interval(v, f"{where} {k}") for k, v in init.items()}
+
+    # [simulation]
+    where = f"{source}: [simulation]"
+    sim = _table(data, "simulation", source, required=True)
+    _unknown(sim, _SIMULATION, where)
+    if "t_end" not in sim:
+        raise SceneError(f"{where}: missing t_end")
+    t_end = _number(sim["t_end"], f"{where} t_end", positive=True)
+    output_dt = sim.get("output_dt")
+    if output_dt is not None:
+        output_dt = _number(output_dt, f"{where} output_dt", positive=True)
+    mode = sim.get("mode", "ii")
+    if mode not in MODES:
+        raise SceneError(f"{where} mode: {mode!r} is not one of {', '.join(MODES)}")
+
+    # [solver]
+    where = f"{source}: [solver]"
+    solver = {}
+    for k, v in _table(data, "solver", source).items():
+        if k not in _SOLVER:
+            _unknown({k: v}, _SOLVER, where)
+        typ = _SOLVER[k]
+        if k == "subdivision":
+            solver[k] = _subdivision(v, f"{where} subdivision")
+        elif typ is bool:
+            if not isinstance(v, bool):
+                raise SceneError(f"{where} {k}: expected true or false, got {v!r}")
+            solver[k] = v
+        elif typ is str:
+            if not isinstance(v, str):
+                raise SceneError(f"{where} {k}: expected a string, got {v!r}")
+            solver[k] = v
+        else:
+            solver[k] = _number(v, f"{where} {k}", typ, positive=True)
+    if "error_basis" in solver and solver["error_basis"] not in ("qr", "auto"):
+        raise SceneError(f"{where} error_basis: {solver['error_basis']!r} is not 'qr' or 'auto'")
+    if "order" in solver and solver["order"] < 2:
+        raise SceneError(f"{where} order: must be >= 2")
+
+    # [consistency]
+    where = f"{source}: [consistency]"
+    cons = {}
+    for k, v in _table(data, "consistency", source).items():
+        if k not in _CONSISTENCY:
+            _unknown({k: v}, _CONSISTENCY, where)
+        typ = _CONSISTENCY[k]
+        if typ is str:
+            if not isinstance(v, str):
+                raise SceneError(f"{where} {k}: expected a string, got {v!r}")
+            cons[k] = v
+        else:
+            cons[k] = _number(v, f"{where} {k}", typ, positive=(k != "backward_depth"))
+    if cons.get("backward_depth", 0) < 0:
+        raise SceneError(f"{where} backward_depth: must be >= 0")
+    if "energy_rate" in cons and cons["energy_rate"] not in _ENERGY_RATES:
+        raise SceneError(f"{where} energy_rate: {cons['energy_rate']!r} is not one of "
+                         f"{', '.join(_ENERGY_RATES)}")
+
+    scene = Scene(source=source, name=name, description=description, model_spec=spec,
+                  parameters=params, initial=initial, t_end=t_end, output_dt=output_dt,
+                  mode=mode, solver=solver, consistency=cons)
+    if isinstance(initial, list) and isinstance(solver.get("subdivision"), list) \
+            and len(solver["subdivision"]) != len(initial):
+        raise SceneError(f"{source}: [solver] subdivision has {len(solver['subdivision'])} entries, "
+                         f"the initial box {len(initial)}")
+    return scene
+
+
+def _subdivision(v, where):
+    if isinstance(v, int) and not isinstance(v, bool):
+        if v < 1:
+            raise SceneError(f"{where}: must be >= 1")
+        return v
+    if isinstance(v, list):
+        if not v or not all(isinstance(p, int) and not isinstance(p, bool) and p >= 1 for p in v):
+            raise SceneError(f"{where}: expected a list of integers >= 1 (pieces per state)")
+        return list(v)
+    if isinstance(v, dict):
+        if not all(isinstance(p, int) and not isinstance(p, bool) and p >= 1 for p in v.values()):
+            raise SceneError(f"{where}: expected state = pieces (integers >= 1)")
+        return dict(v)
+    raise SceneError(f"{where}: expected an integer, a list or a table of pieces per state")
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a TOML scene file (see the module docstring).
+
+    ``path`` may also be the name of a shipped scene ("double_pendulum_paper").
+    Raises :class:`SceneError` on any problem.
+    """
+    p = Path(path)
+    if not p.exists() and not p.suffix:
+        shipped = scene_dir() / f"{p.name}.toml"
+        if shipped.is_file():
+            p = shipped
+    src = str(path)
+    if not p.is_file():
+        raise SceneError(f"{src}: scene file not found")
+    try:
+        with open(p, "rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{src}: not valid TOML: {e}") from None
+    except OSError as e:
+        raise SceneError(f"{src}: cannot read: {e.strerror}") from None
+    return parse_scene(data, src, p.parent)
+
+
+def loads_scene(text: str, base=None) -> Scene:
+    """Parse a scene from a TOML string (relative URDF paths resolve against ``base``)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"<string>: not valid TOML: {e}") from None
+    return parse_scene(data, "<string>", Path(base) if base else None)

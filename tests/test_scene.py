@@ -1,0 +1,173 @@
+"""Scene files (mbs.scene): parsing, rigorous enclosure of numbers, clear errors."""
+import math
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from mbs.scene import SceneError, enclose_number, load_scene, loads_scene, output_times, scene_dir
+
+GOOD = """
+name = "t"
+[model]
+name = "double_pendulum_paper"
+[initial]
+x1 = ["0.99*3*pi/4", "1.01*3*pi/4"]
+x2 = "-11*pi/20"
+x3 = 0.43
+x4 = "67/100"
+[simulation]
+t_end = 1.0
+output_dt = 0.1
+mode = "i"
+[solver]
+order = 12
+subdivision = { x1 = 8 }
+[consistency]
+test_splits = 10
+"""
+
+NAMES = ["x1", "x2", "x3", "x4"]
+
+
+def test_shipped_scenes_load():
+    for name in ("pendulum_paper", "double_pendulum_paper", "double_pendulum_urdf"):
+        s = load_scene(scene_dir() / f"{name}.toml")
+        assert s.t_end > 0 and s.mode in ("i", "ii", "iii")
+        s.build_model()
+    # a shipped scene by name
+    assert load_scene("double_pendulum_paper").name.startswith("double pendulum")
+
+
+def test_paper_box_matches_model():
+    from models import double_pendulum as dp
+    s = loads_scene(GOOD)
+    box = s.initial_box(NAMES)
+    lo, hi = dp.initial_box()
+    assert np.array_equal(box.lo, lo) and np.array_equal(box.hi, hi)
+    assert s.subdivision_for(NAMES) == [8, 1, 1, 1]
+    kw = s.simulate_kwargs(NAMES)
+    assert kw["subdivision"] == [8, 1, 1, 1] and kw["mode"] == "i" and kw["test_splits"] == 10
+
+
+def test_number_enclosures_are_rigorous():
+    # decimals that are not doubles: the tightest enclosing pair, one ulp wide
+    for lit in ("0.43", "0.1", "2.1", "1e-300", "123456.789"):
+        lo, hi = enclose_number(float(lit))
+        q = Fraction(lit)
+        assert Fraction(lo) < q < Fraction(hi) and math.nextafter(lo, math.inf) == hi
+        assert enclose_number(lit) == (lo, hi)
+    # exact doubles and integers stay points
+    assert enclose_number(2.5) == (2.5, 2.5) and enclose_number(3) == (3.0, 3.0)
+    assert enclose_number("1/4") == (0.25, 0.25)
+    # pi expressions: compare with 60-digit mpmath
+    import mpmath
+    mpmath.mp.dps = 60
+    for text, val in (("pi", mpmath.pi), ("-11*pi/20", -11 * mpmath.pi / 20),
+                      ("0.99*3*pi/4", mpmath.mpf(99) / 100 * 3 * mpmath.pi / 4), ("1 + pi/3", 1 + mpmath.pi / 3)):
+        lo, hi = enclose_number(text)
+        assert mpmath.mpf(lo) < val < mpmath.mpf(hi)
+        assert hi == math.nextafter(math.nextafter(lo, math.inf), math.inf)
+
+
+@pytest.mark.parametrize("text", ["pi*pi", "1/pi", "1/0", "sin(1)", "2**3", "import os", "x1", "1 +"])
+def test_bad_expressions(text):
+    with pytest.raises(SceneError):
+        enclose_number(text, "[initial] x1")
+
+
+def test_output_times_are_exact_multiples():
+    assert output_times(1.0, 0.1) == [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]
+    assert output_times(1.0, 0.3) == [0.3, 0.6, 0.9, 1.0]
+    assert output_times(0.5, None) == [0.5]
+    ts = output_times(3.0, 0.05)
+    assert len(ts) == 60 and ts[-1] == 3.0 and all(float(Fraction(k + 1) * Fraction(1, 20)) == t
+                                                   for k, t in enumerate(ts))
+
+
+def _err(text, *words, names=None):
+    with pytest.raises(SceneError) as e:
+        s = loads_scene(text)
+        s.build_model()
+        s.initial_box(names or NAMES)
+        s.simulate_kwargs(names or NAMES)
+    msg = str(e.value)
+    assert "\n" not in msg
+    for w in words:
+        assert w in msg, msg
+    return msg
+
+
+def test_bad_scenes_name_the_problem(tmp_path):
+    _err(GOOD.replace("mode = \"i\"", "mode = \"i\"\nfoo = 1"), "[simulation]", "'foo'")
+    _err(GOOD.replace("[consistency]", "[consistency]\ntest_split = 3"), "[consistency]", "'test_split'")
+    _err(GOOD + "\n[extra]\na = 1\n", "'extra'")
+    _err(GOOD.replace('x3 = 0.43', 'x3 = [0.5, 0.43]'), "[initial] x3", "inverted")
+    _err(GOOD.replace('x3 = 0.43', 'x3 = nan'), "[initial] x3", "not a finite")
+    _err(GOOD.replace('x3 = 0.43', 'x3 = inf'), "[initial] x3", "not a finite")
+    _err(GOOD.replace('x3 = 0.43\n', ''), "missing initial value", "'x3'")
+    _err(GOOD.replace('x3 = 0.43\n', 'x9 = 0.43\n'), "unknown state", "'x9'")
+    text = GOOD.split("[initial]")[0] + GOOD.split('x4 = "67/100"')[1]
+    _err(text, "missing [initial]")
+    _err(GOOD.replace("double_pendulum_paper", "triple_pendulum"), "unknown model", "'triple_pendulum'")
+    _err(GOOD.replace('name = "double_pendulum_paper"', 'urdf = "nope.urdf"'), "nope.urdf", "not found")
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("<robot name='x'><link name='a'/><joint name='j' type='revolute'>")
+    _err(GOOD.replace('name = "double_pendulum_paper"', f'urdf = "{bad}"'), "bad.urdf")
+    _err(GOOD.replace("t_end = 1.0", "t_end = -1.0"), "t_end", "> 0")
+    _err(GOOD.replace("t_end = 1.0\n", ""), "missing t_end")
+    _err(GOOD.replace('mode = "i"', 'mode = "iv"'), "mode", "'iv'")
+    _err(GOOD.replace("order = 12", "order = 12.5"), "[solver] order", "integer")
+    _err(GOOD.replace("{ x1 = 8 }", "[8, 1]"), "subdivision", "2 entries")
+    _err(GOOD.replace("{ x1 = 8 }", "{ y = 8 }"), "subdivision", "'y'")
+    _err("[model\nname=1", "not valid TOML")
+
+
+def test_bad_scene_file(tmp_path):
+    with pytest.raises(SceneError, match="not found"):
+        load_scene(tmp_path / "missing.toml")
+    p = tmp_path / "s.toml"
+    p.write_text(GOOD.replace("[initial]", "[initial]\n").replace('x2 = "-11*pi/20"', 'x2 = "-11*pi/"'))
+    with pytest.raises(SceneError, match=r"s\.toml: \[initial\] x2: cannot parse"):
+        load_scene(p)
+
+
+def test_urdf_relative_path_and_dh_parameters(tmp_path):
+    from models import double_pendulum as dp
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "robots" / "dp.urdf").write_text(dp.urdf_xml())
+    text = """
+[model]
+urdf = "robots/dp.urdf"
+lock = {}
+[initial]
+box = [[2.3, 2.4], 0.1, 0, 0]
+[simulation]
+t_end = 0.5
+"""
+    p = tmp_path / "scene.toml"
+    p.write_text(text)
+    s = load_scene(p)
+    chain = s.build_model()
+    assert chain.n == 2
+    assert s.initial_box(["q1", "q2", "qd1", "qd2"]).shape == (4,)
+    dh = """
+[model]
+dh = [ {joint = "R", a = "l1", mass = "m1"}, {joint = "R", a = 1.0, mass = 1.0} ]
+gravity = [9.81, 0.0, 0.0]
+[parameters]
+l1 = 1.0
+m1 = 2.0
+[initial]
+box = [[2.3, 2.4], 0.1, 0, 0]
+[simulation]
+t_end = 0.5
+"""
+    s = loads_scene(dh)
+    c = s.build_model()
+    assert not c.free_symbols and c.n == 2
+    assert "params" not in s.simulate_kwargs()
+    _err(dh.replace('a = "l1"', 'a = "l7"'), "'l7'", "names no parameter")
+    # interval parameters are handed to simulate
+    s = loads_scene(dh.replace("m1 = 2.0", "m1 = [1.9, 2.1]"))
+    assert s.simulate_kwargs()["params"] == {"m1": (1.9, 2.1)}
