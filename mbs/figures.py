@@ -1,0 +1,264 @@
+"""The paper's figures from simulation results (matplotlib, Agg backend, PNG files).
+
+* :func:`fig_reduction_area` -- Fig. 2: the reduction area RA(t) of eq. (16) with the
+  test times t* marked (and the H_H / H_V enclosures it compares).
+* :func:`fig_consistency_plane` -- Fig. 3: the (q, qd) plane at t*: the regions where
+  the energy H is certainly outside [H_V(t*)] (H evaluated in interval arithmetic on a
+  grid of cells over the tested box; a shaded cell holds no consistent state), the
+  tested sub-boxes, kept ones outlined, pruned ones crossed.
+* :func:`fig_enclosures` -- Fig. 5: the hull of the enclosure of each state over time
+  for several modes overlaid (solid (i), grey (ii), dashed (iii), as in the paper),
+  optionally with sampled true trajectories (:func:`sample_trajectories`).
+* :func:`fig_work_precision` -- final width ratio against wall time (benchmarks).
+"""
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["fig_reduction_area", "fig_consistency_plane", "fig_enclosures", "fig_work_precision",
+           "sample_trajectories", "sample_initial_points"]
+
+MODE_STYLE = {"i": dict(color="black", ls="-", lw=1.2, label="(i) numeric, no test"),
+              "ii": dict(color="0.55", ls="-", lw=2.2, label="(ii) numeric + energy test"),
+              "iii": dict(color="tab:blue", ls="--", lw=1.2, label="(iii) symbolic + energy test")}
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, path):
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    _plt().close(fig)
+    return path
+
+
+# --------------------------------------------------------------------------- sampling
+def sample_initial_points(lo, hi, n_random, seed=0):
+    """All corners of the box (up to 2^10 of them), ``n_random`` uniform points, the centre."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    free = np.flatnonzero(hi > lo)
+    base = (lo + hi) / 2
+    pts = []
+    if free.size <= 10:
+        for corner in itertools.product(*[(lo[i], hi[i]) for i in free]):
+            p = lo.copy()
+            p[free] = corner
+            pts.append(p)
+    rng = np.random.default_rng(seed)
+    pts.extend(lo + rng.uniform(0, 1, (n_random, lo.size)) * (hi - lo))
+    pts.append(base)
+    return np.array(pts)
+
+
+def sample_trajectories(f, points, times, params=None):
+    """States at ``times`` of the float ODE ``x' = f(x)`` from each point (DOP853,
+    rtol = atol = 1e-12, all points integrated as one vectorized system).
+
+    ``f`` maps an (n, S) array (column per trajectory) to its (n, S) derivative, or is
+    an expression Graph (evaluated with ``eval_float``). Returns (S, len(times), n);
+    trajectories that fail are NaN from the failure on.
+    """
+    from scipy.integrate import solve_ivp
+
+    pts = np.asarray(points, float)
+    S, n = pts.shape
+    times = np.asarray(times, float)
+    if hasattr(f, "eval_float"):
+        graph = f
+        p = None if params is None else np.asarray(params, float)
+
+        def fv(x):
+            return graph.eval_float(x.T, p).T
+    else:
+        fv = f
+
+    def rhs(t, y):
+        return np.asarray(fv(y.reshape(n, S)), float).reshape(-1)
+
+    out = np.full((S, times.size, n), np.nan)
+    t_end = float(times.max())
+    sol = solve_ivp(rhs, (0.0, t_end), pts.T.reshape(-1), method="DOP853", rtol=1e-12, atol=1e-12,
+                    t_eval=times)
+    k = sol.y.shape[1]
+    out[:, :k, :] = sol.y.reshape(n, S, k).transpose(1, 2, 0)
+    return out
+
+
+# --------------------------------------------------------------------------- Fig. 2
+def fig_reduction_area(sol, path, title=None):
+    """RA(t) (eq. 16) with t* marked; below it the enclosures [H_H(t)] and [H_V(t)]."""
+    plt = _plt()
+    c = sol.consistency
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    t = np.asarray(c.ra_t, float)
+    ax1.plot(t, np.asarray(c.ra, float), color="black", lw=1.3, label=r"$\mathcal{RA}(t)$")
+    for j, rec in enumerate(c.tests):
+        ax1.axvline(rec.t, color="tab:red", ls=":", lw=1.0, label=r"test time $t^*$" if j == 0 else None)
+        ax2.axvline(rec.t, color="tab:red", ls=":", lw=1.0)
+    ax1.set_ylabel(r"$\mathcal{RA}(t)$ [J]")
+    ax1.legend(loc="best")
+    ax1.set_title(title or r"Reduction area $\mathcal{RA}(t) = $ diam$[H_H]$ $-$ diam$([H_H] \cap [H_V])$")
+    for name, enc, style in (("$[H_H(t)]$", c.h_h, dict(color="tab:blue", alpha=0.25)),
+                             ("$[H_V(t)]$", c.h_v, dict(color="tab:orange", alpha=0.45))):
+        lo, hi = np.asarray(enc.lo, float).ravel(), np.asarray(enc.hi, float).ravel()
+        ok = np.isfinite(lo) & np.isfinite(hi)
+        ax2.fill_between(t[ok], lo[ok], hi[ok], step=None, label=name, **style)
+    ax2.set_xlabel("t [s]")
+    ax2.set_ylabel("H [J]")
+    ax2.legend(loc="best")
+    return _save(fig, path)
+
+
+# --------------------------------------------------------------------------- Fig. 3
+def fig_consistency_plane(sol, energy, path, test_index=0, pair=None, grid=160, params=None,
+                          title=None):
+    """The (q, qd) plane at the test time t* (paper Fig. 3).
+
+    ``energy``: the Graph x -> [H] (H_H). ``pair``: the two state indices to plot
+    (default: the first position and its rate, (0, n/2)). Shaded: cells of a
+    ``grid`` x ``grid`` partition of the tested box where the interval enclosure of
+    H over the cell (all other states ranging over the tested box) misses [H_V(t*)]:
+    no state there is consistent with the energy. Rectangles: the tested sub-boxes,
+    kept ones outlined in green, pruned ones grey and crossed.
+    """
+    from verified.interval import Interval, hull
+
+    plt = _plt()
+    rec = sol.consistency.tests[test_index]
+    cand = rec.candidates
+    n = cand.shape[-1]
+    i, j = pair if pair is not None else (0, n // 2)
+    names = list(getattr(sol, "state_names", None) or [f"x{k + 1}" for k in range(n)])
+    box = hull(cand, axis=0)
+    lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
+    ei = np.linspace(lo[i], hi[i], grid + 1)
+    ej = np.linspace(lo[j], hi[j], grid + 1)
+    cells_lo = np.broadcast_to(lo, (grid, grid, n)).copy()
+    cells_hi = np.broadcast_to(hi, (grid, grid, n)).copy()
+    cells_lo[..., i] = ei[:-1][:, None]
+    cells_hi[..., i] = ei[1:][:, None]
+    cells_lo[..., j] = ej[:-1][None, :]
+    cells_hi[..., j] = ej[1:][None, :]
+    cells = Interval(cells_lo.reshape(-1, n), cells_hi.reshape(-1, n))
+    H = energy.eval_interval(cells, params)[..., 0]
+    hv = rec.h_v
+    hv_lo, hv_hi = float(np.asarray(hv.lo).ravel()[0]), float(np.asarray(hv.hi).ravel()[0])
+    outside = ((np.asarray(H.hi) < hv_lo) | (np.asarray(H.lo) > hv_hi)).reshape(grid, grid)
+
+    fig, ax = plt.subplots(figsize=(6.5, 5.5))
+    from matplotlib.colors import ListedColormap
+    ax.pcolormesh(ei, ej, outside.T.astype(float), cmap=ListedColormap(["white", "#f4b6b6"]),
+                  vmin=0, vmax=1, shading="flat", rasterized=True)
+    from matplotlib.patches import Rectangle
+    kept = np.asarray(rec.kept, bool)
+    clo, chi = np.asarray(cand.lo, float), np.asarray(cand.hi, float)
+    for k in range(clo.shape[0]):
+        x0, x1, y0, y1 = clo[k, i], chi[k, i], clo[k, j], chi[k, j]
+        if kept[k]:
+            ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec="tab:green", lw=1.2))
+        else:
+            ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=True, fc="0.85", ec="0.5", lw=0.6,
+                                   alpha=0.6))
+            ax.plot([x0, x1], [y0, y1], color="0.5", lw=0.5)
+            ax.plot([x0, x1], [y1, y0], color="0.5", lw=0.5)
+    ax.set_xlim(lo[i], hi[i])
+    ax.set_ylim(lo[j], hi[j])
+    ax.set_xlabel(names[i])
+    ax.set_ylabel(names[j])
+    from matplotlib.patches import Patch
+    ax.legend(handles=[Patch(fc="#f4b6b6", label="H certainly outside $[H_V(t^*)]$"),
+                       Patch(fc="none", ec="tab:green", label=f"kept sub-boxes ({int(kept.sum())})"),
+                       Patch(fc="0.85", ec="0.5", label=f"pruned sub-boxes ({int((~kept).sum())})")],
+              loc="upper right", fontsize=8, framealpha=0.9)
+    ax.set_title(title or f"Energy consistency test at t* = {rec.t:.4g} s, "
+                          f"[H_V] = [{hv_lo:.5g}, {hv_hi:.5g}] J")
+    return _save(fig, path)
+
+
+# --------------------------------------------------------------------------- Fig. 5
+def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None, tube=True):
+    """Hull of each state's enclosure over time for each mode (paper Fig. 5).
+
+    ``solutions``: dict mode -> Solution (or a single Solution). ``tube``: draw the
+    enclosure over every step (``tube_t``/``tube_hull``) as a staircase, else the
+    output times only. ``samples``: (S, k, n) sampled true states at ``sample_times``.
+    """
+    plt = _plt()
+    if not isinstance(solutions, dict):
+        solutions = {getattr(solutions, "mode", "") or "i": solutions}
+    first = next(iter(solutions.values()))
+    n = first.hull.shape[-1]
+    names = list(getattr(first, "state_names", None) or [f"x{k + 1}" for k in range(n)])
+    cols = 2 if n > 1 else 1
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(6 * cols, 2.8 * rows), squeeze=False, sharex=True)
+    for k in range(n):
+        ax = axes[k // cols][k % cols]
+        if samples is not None:
+            S = samples.shape[0]
+            step = max(1, S // 60)
+            for s in range(0, S, step):
+                ax.plot(sample_times, samples[s, :, k], color="tab:orange", lw=0.4, alpha=0.5,
+                        label="sampled trajectories" if s == 0 else None)
+        for mode, sol in solutions.items():
+            style = dict(MODE_STYLE.get(mode, dict(color="black", ls="-", lw=1.0, label=str(mode))))
+            label = style.pop("label")
+            if sol.status != "completed":
+                label += f" (breakdown t={sol.t_reached:.3g})"
+            if tube and len(sol.tube_t) > 1:
+                tt = np.repeat(np.asarray(sol.tube_t, float), 2)[1:-1]
+                lo = np.repeat(np.asarray(sol.tube_hull.lo, float)[:, k], 2)
+                hi = np.repeat(np.asarray(sol.tube_hull.hi, float)[:, k], 2)
+            else:
+                tt = np.asarray(sol.t, float)
+                lo, hi = np.asarray(sol.hull.lo, float)[:, k], np.asarray(sol.hull.hi, float)[:, k]
+            ax.plot(tt, lo, label=label, **style)
+            ax.plot(tt, hi, **style)
+        ax.set_ylabel(names[k])
+        if k // cols == rows - 1:
+            ax.set_xlabel("t [s]")
+        if k == 0:
+            ax.legend(fontsize=7, loc="best")
+    for k in range(n, rows * cols):
+        axes[k // cols][k % cols].axis("off")
+    fig.suptitle(title or "State enclosures (hull of all boxes) over time")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+# --------------------------------------------------------------------------- benchmarks
+def fig_work_precision(rows, path, title=None):
+    """rows: dicts with "mode", "order", "pieces", "wall_s", "worst_ratio" (None = breakdown)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 5))
+    markers = {"i": "o", "ii": "s", "iii": "^"}
+    orders = sorted({r["order"] for r in rows})
+    cmap = plt.get_cmap("viridis")
+    for r in rows:
+        if r.get("worst_ratio") is None:
+            continue
+        color = cmap(orders.index(r["order"]) / max(1, len(orders) - 1))
+        ax.scatter(r["wall_s"], r["worst_ratio"] - 1.0, marker=markers.get(r["mode"], "o"), color=color,
+                   s=20 + 6 * np.log2(max(1, r["pieces"])) ** 2, alpha=0.8, edgecolor="black", lw=0.4)
+    from matplotlib.lines import Line2D
+    handles = [Line2D([], [], marker=markers[m], ls="", color="0.4", label=f"mode {m}") for m in markers
+               if any(r["mode"] == m for r in rows)]
+    handles += [Line2D([], [], marker="o", ls="", color=cmap(k / max(1, len(orders) - 1)), label=f"order {o}")
+                for k, o in enumerate(orders)]
+    ax.legend(handles=handles, fontsize=8, title="marker size: pieces", title_fontsize=8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel("worst width ratio to the sampled true hull, minus 1")
+    ax.set_title(title or "Work-precision")
+    ax.grid(True, which="both", alpha=0.3)
+    return _save(fig, path)
