@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["fig_reduction_area", "fig_consistency_plane", "fig_enclosures", "fig_work_precision",
-           "sample_trajectories", "sample_initial_points"]
+           "sample_trajectories", "sample_initial_points", "inconsistent_cells"]
 
 MODE_STYLE = {"i": dict(color="black", ls="-", lw=1.2, label="(i) numeric, no test"),
               "ii": dict(color="0.55", ls="-", lw=2.2, label="(ii) numeric + energy test"),
@@ -119,6 +119,32 @@ def fig_reduction_area(sol, path, title=None):
 
 
 # --------------------------------------------------------------------------- Fig. 3
+def inconsistent_cells(candidates, energy, h_v, pair, grid=160, params=None):
+    """Cells of a grid over the hull of ``candidates`` (Interval (k, n)) in the plane of
+    the states ``pair = (i, j)`` where the interval enclosure of H (the other states
+    over their whole range) lies outside ``h_v = (lo, hi)``: certainly inconsistent.
+    Returns (edges_i (grid+1,), edges_j (grid+1,), outside (grid, grid) bool)."""
+    from verified.interval import Interval, hull
+
+    n = candidates.shape[-1]
+    i, j = pair
+    box = hull(candidates, axis=0)
+    lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
+    ei = np.linspace(lo[i], hi[i], grid + 1)
+    ej = np.linspace(lo[j], hi[j], grid + 1)
+    ei[0], ei[-1], ej[0], ej[-1] = lo[i], hi[i], lo[j], hi[j]
+    cells_lo = np.broadcast_to(lo, (grid, grid, n)).copy()
+    cells_hi = np.broadcast_to(hi, (grid, grid, n)).copy()
+    cells_lo[..., i] = ei[:-1][:, None]
+    cells_hi[..., i] = ei[1:][:, None]
+    cells_lo[..., j] = ej[:-1][None, :]
+    cells_hi[..., j] = ej[1:][None, :]
+    cells = Interval(cells_lo.reshape(-1, n), cells_hi.reshape(-1, n))
+    H = energy.eval_interval(cells, params)[..., 0]
+    outside = ((np.asarray(H.hi) < h_v[0]) | (np.asarray(H.lo) > h_v[1])).reshape(grid, grid)
+    return ei, ej, outside
+
+
 def fig_consistency_plane(sol, energy, path, test_index=0, pair=None, grid=160, params=None,
                           title=None):
     """The (q, qd) plane at the test time t* (paper Fig. 3).
@@ -130,29 +156,16 @@ def fig_consistency_plane(sol, energy, path, test_index=0, pair=None, grid=160, 
     no state there is consistent with the energy. Rectangles: the tested sub-boxes,
     kept ones outlined in green, pruned ones grey and crossed.
     """
-    from verified.interval import Interval, hull
-
     plt = _plt()
     rec = sol.consistency.tests[test_index]
     cand = rec.candidates
     n = cand.shape[-1]
     i, j = pair if pair is not None else (0, n // 2)
     names = list(getattr(sol, "state_names", None) or [f"x{k + 1}" for k in range(n)])
-    box = hull(cand, axis=0)
-    lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
-    ei = np.linspace(lo[i], hi[i], grid + 1)
-    ej = np.linspace(lo[j], hi[j], grid + 1)
-    cells_lo = np.broadcast_to(lo, (grid, grid, n)).copy()
-    cells_hi = np.broadcast_to(hi, (grid, grid, n)).copy()
-    cells_lo[..., i] = ei[:-1][:, None]
-    cells_hi[..., i] = ei[1:][:, None]
-    cells_lo[..., j] = ej[:-1][None, :]
-    cells_hi[..., j] = ej[1:][None, :]
-    cells = Interval(cells_lo.reshape(-1, n), cells_hi.reshape(-1, n))
-    H = energy.eval_interval(cells, params)[..., 0]
     hv = rec.h_v
     hv_lo, hv_hi = float(np.asarray(hv.lo).ravel()[0]), float(np.asarray(hv.hi).ravel()[0])
-    outside = ((np.asarray(H.hi) < hv_lo) | (np.asarray(H.lo) > hv_hi)).reshape(grid, grid)
+    ei, ej, outside = inconsistent_cells(cand, energy, (hv_lo, hv_hi), (i, j), grid, params)
+    lo, hi = (ei[0], ej[0]), (ei[-1], ej[-1])
 
     fig, ax = plt.subplots(figsize=(6.5, 5.5))
     from matplotlib.colors import ListedColormap
@@ -170,8 +183,8 @@ def fig_consistency_plane(sol, energy, path, test_index=0, pair=None, grid=160, 
                                    alpha=0.6))
             ax.plot([x0, x1], [y0, y1], color="0.5", lw=0.5)
             ax.plot([x0, x1], [y1, y0], color="0.5", lw=0.5)
-    ax.set_xlim(lo[i], hi[i])
-    ax.set_ylim(lo[j], hi[j])
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
     ax.set_xlabel(names[i])
     ax.set_ylabel(names[j])
     from matplotlib.patches import Patch
