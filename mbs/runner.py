@@ -7,25 +7,25 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import ModelError
 from .scene import Scene, SceneError, output_times
 
 __all__ = ["run_scene", "reference_system", "check_samples"]
 
 
-def reference_system(model):
-    """The :class:`mbs.system.System` of a model (a name or a Chain): the float
-    right-hand side for sampling and the energy graph for Fig. 3.
+def reference_system(model, mode="ii", energy_rate="unsimplified"):
+    """The :class:`mbs.system.System` of a model (a name or a Chain) in ``mode``: the
+    float right-hand side for sampling and the energy graph for Fig. 3.
 
-    Uses :func:`mbs.simulate.build_system` when available (the same system the
-    simulation integrates), else the numeric model / the paper's hand-written
-    equations.
+    Uses :func:`mbs.simulate.system_for` (the system the simulation integrates);
+    falls back to the numeric model / the paper's hand-written equations.
     """
     try:
-        from .simulate import build_system  # type: ignore[attr-defined]
+        from .simulate import system_for
     except ImportError:
-        build_system = None
-    if build_system is not None:
-        return build_system(model, "ii")
+        system_for = None
+    if system_for is not None:
+        return system_for(model, "ii" if mode == "i" else mode, energy_rate=energy_rate)
     from .system import System
     if isinstance(model, System):
         return model
@@ -81,7 +81,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     t0 = time.perf_counter()
     model = scene.build_model()
     try:
-        system = reference_system(model)
+        system = reference_system(model, mode, scene.consistency.get("energy_rate", "unsimplified"))
     except Exception as e:  # noqa: BLE001 - a model that cannot be built is a scene problem
         raise SceneError(f"{scene.source}: cannot build the model: {type(e).__name__}: {e}") from None
     names = system.state_names
@@ -93,7 +93,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     bar = Progress(t_end, f"mode {mode}", enabled=None if progress else False)
     try:
         sol = simulate(model, x0, t_end, output_dt=dt, progress=bar, **kw)
-    except (ValueError, TypeError) as e:
+    except (ValueError, TypeError, ModelError) as e:  # settings the solver refuses
         raise SceneError(f"{scene.source}: cannot simulate: {e}") from None
     finally:
         bar.close()

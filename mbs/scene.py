@@ -22,7 +22,9 @@
     l1 = [0.99, 1.01]       # substituted, intervals are passed on as uncertain
                             # parameters (simulate(params=...))
 
-    [initial]               # the initial box, required: one entry per state
+    [initial]               # the initial box, required: one entry per state, named
+                            # by the model's state names (chains: q1..qn, qd1..qdn)
+                            # or x1..x2n in state order (positions, then rates)
     x1 = ["0.99*3*pi/4", "1.01*3*pi/4"]   # [lo, hi]
     x2 = "-11*pi/20"                      # a point
     x3 = 0.43
@@ -31,7 +33,7 @@
 
     [simulation]
     t_end = 1.0             # required [s]
-    output_dt = 0.1         # outputs at exactly k * output_dt (and at t_end)
+    output_dt = 0.1         # outputs at k * output_dt (one float product each) and t_end
     mode = "ii"             # "i" | "ii" | "iii" (paper sec. 5.2)
 
     [solver]                # passed to verified.solver.solve
@@ -283,15 +285,12 @@ class Scene:
                                  f"{len(names)} states ({', '.join(names)})")
             pairs = list(self.initial)
         else:
-            missing = [s for s in names if s not in self.initial]
-            unknown = [s for s in self.initial if s not in names]
-            if unknown:
-                raise SceneError(f"{where}: unknown state{'s' if len(unknown) > 1 else ''} "
-                                 f"{', '.join(map(repr, unknown))}; the model's states are {', '.join(names)}")
+            by_index = _by_state(self.initial, names, where)
+            missing = [names[i] for i in range(len(names)) if i not in by_index]
             if missing:
                 raise SceneError(f"{where}: missing initial value for {', '.join(map(repr, missing))} "
                                  f"(states: {', '.join(names)})")
-            pairs = [self.initial[s] for s in names]
+            pairs = [by_index[i] for i in range(len(names))]
         lo = np.array([p[0] for p in pairs])
         hi = np.array([p[1] for p in pairs])
         return Interval(lo, hi)
@@ -306,10 +305,8 @@ class Scene:
             if len(sub) != len(names):
                 raise SceneError(f"{where}: {len(sub)} entries for {len(names)} states ({', '.join(names)})")
             return list(sub)
-        unknown = [s for s in sub if s not in names]
-        if unknown:
-            raise SceneError(f"{where}: unknown state(s) {', '.join(map(repr, unknown))}; states: {', '.join(names)}")
-        return [sub.get(s, 1) for s in names]
+        by_index = _by_state(sub, names, where)
+        return [by_index.get(i, 1) for i in range(len(names))]
 
     def t_eval(self, t_end: float | None = None, output_dt: float | None = None):
         """Output times: exactly k * output_dt (decimal, rounded to nearest) for
@@ -334,20 +331,29 @@ class Scene:
         return kw
 
 
+def _by_state(table: dict, names, where) -> dict:
+    """{state index: value} for a table keyed by state names or by x1..xn (state order)."""
+    out = {}
+    for key, v in table.items():
+        if key in names:
+            i = names.index(key)
+        elif key.startswith("x") and key[1:].isdigit() and 1 <= int(key[1:]) <= len(names):
+            i = int(key[1:]) - 1
+        else:
+            raise SceneError(f"{where}: unknown state {key!r}; the model's states are {', '.join(names)} "
+                             f"(or x1..x{len(names)} in that order)")
+        if i in out:
+            raise SceneError(f"{where}: state {names[i]!r} given twice ({key!r})")
+        out[i] = v
+    return out
+
+
 def output_times(t_end: float, output_dt: float | None) -> list:
-    """[k * dt for k = 1.. while k dt < t_end] + [t_end]; k * dt is computed exactly
-    from dt's decimal literal and rounded to the nearest double (3 * 0.1 -> 0.3)."""
-    if output_dt is None:
-        return [float(t_end)]
-    dt = Fraction(repr(float(output_dt)))
-    T = Fraction(repr(float(t_end)))
-    n = int(T / dt)
-    ts = [float(k * dt) for k in range(1, n + 1)]
-    if not ts or Fraction(ts[-1]) != Fraction(float(t_end)):
-        if ts and ts[-1] > t_end:
-            ts.pop()
-        ts.append(float(t_end))
-    return ts
+    """The output times of a run: ``k * output_dt`` (one float product each, never
+    accumulated) for k = 1, 2, ... up to t_end, plus t_end (see
+    :func:`mbs.simulate.output_times`)."""
+    from .simulate import output_times as _times
+    return [float(t) for t in _times(0.0, float(t_end), output_dt)]
 
 
 def _resolve_urdf(spec: str, base: Path | None, where: str) -> str:

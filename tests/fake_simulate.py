@@ -9,19 +9,36 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from mbs.scene import output_times
 from verified.interval import Interval, hull
 from verified.solver import solve
 
 MODES = ("i", "ii", "iii")
 
 
+def output_times(t0, t_end, output_dt):
+    if output_dt is None:
+        return np.array([t_end])
+    k = np.arange(1, int(np.floor((t_end - t0) / output_dt * (1 + 1e-12))) + 1)
+    ts = t0 + k * output_dt
+    ts = ts[ts <= t_end]
+    return ts if ts.size and ts[-1] >= t_end * (1 - 1e-12) else np.append(ts, t_end)
+
+
+def system_for(model, mode="ii", energy_rate="unsimplified"):
+    import mbs.runner as r
+    import sys
+    saved = sys.modules.pop("mbs.simulate")
+    try:
+        return r.reference_system(model)
+    finally:
+        sys.modules["mbs.simulate"] = saved
+
+
 def simulate(model, x0, t_end, *, mode="ii", output_dt=None, params=None, order=12, tol=1e-10,
              subdivision=None, energy_rate="unsimplified", test_interval=0.1, test_splits=10,
              split_strategy="gradient", backward_depth=0, progress=None, **kw):
-    from mbs.runner import reference_system
-    system = reference_system(model)
-    sol = solve(system.rhs, x0, (0.0, t_end), t_eval=output_times(t_end, output_dt), order=order, tol=tol,
+    system = system_for(model)
+    sol = solve(system.rhs, x0, (0.0, t_end), t_eval=output_times(0.0, t_end, output_dt), order=order, tol=tol,
                 subdivision=subdivision, **kw)
     if progress is not None:
         for t in sol.tube_t:

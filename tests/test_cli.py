@@ -67,7 +67,7 @@ def test_overrides(tmp_path):
     assert main(["simulate", str(scene), "--out", str(out), "--mode", "i", "--t-end", "0.2",
                  "--output-dt", "0.05", "--samples", "0", "--no-figures"]) == 0
     data = json.loads((out / "result.json").read_text())
-    assert data["mode"] == "i" and [o["t"] for o in data["outputs"]] == [0.0, 0.05, 0.1, 0.15, 0.2]
+    assert data["mode"] == "i" and [o["t"] for o in data["outputs"]] == [0.0, 0.05, 0.1, 3 * 0.05, 0.2]
     assert not (out / "enclosures.png").exists()
 
 
