@@ -163,9 +163,39 @@ def test_split_halves_cover_the_parent_set():
         a = rng.uniform(-1, 1, (500, n)) * r0w[b]
         e = rng.uniform(-1, 1, (500, n)) * rw[b]
         pts = sets.c[b] + a @ C[b].T + e @ Q[b].T
-        in_left = np.all((h.lo[b] <= pts) & (pts <= h.hi[b]), axis=1)
-        in_right = np.all((h.lo[nb + b] <= pts) & (pts <= h.hi[nb + b]), axis=1)
+        in_left = np.all((h.lo[2 * b] <= pts) & (pts <= h.hi[2 * b]), axis=1)  # parts are set-major
+        in_right = np.all((h.lo[2 * b + 1] <= pts) & (pts <= h.hi[2 * b + 1]), axis=1)
         assert (in_left | in_right).all()
+        assert in_left.any() and in_right.any()
+
+
+@pytest.mark.parametrize("pieces", [3, 7])
+def test_subdivide_along_covers_the_set_exactly_in_parameter_space(pieces):
+    """Every parameter value (a, b) of a set lies in one of the parts cut along any
+    direction, mapped through the parts' own centres (the rounding is enclosed)."""
+    from verified.lohner import DoubletonSets
+
+    rng = np.random.default_rng(pieces)
+    n, nb = 3, 2 * 3
+    C = rng.normal(size=(nb, n, n))
+    Q, _ = np.linalg.qr(rng.normal(size=(nb, n, n)))
+    r0w, rw = rng.uniform(0.1, 1, (nb, n)), rng.uniform(0.1, 1, (nb, n))
+    sets = DoubletonSets(c=rng.normal(size=(nb, n)) * 1e3, C=C, r0=Interval(-r0w, r0w), Q=Q, r=Interval(-rw, rw))
+    which = np.arange(nb)  # every direction once: r0_0..r0_2, r_0..r_2
+    parts = sets.subdivide_along(which, pieces)
+    assert parts.n_sets == nb * pieces
+    h = parts.hull().reshape(nb, pieces, n)
+    for b in range(nb):
+        a = rng.uniform(-1, 1, (400, n)) * r0w[b]
+        e = rng.uniform(-1, 1, (400, n)) * rw[b]
+        a[:2, which[b] % n if which[b] < n else 0] = [-r0w[b, which[b]] if which[b] < n else 0, 0]
+        pts = sets.c[b] + a @ C[b].T + e @ Q[b].T
+        inside = np.zeros(400, dtype=bool)
+        for p in range(pieces):
+            inside |= np.all((h.lo[b, p] <= pts) & (pts <= h.hi[b, p]), axis=1)
+        assert inside.all()
+        # the parts are narrower than the parent along the cut direction
+        assert (h[b].width().sum(axis=1) <= sets.take([b]).hull().width().sum() + 1e-9).all()
 
 
 def test_adaptive_splitting_is_sound_on_the_double_pendulum():

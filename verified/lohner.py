@@ -86,38 +86,67 @@ class DoubletonSets:
         if idx.size == 0:
             return self
         part = self.take(idx)
-        nb, n = part.c.shape
-        rows = np.arange(nb)
-        contribution = np.concatenate(
-            [np.abs(part.C).sum(axis=1) * part.r0.width(), np.abs(part.Q).sum(axis=1) * part.r.width()], axis=1
+        halves = part.subdivide_along(np.argmax(part.direction_widths(), axis=1), 2)
+        keep = self.take(np.flatnonzero(~mask))
+        return DoubletonSets.concatenate([keep, halves])
+
+    def direction_widths(self) -> np.ndarray:
+        """Per set, the width each parameter direction gives the set, shape (B, 2n):
+        ``sum_i |C_ij| w(r0_j)`` for the ``r0`` directions, then ``|Q_ij| w(r_j)``."""
+        return np.concatenate(
+            [np.abs(self.C).sum(axis=1) * self.r0.width(), np.abs(self.Q).sum(axis=1) * self.r.width()], axis=1
         )
-        pick = np.argmax(contribution, axis=1)
-        in_r0 = pick < n
-        j = np.where(in_r0, pick, pick - n)
-        halves = []
-        for side in (0, 1):
-            r0 = part.r0.copy()
-            r = part.r.copy()
-            shift = np.empty(nb)
+
+    def direction_columns(self) -> np.ndarray:
+        """The columns of ``[C | Q]``, shape (B, n, 2n): direction ``j`` moves the set
+        along column ``j`` per unit of its parameter (``r0_j`` or ``r_{j-n}``)."""
+        return np.concatenate([self.C, self.Q], axis=2)
+
+    def subdivide_along(self, which: np.ndarray, pieces: int) -> "DoubletonSets":
+        """Cut every set into ``pieces`` equal parts along one parameter direction.
+
+        ``which[b]`` in ``[0, 2n)`` picks ``r0_j`` (``j < n``) or ``r_{j-n}`` of set ``b``.
+        Returns ``B * pieces`` sets, set-major (the parts of set ``b`` are rows
+        ``b * pieces .. (b + 1) * pieces - 1``). Each part is recentred: its shift
+        moves into the float centre ``c`` and the rounding of that centre is enclosed
+        and folded into the error vector (``r += Q^-1 d``). Consecutive parts share
+        their float breakpoints, so the union of the parts covers the set exactly.
+        """
+        nb, n = self.c.shape
+        which = np.asarray(which, dtype=np.int64).reshape(nb)
+        pieces = int(pieces)
+        if pieces < 1:
+            raise ValueError(f"pieces must be >= 1, got {pieces}")
+        if pieces == 1 or nb == 0:
+            return self
+        rows = np.arange(nb)
+        in_r0 = which < n
+        j = np.where(in_r0, which, which - n)
+        lo = np.where(in_r0, self.r0.lo[rows, j], self.r.lo[rows, j])
+        hi = np.where(in_r0, self.r0.hi[rows, j], self.r.hi[rows, j])
+        frac = np.arange(pieces + 1) / pieces
+        cuts = lo[:, None] + (hi - lo)[:, None] * frac[None, :]
+        cuts[:, 0], cuts[:, -1] = lo, hi
+        cuts = np.maximum.accumulate(np.minimum(cuts, hi[:, None]), axis=1)  # monotone despite rounding
+        column = np.where(in_r0[:, None], self.C[rows, :, j], self.Q[rows, :, j])
+        parts = []
+        for p in range(pieces):
+            a, b = cuts[:, p], cuts[:, p + 1]
+            sh = 0.5 * a + 0.5 * b
+            piece = Interval._from_bounds(a, b) - sh  # outward rounded: contains the centred part
+            r0 = self.r0.copy()
+            r = self.r.copy()
             for vec, sel in ((r0, in_r0), (r, ~in_r0)):
                 rr = rows[sel]
-                lo = vec.lo[rr, j[sel]]
-                hi = vec.hi[rr, j[sel]]
-                m = 0.5 * lo + 0.5 * hi
-                a, b = (lo, m) if side == 0 else (m, hi)
-                sh = 0.5 * a + 0.5 * b
-                piece = Interval._from_bounds(a, b) - sh  # outward rounded: contains the centred half
-                vec.lo[rr, j[sel]] = piece.lo
-                vec.hi[rr, j[sel]] = piece.hi
-                shift[sel] = sh
-            column = np.where(in_r0[:, None], part.C[rows, :, j], part.Q[rows, :, j])
-            exact_c = part.c + Interval._from_bounds(column, column) * shift[:, None]
+                vec.lo[rr, j[sel]] = piece.lo[sel]
+                vec.hi[rr, j[sel]] = piece.hi[sel]
+            exact_c = self.c + Interval._from_bounds(column, column) * sh[:, None]
             c_new = exact_c.mid()
             d = exact_c - c_new  # the float centre's rounding, enclosed
-            r = r + linalg.solve(part.Q, d)
-            halves.append(DoubletonSets(c_new, part.C.copy(), r0, part.Q.copy(), r))
-        keep = self.take(np.flatnonzero(~mask))
-        return DoubletonSets.concatenate([keep, *halves])
+            r = r + linalg.solve(self.Q, d)
+            parts.append(DoubletonSets(c_new, self.C.copy(), r0, self.Q.copy(), r))
+        order = np.arange(nb * pieces).reshape(pieces, nb).T.ravel()  # set-major
+        return DoubletonSets.concatenate(parts).take(order)
 
     def merge_overlapping(self, slack: float = 0.05) -> tuple["DoubletonSets", int]:
         """Merge neighbouring sets whose union is covered by one of them, nearly.

@@ -15,6 +15,7 @@ symbolically so constants and parameters cost nothing.
 from __future__ import annotations
 
 from .graph import Graph, GraphBuilder, Op
+from .graph_ops import embed, forward_mode
 
 __all__ = ["variational_graph"]
 
@@ -26,98 +27,15 @@ def variational_graph(graph: Graph) -> Graph:
         raise ValueError(f"variational equations need a square ODE graph, got {n} inputs and {graph.n_outputs} outputs")
     names = list(graph.input_names) + [f"V_{i}_{j}" for i in range(n) for j in range(n)]
     b = GraphBuilder(n + n * n, graph.n_params, input_names=names, param_names=graph.param_names)
-    val = []  # new node id of each original node
-    der = []  # per original node: list of n new ids (None = structurally zero)
-
-    def dsum(x, y):
-        if x is None:
-            return y
-        if y is None:
-            return x
-        return b.add(x, y)
-
-    def dscale(factor, d):
-        return None if d is None else b.mul(factor, d)
-
-    for node in graph.nodes:
-        op, args, data = node.op, node.args, node.data
-        if op == Op.CONST:
-            v = b.const_enclosure(*data)
-            d = [None] * n
-        elif op == Op.INPUT:
-            v = b.input(data)
-            d = [b.input(n + data * n + j) for j in range(n)]
-        elif op == Op.PARAM:
-            v = b.param(data)
-            d = [None] * n
-        else:
-            u = val[args[0]]
-            du = der[args[0]]
-            if op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV):
-                w = val[args[1]]
-                dw = der[args[1]]
-            if op == Op.ADD:
-                v = b.add(u, w)
-                d = [dsum(p, q) for p, q in zip(du, dw)]
-            elif op == Op.SUB:
-                v = b.sub(u, w)
-                d = [p if q is None else (b.neg(q) if p is None else b.sub(p, q)) for p, q in zip(du, dw)]
-            elif op == Op.MUL:
-                v = b.mul(u, w)
-                d = [dsum(dscale(w, p), dscale(u, q)) for p, q in zip(du, dw)]
-            elif op == Op.DIV:
-                v = b.div(u, w)
-                # (u / w)' = (u' - v w') / w
-                d = []
-                for p, q in zip(du, dw):
-                    num = p if q is None else (b.neg(b.mul(v, q)) if p is None else b.sub(p, b.mul(v, q)))
-                    d.append(None if num is None else b.div(num, w))
-            elif op == Op.NEG:
-                v = b.neg(u)
-                d = [None if p is None else b.neg(p) for p in du]
-            elif op == Op.SQR:
-                v = b.sqr(u)
-                two_u = b.mul(b.const(2), u)
-                d = [dscale(two_u, p) for p in du]
-            elif op == Op.POW:
-                v = b.pow(u, data)
-                factor = b.mul(b.const(data), b.pow(u, data - 1))
-                d = [dscale(factor, p) for p in du]
-            elif op == Op.SQRT:
-                v = b.sqrt(u)
-                d = [None if p is None else b.div(p, b.mul(b.const(2), v)) for p in du]
-            elif op == Op.EXP:
-                v = b.exp(u)
-                d = [dscale(v, p) for p in du]
-            elif op == Op.LOG:
-                v = b.log(u)
-                d = [None if p is None else b.div(p, u) for p in du]
-            elif op == Op.SIN:
-                v = b.sin(u)
-                c = b.cos(u)
-                d = [dscale(c, p) for p in du]
-            elif op == Op.COS:
-                v = b.cos(u)
-                ms = b.neg(b.sin(u))
-                d = [dscale(ms, p) for p in du]
-            elif op == Op.TAN:
-                v = b.tan(u)
-                sec2 = b.add(b.const(1), b.sqr(v))
-                d = [dscale(sec2, p) for p in du]
-            elif op == Op.ATAN:
-                v = b.atan(u)
-                den = b.add(b.const(1), b.sqr(u))
-                d = [None if p is None else b.div(p, den) for p in du]
-            else:  # pragma: no cover
-                raise NotImplementedError(f"no derivative rule for {op.name}")
-        val.append(v)
-        der.append(d)
-
+    x = [b.input(i) for i in range(n)]
+    p = [b.param(i) for i in range(graph.n_params)]
+    # column j of V is the seed of direction j
+    seeds = [[b.input(n + i * n + j) for j in range(n)] for i in range(n)]
+    values, derivatives = forward_mode(b, graph, x, p, seeds)
     zero = b.const(0)
-    outputs = [val[o] for o in graph.outputs]
-    for i in range(n):
-        di = der[graph.outputs[i]]
-        outputs += [zero if di[j] is None else di[j] for j in range(n)]
+    outputs = list(values)
+    for di in derivatives:
+        outputs += [zero if dij is None else dij for dij in di]
     out_names = list(graph.output_names) + [f"dV_{i}_{j}" for i in range(n) for j in range(n)]
     return b.build(outputs, out_names)
 
@@ -130,19 +48,6 @@ def params_as_states(graph: Graph) -> Graph:
     """
     n, p = graph.n_inputs, graph.n_params
     b = GraphBuilder(n + p, 0, input_names=list(graph.input_names) + list(graph.param_names))
-    ids = []
-    for node in graph.nodes:
-        op, args, data = node.op, [ids[a] for a in node.args], node.data
-        if op == Op.CONST:
-            ids.append(b.const_enclosure(*data))
-        elif op == Op.INPUT:
-            ids.append(b.input(data))
-        elif op == Op.PARAM:
-            ids.append(b.input(n + data))
-        elif op == Op.POW:
-            ids.append(b.pow(args[0], data))
-        else:
-            ids.append(getattr(b, op.name.lower())(*args))
-    zero = b.const(0)
-    outputs = [ids[o] for o in graph.outputs] + [zero] * p
+    outputs = embed(b, graph, [b.input(i) for i in range(n)], [b.input(n + k) for k in range(p)])
+    outputs += [b.const(0)] * p
     return b.build(outputs, list(graph.output_names) + [f"d{name}" for name in graph.param_names])

@@ -1,0 +1,197 @@
+"""Building graphs from graphs: embedding, forward-mode derivatives, ODE augmentation.
+
+Everything here copies the nodes of existing graphs into a :class:`GraphBuilder`
+(hash-consing merges common subexpressions of the pieces), so the results are plain
+graphs that every evaluator and the Taylor interpreter run unchanged.
+
+- :func:`embed` -- the outputs of a graph applied to node ids of a builder;
+- :func:`forward_mode` -- values and directional derivatives (several seeds at once),
+  the rule set the variational equations and ``dH/dt`` share;
+- :func:`rate_along` -- ``dH/dt = grad H(x) . f(x)`` of a scalar function along an
+  ODE, by forward-mode differentiation (the paper's FADBAD++ step in mode (ii));
+- :func:`augment_with_rate` -- the ODE ``(x, h)' = (f(x), r(x))``, the extra state
+  carrying ``H_V`` of eq. (12);
+- :func:`negated` -- ``x' = -f(x)``: the same ODE backward in time.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+from .graph import Graph, GraphBuilder, Op
+
+__all__ = ["embed", "forward_mode", "rate_along", "augment_with_rate", "negated", "difference"]
+
+
+def _copy_node(b: GraphBuilder, op: Op, args: list[int], data):
+    if op == Op.CONST:
+        return b.const_enclosure(*data)
+    if op == Op.POW:
+        return b.pow(args[0], data)
+    return getattr(b, op.name.lower())(*args)
+
+
+def embed(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: Sequence[int] = ()) -> list[int]:
+    """Copy ``graph`` into builder ``b`` with its inputs bound to the node ids ``inputs``
+    (and parameters to ``params``); returns the node ids of its outputs."""
+    if len(inputs) != graph.n_inputs or len(params) != graph.n_params:
+        raise ValueError(f"embedding needs {graph.n_inputs} inputs and {graph.n_params} params, "
+                         f"got {len(inputs)} and {len(params)}")
+    ids: list[int] = []
+    for node in graph.nodes:
+        if node.op == Op.INPUT:
+            ids.append(inputs[node.data])
+        elif node.op == Op.PARAM:
+            ids.append(params[node.data])
+        else:
+            ids.append(_copy_node(b, node.op, [ids[a] for a in node.args], node.data))
+    return [ids[o] for o in graph.outputs]
+
+
+def forward_mode(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: Sequence[int],
+                 seeds: Sequence[Sequence[int | None]]):
+    """Values and directional derivatives of ``graph``'s outputs, built into ``b``.
+
+    ``seeds[i][k]`` is the node id of the derivative of input ``i`` in direction ``k``
+    (``None`` = structurally zero). Returns ``(values, derivatives)``: the output node
+    ids and, per output, a list of ``k`` node ids or ``None`` (zero).
+    """
+    n_dir = len(seeds[0]) if seeds else 0
+    val: list[int] = []
+    der: list[list[int | None]] = []
+
+    def dsum(x, y):
+        if x is None:
+            return y
+        if y is None:
+            return x
+        return b.add(x, y)
+
+    def dscale(factor, d):
+        return None if d is None else b.mul(factor, d)
+
+    for node in graph.nodes:
+        op, args, data = node.op, node.args, node.data
+        if op == Op.CONST:
+            v, d = b.const_enclosure(*data), [None] * n_dir
+        elif op == Op.INPUT:
+            v, d = inputs[data], list(seeds[data])
+        elif op == Op.PARAM:
+            v, d = params[data], [None] * n_dir
+        else:
+            u, du = val[args[0]], der[args[0]]
+            if op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV):
+                w, dw = val[args[1]], der[args[1]]
+            if op == Op.ADD:
+                v = b.add(u, w)
+                d = [dsum(p, q) for p, q in zip(du, dw)]
+            elif op == Op.SUB:
+                v = b.sub(u, w)
+                d = [p if q is None else (b.neg(q) if p is None else b.sub(p, q)) for p, q in zip(du, dw)]
+            elif op == Op.MUL:
+                v = b.mul(u, w)
+                d = [dsum(dscale(w, p), dscale(u, q)) for p, q in zip(du, dw)]
+            elif op == Op.DIV:
+                v = b.div(u, w)
+                d = []  # (u / w)' = (u' - v w') / w
+                for p, q in zip(du, dw):
+                    num = p if q is None else (b.neg(b.mul(v, q)) if p is None else b.sub(p, b.mul(v, q)))
+                    d.append(None if num is None else b.div(num, w))
+            elif op == Op.NEG:
+                v = b.neg(u)
+                d = [None if p is None else b.neg(p) for p in du]
+            elif op == Op.SQR:
+                v = b.sqr(u)
+                two_u = b.mul(b.const(2), u)
+                d = [dscale(two_u, p) for p in du]
+            elif op == Op.POW:
+                v = b.pow(u, data)
+                factor = b.mul(b.const(data), b.pow(u, data - 1))
+                d = [dscale(factor, p) for p in du]
+            elif op == Op.SQRT:
+                v = b.sqrt(u)
+                d = [None if p is None else b.div(p, b.mul(b.const(2), v)) for p in du]
+            elif op == Op.EXP:
+                v = b.exp(u)
+                d = [dscale(v, p) for p in du]
+            elif op == Op.LOG:
+                v = b.log(u)
+                d = [None if p is None else b.div(p, u) for p in du]
+            elif op == Op.SIN:
+                v = b.sin(u)
+                c = b.cos(u)
+                d = [dscale(c, p) for p in du]
+            elif op == Op.COS:
+                v = b.cos(u)
+                ms = b.neg(b.sin(u))
+                d = [dscale(ms, p) for p in du]
+            elif op == Op.TAN:
+                v = b.tan(u)
+                sec2 = b.add(b.const(1), b.sqr(v))
+                d = [dscale(sec2, p) for p in du]
+            elif op == Op.ATAN:
+                v = b.atan(u)
+                den = b.add(b.const(1), b.sqr(u))
+                d = [None if p is None else b.div(p, den) for p in du]
+            else:  # pragma: no cover
+                raise NotImplementedError(f"no derivative rule for {op.name}")
+        val.append(v)
+        der.append(d)
+    return [val[o] for o in graph.outputs], [der[o] for o in graph.outputs]
+
+
+def _check_same_inputs(a: Graph, b: Graph, what: str):
+    if a.n_inputs != b.n_inputs:
+        raise ValueError(f"{what}: the graphs take {a.n_inputs} and {b.n_inputs} inputs")
+    if a.n_params != b.n_params:
+        raise ValueError(f"{what}: the graphs take {a.n_params} and {b.n_params} parameters")
+
+
+def rate_along(func: Graph, rhs: Graph, name: str = "dHdt") -> Graph:
+    """The graph of ``x -> grad func(x) . f(x)``: the rate of the scalar ``func`` along
+    the ODE ``x' = f(x)`` (eq. (7) evaluated without simplification), by forward-mode
+    automatic differentiation with the single seed ``dx = f(x)``."""
+    _check_same_inputs(func, rhs, "rate_along")
+    if func.n_outputs != 1:
+        raise ValueError(f"rate_along needs a scalar function, got {func.n_outputs} outputs")
+    b = GraphBuilder(rhs.n_inputs, rhs.n_params, input_names=rhs.input_names, param_names=rhs.param_names)
+    x = [b.input(i) for i in range(rhs.n_inputs)]
+    p = [b.param(i) for i in range(rhs.n_params)]
+    f = embed(b, rhs, x, p)
+    (_,), (d,) = forward_mode(b, func, x, p, [[fi] for fi in f])
+    return b.build([b.const(0) if d[0] is None else d[0]], [name])
+
+
+def augment_with_rate(rhs: Graph, rate: Graph | None, name: str = "h") -> Graph:
+    """The ODE ``(x, h)' = (f(x), rate(x))`` with one extra state ``h`` (appended last).
+
+    ``rate=None`` means ``h' = 0`` (a conserved quantity: ``h`` keeps its initial
+    enclosure and its correlation with the initial states)."""
+    n = rhs.n_inputs
+    if rate is not None:
+        _check_same_inputs(rhs, rate, "augment_with_rate")
+    b = GraphBuilder(n + 1, rhs.n_params, input_names=list(rhs.input_names) + [name], param_names=rhs.param_names)
+    x = [b.input(i) for i in range(n)]
+    p = [b.param(i) for i in range(rhs.n_params)]
+    outs = embed(b, rhs, x, p)
+    outs.append(b.const(0) if rate is None else embed(b, rate, x, p)[0])
+    return b.build(outs, list(rhs.output_names) + [f"d{name}"])
+
+
+def difference(func: Graph, n_inputs: int, index: int, name: str = "residual") -> Graph:
+    """The graph of ``(x_1..x_n_inputs) -> func(x_1..x_m) - x_index`` (``m`` = func's
+    inputs, ``m <= n_inputs``): e.g. ``H(x) - h`` on the augmented state, which is 0
+    on every true trajectory."""
+    if func.n_outputs != 1 or func.n_inputs > n_inputs or not 0 <= index < n_inputs:
+        raise ValueError("difference needs a scalar function of the leading inputs and a valid index")
+    b = GraphBuilder(n_inputs, func.n_params, param_names=func.param_names)
+    xs = [b.input(i) for i in range(n_inputs)]
+    (v,) = embed(b, func, xs[:func.n_inputs], [b.param(i) for i in range(func.n_params)])
+    return b.build([b.sub(v, xs[index])], [name])
+
+
+def negated(rhs: Graph) -> Graph:
+    """``x' = -f(x)``: solutions are those of ``f`` run backward in time."""
+    b = GraphBuilder(rhs.n_inputs, rhs.n_params, input_names=rhs.input_names, param_names=rhs.param_names)
+    outs = embed(b, rhs, [b.input(i) for i in range(rhs.n_inputs)], [b.param(i) for i in range(rhs.n_params)])
+    return b.build([b.neg(o) for o in outs], [f"-{name}" for name in rhs.output_names])
