@@ -32,6 +32,9 @@ class System:
         ``None`` with an ``energy`` means "derive it": the verified side forms
         ``dH/dt = grad H(x) . f(x)`` by forward-mode differentiation of the graphs
         (what the paper did with FADBAD++ in mode (ii)).
+    conservative : bool
+        ``dH/dt`` is identically 0 (declared, e.g. after symbolic simplification):
+        ``H_V`` stays ``H(0)`` and no rate is integrated. Only sound if true.
     params : dict
         Parameter values (numbers or ``(lo, hi)``) by name, if the graphs have any.
     description : str
@@ -42,6 +45,7 @@ class System:
     rhs: Graph
     energy: Graph | None = None
     energy_rate: Graph | None = None
+    conservative: bool = False
     params: dict = field(default_factory=dict)
     description: str = ""
 
@@ -56,8 +60,10 @@ class System:
             if g.n_inputs != n or g.n_outputs != 1:
                 raise ValueError(f"{self.name}: {what} must map the {n} states to one value, "
                                  f"got {g.n_inputs} inputs and {g.n_outputs} outputs")
-        if self.energy_rate is not None and self.energy is None:
-            raise ValueError(f"{self.name}: energy_rate given without energy")
+        if (self.energy_rate is not None or self.conservative) and self.energy is None:
+            raise ValueError(f"{self.name}: energy_rate or conservative given without energy")
+        if self.conservative and self.energy_rate is not None:
+            raise ValueError(f"{self.name}: a conservative system has no energy_rate graph")
 
     @property
     def n(self) -> int:

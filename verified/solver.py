@@ -79,7 +79,14 @@ class Solution:
     reason : str
         Why the integration stopped early ("" when completed).
     stats : dict
-        steps, boxes, rejected steps, Taylor evaluations, wall time (s).
+        steps, boxes, rejected steps, Taylor evaluations, ``max_boxes`` (most sets
+        at any time), wall time (s); with a consistency test also ``tests``,
+        ``pruned_boxes``, ``test_s`` and ``backward_s`` (seconds in the tests).
+    state_names : tuple of str
+    consistency : verified.consistency.ConsistencyRecord or None
+        RA(t), H_H and H_V per step and a record of every test (paper Figs. 2-3).
+    mode : str
+        Set by :func:`mbs.simulate.simulate` ("i", "ii", "iii"; "" otherwise).
     """
 
     t: np.ndarray
@@ -92,6 +99,9 @@ class Solution:
     status: str
     reason: str
     stats: dict = field(default_factory=dict)
+    state_names: tuple = ()
+    consistency: object = None
+    mode: str = ""
 
     @property
     def success(self) -> bool:
@@ -141,6 +151,8 @@ def solve(
     wrap_target: float = 0.03,
     merge_slack: float | None = None,
     error_basis: str = "qr",
+    consistency=None,
+    progress=None,
 ) -> Solution:
     """Verified enclosure of all solutions of ``x' = f(x, p)`` from ``x0``.
 
@@ -179,6 +191,13 @@ def solve(
         (T = 1, 256 pieces: worst ratio 1.004 vs 1.012; single box verified to 0.635
         vs 0.465) but breaks down on long horizons where "qr" does not (T = 2,
         256 pieces: break-down at 1.93 vs ratio 1.23).
+    consistency : verified.consistency.EnergyTest or None
+        Energy (Hamiltonian) consistency test, further constraints and the backward
+        test (paper sec. 4): branch and prune at the first local maximum of the
+        reduction area RA(t), at least every ``max_interval`` seconds. Its record
+        (RA(t), H_H, H_V, every test) is returned as ``Solution.consistency``.
+    progress : callable(t, t_end) or None
+        Called after every accepted step (for progress bars).
     wrap_target : wrapping control: the next step is shortened when a step injected
         more than this fraction of a set's linear size through the spread of the
         Jacobian over the set (np.inf turns the control off)
@@ -221,8 +240,17 @@ def solve(
         boxes = concatenate([boxes, p_boxes], axis=1)
         param_boxes = hull(p_boxes, axis=0)  # (p,): valid for every set, also after splits
         params = None
+    n_solver = prob.n  # states the solver integrates before any energy state
+    test = consistency
+    if test is not None:
+        user_graph = ode.graph if isinstance(ode, VerifiedODE) else ode
+        prob = VerifiedODE(test.prepare(user_graph, prob.graph, n_state, params))
     stepper = LohnerStepper(prob.taylor, prob.variational, order, params, error_basis)
     sets = DoubletonSets.from_boxes(boxes)
+    if test is not None:
+        sets = test.initial_sets(sets)
+    history = []  # (sets, t_exact, t, h_step) before the last accepted steps
+    max_sets = sets.n_sets
     h_max = (t1 - t0) if h_max is None else float(h_max)
 
     out_t, out_boxes = [t0], [boxes[:, :n_state]]
@@ -245,7 +273,7 @@ def solve(
             # Parameters never change: their true values stay in the given boxes, so
             # the hull used for the Taylor coefficients and the Jacobian may be cut
             # down to them (wrapping may have smeared error into those components).
-            X[:, n_state:] = X[:, n_state:].intersect(param_boxes)
+            X[:, n_state:n_solver] = X[:, n_state:n_solver].intersect(param_boxes)
             # A set (for example one half of a split error box) whose parameter range
             # misses the parameter boxes holds no true solution: drop it.
             feasible = ~X.is_empty().any(axis=1)
@@ -282,18 +310,22 @@ def solve(
             break
         E, cE = validated
         landing = h == gap_hi
+        t_exact_before = t_exact
         if landing:
             h_step = h if gap_lo == gap_hi else Interval(gap_lo, gap_hi)  # encloses the exact gap
             t_exact = Fraction(float(outs[next_out]))
         else:
             h_step = h
             t_exact += Fraction(h)
+        history = (history + [(sets, t_exact_before, t, h_step)])[-2:]
         sets = stepper.step(sets, h_step, X, E, cE)
         evaluations += 2
         t = float(outs[next_out]) if landing else float(t_exact)
         tube.append(E[:, :n_state])
         tube_t.append(t)
         steps += 1
+        if progress is not None:
+            progress(t, t1)
         # Wrapping control: the error a step injects through the spread of the
         # Jacobian over a wide set grows faster than the step itself, so keep it at
         # about wrap_target times the set's linear size by adapting the next step.
@@ -302,6 +334,28 @@ def solve(
             h_wrap = h * max(0.2, np.sqrt(wrap_target / ratio))
         elif ratio < 0.25 * wrap_target:
             h_wrap = 2.0 * h_wrap if np.isfinite(h_wrap) else h_wrap
+        if test is not None:
+            decision = test.observe(t, sets)
+            if decision == "previous" and not landing and len(history) == 2:
+                # RA(t) peaked at the previous step: t* is there, roll back to it
+                sets, t_exact, t, _ = history.pop()
+                tube.pop()
+                tube_t.pop()
+                test.forget_last()
+                decision = "now"
+            if decision == "now":
+                t_iv = Interval(_round_down(t_exact), _round_up(t_exact))
+                prev = None
+                if test.backward_depth and history:
+                    prev_sets, _, _, prev_h = history[-1]
+                    prev = (prev_sets, prev_h, lambda g: LohnerStepper(
+                        VerifiedODE(g).taylor, VerifiedODE(g).variational, order, params, error_basis))
+                sets = test.apply(t, t_iv, sets, prev)
+                history = []
+                if sets.n_sets == 0:
+                    status, reason = "breakdown", "the consistency test removed every set (inconsistent model or constraints?)"
+                    break
+            max_sets = max(max_sets, sets.n_sets)
         if landing:
             out_t.append(t)
             out_boxes.append(sets.hull()[:, :n_state])
@@ -321,6 +375,7 @@ def solve(
                     break
                 sets = sets.split(grow)
                 splits += int(grow.sum())
+                max_sets = max(max_sets, sets.n_sets)
             if merge_slack is not None and sets.n_sets > 1:
                 sets, merged = sets.merge_overlapping(merge_slack)
                 merges += merged
@@ -343,11 +398,17 @@ def solve(
             splits=splits,
             merges=merges,
             pruned_sets=pruned,
+            max_boxes=max_sets,
             taylor_evaluations=evaluations,
             order=order,
             wall_s=time.perf_counter() - wall0,
         ),
+        state_names=tuple(prob.graph.input_names[:n_state]),
     )
+    if test is not None:
+        result.consistency = test.finish()
+        result.stats.update(test.stats)
+        result.stats["wall_s"] = time.perf_counter() - wall0
     return result
 
 

@@ -1,0 +1,523 @@
+"""Consistency tests that cut physically impossible parts out of enclosures (paper sec. 4).
+
+The energy (Hamiltonian) test evaluates the energy of a dynamical system in two
+"computationally different but effectively identical" ways:
+
+- ``H_H``: the Hamiltonian ``H(x)`` evaluated on a state enclosure (eqs. (3)/(4));
+- ``H_V``: ``H(0) + int_0^t dH/dt`` (eq. (12)), carried as an extra state ``h`` of the
+  verified integration, ``h' = dH/dt(x)`` (``0`` for a conservative system whose
+  rate was simplified, the unsimplified chain rule, or ``qd^T tau`` with damping).
+
+Every true trajectory has ``h(t) = H(x(t))``. A part of an enclosure whose ``H_H``
+misses its ``H_V`` holds no true state and is discarded (branch and prune).
+
+Here ``h`` starts correlated with the initial states: ``h(0) = H(c) + DH(X0) (x0 - c)``
+enters the set's linear part, so ``H_V`` of a part of a set is the energy range of the
+initial values that part came from, not of the whole initial box. The pruning test of
+a part ``S = c + C r0 + Q r`` is the paper's ``H_H(S) ∩ H_V(S) = ∅``, evaluated both
+naively on the hull and in mean-value form over the set's parameters,
+``G(S) ⊆ G(c) + (DG C) r0 + (DG Q) r`` with ``G = H(x) - h``; either excluding 0
+proves the part empty of true states.
+
+When to test (``t*``): the reduction area ``RA(t) = diam H_H - diam(H_H ∩ H_V)``
+(eq. (16)) is tracked after every step (summed over the sets of a batch); the test
+runs at its first local maximum after the previous test, and at the latest
+``max_interval`` seconds after it.
+
+Further constraints (paper sec. 3) use the same machinery: holonomic ``g(x, t) = 0``
+and inequalities such as a kinetic-energy bound, see :class:`Constraint`.
+
+The backward test (sec. 4, cases A/B/C) integrates the parts that survive the energy
+test back over the last step and compares with the forward sets there.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import linalg
+from .graph import Graph, GraphBuilder
+from .graph_ops import augment_with_rate, difference, embed, negated, rate_along
+from .interval import Interval, concatenate, hull, point
+
+__all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES"]
+
+#: ways to split a set at ``t*`` (compared in benchmarks/bench_consistency.py)
+STRATEGIES = ("gradient", "widest", "grid")
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """``lower <= g(x[, t]) <= upper`` for every true state ``x`` (at time ``t``).
+
+    ``graph`` takes the ODE's ``n`` states (plus the time as one more, last input when
+    ``time_dependent``) and has ``m`` outputs; ``lower``/``upper`` have ``m`` entries
+    (``-inf``/``inf`` for one-sided bounds). Parameters of the ODE are not available
+    to constraints (bake exact values into the graph).
+    """
+
+    graph: Graph
+    lower: tuple
+    upper: tuple
+    time_dependent: bool = False
+    name: str = "constraint"
+
+    def __post_init__(self):
+        m = self.graph.n_outputs
+        lo = np.broadcast_to(np.asarray(self.lower, dtype=float), (m,))
+        hi = np.broadcast_to(np.asarray(self.upper, dtype=float), (m,))
+        if np.isnan(lo).any() or np.isnan(hi).any() or (lo > hi).any():
+            raise ValueError(f"{self.name}: bounds must satisfy lower <= upper (no NaN), got {lo}, {hi}")
+        if self.graph.n_params:
+            raise ValueError(f"{self.name}: constraint graphs cannot have parameters")
+        object.__setattr__(self, "lower", tuple(lo))
+        object.__setattr__(self, "upper", tuple(hi))
+
+    @classmethod
+    def equality(cls, graph: Graph, *, time_dependent: bool = False, name: str = "holonomic") -> "Constraint":
+        """``g(x[, t]) = 0``, e.g. a holonomic constraint ``g(q, t) = 0``."""
+        return cls(graph, (0.0,) * graph.n_outputs, (0.0,) * graph.n_outputs, time_dependent, name)
+
+    @classmethod
+    def bounds(cls, graph: Graph, lower=-np.inf, upper=np.inf, *, time_dependent: bool = False,
+               name: str = "inequality") -> "Constraint":
+        """``lower <= g(x[, t]) <= upper``, e.g. ``K(q, qd) <= K_max``."""
+        return cls(graph, lower, upper, time_dependent, name)
+
+
+@dataclass
+class TestRecord:
+    """One consistency test at time ``t`` (the paper's ``t*``)."""
+
+    t: float
+    candidates: Interval  # (k, n): hulls of the parts tested (state components only)
+    kept: np.ndarray  # (k,) bool
+    h_v: Interval  # scalar: H_V at t (hull over the sets), or empty without energy
+    sets_before: int
+    sets_after: int
+    backward_deleted: int = 0
+    backward_runs: int = 0
+
+
+@dataclass
+class ConsistencyRecord:
+    """What the tests saw: ``RA(t)`` and the energy enclosures per step, and each test."""
+
+    ra_t: np.ndarray
+    ra: np.ndarray
+    h_h: Interval
+    h_v: Interval
+    tests: list = field(default_factory=list)
+
+
+class EnergyTest:
+    """The energy consistency test, optional further constraints, and the backward test.
+
+    Parameters
+    ----------
+    energy : Graph or None
+        ``H(x, p)`` (1 output, J) over the ODE's states and parameters; ``None`` for
+        constraints only.
+    energy_rate : Graph, "derive" or "zero"
+        ``dH/dt(x, p)`` integrated into ``H_V`` (eq. (12)); "derive" forms
+        ``grad H . f`` by forward-mode differentiation (mode (ii)); "zero" declares
+        the system conservative (``H_V = H(0)``; only sound if it is!).
+    constraints : sequence of Constraint
+    max_interval : float
+        Longest time (s) between two tests (the paper: 0.1 s in mode (ii), 0.01 s in (iii)).
+    splits : int
+        Parts per set at a test (paper: 10 and 50). "gradient"/"widest" bisect
+        ``round(log2(splits))`` times, pruning between rounds; "grid" cuts the two
+        directions that widen ``H_H`` most into a ``k x k`` grid, ``k^2 ~ splits``.
+    strategy : "gradient", "widest" or "grid"
+        Direction choice: largest ``|dG/dx . column| x width`` (the part of ``H_H``'s
+        width a direction causes), largest share of the set's own width, or a grid.
+    refine : "pruned" or "always"
+        Keep a set's surviving parts only when at least one part was pruned
+        ("pruned", default: splitting costs integration time), or always.
+    backward_depth : int
+        Backward consistency test on parts the energy test keeps: 0 = off; else the
+        bisection depth for undecided parts (case C).
+    max_boxes : int
+        Refinement is skipped when the batch would exceed this many sets.
+    """
+
+    def __init__(self, energy: Graph | None = None, energy_rate="derive", constraints=(), *,
+                 max_interval: float = 0.1, splits: int = 10, strategy: str = "gradient",
+                 refine: str = "pruned", backward_depth: int = 0, max_boxes: int = 4096):
+        if energy is None and not constraints:
+            raise ValueError("EnergyTest needs an energy graph or at least one constraint")
+        if energy is not None and (not isinstance(energy, Graph) or energy.n_outputs != 1):
+            raise ValueError("energy must be a Graph with one output (H)")
+        if isinstance(energy_rate, str) and energy_rate not in ("derive", "zero"):
+            raise ValueError(f"energy_rate must be a Graph, 'derive' or 'zero', got {energy_rate!r}")
+        if strategy not in STRATEGIES:
+            raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
+        if refine not in ("pruned", "always"):
+            raise ValueError(f"refine must be 'pruned' or 'always', got {refine!r}")
+        if not (np.isfinite(max_interval) and max_interval > 0):
+            raise ValueError(f"max_interval must be a positive number of seconds, got {max_interval!r}")
+        if int(splits) < 2:
+            raise ValueError(f"splits must be >= 2, got {splits!r}")
+        if int(backward_depth) < 0:
+            raise ValueError(f"backward_depth must be >= 0, got {backward_depth!r}")
+        self.energy = energy
+        self.energy_rate = energy_rate
+        self.constraints = tuple(constraints)
+        self.max_interval = float(max_interval)
+        self.splits = int(splits)
+        self.strategy = strategy
+        self.refine = refine
+        self.backward_depth = int(backward_depth)
+        self.max_boxes = int(max_boxes)
+
+    # ------------------------------------------------------------------ set-up
+    def prepare(self, rhs: Graph, integrated: Graph, n_x: int, params: Interval | None):
+        """Bind to one solve: ``rhs`` is the user's ODE over ``(x, p)``; ``integrated``
+        the graph the solver runs (its parameters possibly turned into states after
+        ``x``). Returns the graph to integrate (with ``h`` appended when there is an
+        energy) and remembers how to evaluate the constraints on the solver's sets."""
+        self._params = params
+        self._n_x = n_x
+        self._p_as_states = integrated.n_inputs > n_x
+        n_s = integrated.n_inputs
+        self._n_s = n_s
+
+        def lift(g: Graph) -> Graph:
+            """``g`` over the solver's states (parameters as states if they are)."""
+            if not self._p_as_states:
+                return g
+            b = GraphBuilder(n_s, 0, input_names=integrated.input_names)
+            xs = [b.input(i) for i in range(n_s)]
+            return b.build(embed(b, g, xs[:n_x], xs[n_x:n_x + g.n_params]), g.output_names)
+
+        self._energy = None
+        graph = integrated
+        if self.energy is not None:
+            if self.energy.n_inputs != n_x or self.energy.n_params != rhs.n_params:
+                raise ValueError(f"the energy graph takes {self.energy.n_inputs} states and "
+                                 f"{self.energy.n_params} parameters; the ODE has {n_x} and {rhs.n_params}")
+            if isinstance(self.energy_rate, Graph):
+                rate = self.energy_rate
+                if rate.n_inputs != n_x or rate.n_outputs != 1 or rate.n_params != rhs.n_params:
+                    raise ValueError("energy_rate must take the ODE's states and parameters and have one output")
+            elif self.energy_rate == "derive":
+                rate = rate_along(self.energy, rhs)
+            else:
+                rate = None
+            self._energy = lift(self.energy)
+            graph = augment_with_rate(integrated, None if rate is None else lift(rate), name="h")
+            self._residual = difference(self._energy, n_s + 1, n_s, name="H-h")  # 0 on true trajectories
+        self._n_aug = graph.n_inputs
+        self._constraints = []
+        for c in self.constraints:
+            k = c.graph.n_inputs - (1 if c.time_dependent else 0)
+            if k != n_x:
+                raise ValueError(f"constraint {c.name!r} takes {k} states; the ODE has {n_x}")
+            b = GraphBuilder(self._n_aug + (1 if c.time_dependent else 0), 0)
+            xs = [b.input(i) for i in range(b_inputs(b))]
+            args = xs[:n_x] + ([xs[-1]] if c.time_dependent else [])
+            self._constraints.append((c, b.build(embed(b, c.graph, args), c.graph.output_names)))
+        self._backward = None
+        self._graph = graph
+        self.record = ConsistencyRecord(np.zeros(0), np.zeros(0), Interval(np.zeros(0)), Interval(np.zeros(0)))
+        self._ra_t, self._ra, self._hh, self._hv = [], [], [], []
+        self._last_test_t = None
+        self.stats = dict(tests=0, pruned_boxes=0, test_s=0.0, backward_s=0.0, backward_runs=0,
+                          backward_deleted=0, refinements_skipped=0)
+        return graph
+
+    def initial_sets(self, sets):
+        """Append ``h(0) = H(x0)`` to the initial doubleton sets, correlated with ``r0``:
+        ``H(x0) ∈ H(c) + DH(X0) (x0 - c)`` (mean value theorem), the midpoint of
+        ``DH(X0) C`` entering the linear part and everything else the error part."""
+        from .lohner import DoubletonSets
+
+        if self._energy is None:
+            return sets
+        nb, n = sets.c.shape
+        X0 = sets.hull()
+        Hc = self._eval(self._energy, point(sets.c))[:, 0]  # (B,)
+        DH = self._jac(self._energy, X0)[:, 0, :]  # (B, n)
+        row = _row_times(DH, sets.C)
+        row_mid = row.mid()  # (B, n)
+        c_h = Hc.mid()
+        # everything that is not row_mid . r0, enclosed: H(c) - c_h, (DH C - row_mid) r0, DH Q r
+        rest = (Hc - c_h) + _dot(row - row_mid, sets.r0) + _dot(_row_times(DH, sets.Q), sets.r)
+        c = np.concatenate([sets.c, c_h[:, None]], axis=1)
+        C = np.zeros((nb, n + 1, n + 1))
+        C[:, :n, :n] = sets.C
+        C[:, n, :n] = row_mid
+        Q = np.zeros((nb, n + 1, n + 1))
+        Q[:, :n, :n] = sets.Q
+        Q[:, n, n] = 1.0
+        zero = point(np.zeros((nb, 1)))
+        r0 = concatenate([sets.r0, zero], axis=1)
+        r = concatenate([sets.r, rest.reshape((nb, 1))], axis=1)
+        return DoubletonSets(c, C, r0, Q, r)
+
+    # ------------------------------------------------------------------ evaluation
+    def _p(self, nb):
+        if self._params is None or self._p_as_states:
+            return None
+        p = self._params
+        return p if p.ndim == 2 else p.broadcast_to((nb, p.shape[-1]))
+
+    def _eval(self, g: Graph, X: Interval, extra=None) -> Interval:
+        if extra is not None:
+            X = concatenate([X, extra], axis=1)
+        return g.eval_interval(X, self._p(X.shape[0]) if g.n_params else None)
+
+    def _jac(self, g: Graph, X: Interval, extra=None) -> Interval:
+        if extra is not None:
+            X = concatenate([X, extra], axis=1)
+        return g.jacobian_interval(X, self._p(X.shape[0]) if g.n_params else None)
+
+    def _checks(self, sets, t: Interval):
+        """Per set, the enclosure of every checked quantity and its allowed range:
+        a list of ``(enclosure (B, m), lower (m,), upper (m,), gradient-in-directions
+        (B, m, 2n))``."""
+        nb = sets.n_sets
+        X = sets.hull()
+        cols = sets.direction_columns()  # (B, n, 2n)
+        widths = np.concatenate([sets.r0.width(), sets.r.width()], axis=1)  # (B, 2n)
+        out = []
+        todo = []
+        if self._energy is not None:
+            todo.append((self._residual, None, np.zeros(1), np.zeros(1)))
+        for c, g in self._constraints:
+            todo.append((g, t if c.time_dependent else None, np.array(c.lower), np.array(c.upper)))
+        for g, tt, lo, hi in todo:
+            extra = None if tt is None else Interval._from_bounds(np.full((nb, 1), tt.lo), np.full((nb, 1), tt.hi))
+            naive = self._eval(g, X, extra)  # (B, m)
+            D = self._jac(g, X.hull(point(sets.c)), extra)[..., : self._n_aug]  # (B, m, n)
+            Dcols = linalg.matmul(D, cols)  # (B, m, 2n)
+            centre = self._eval(g, point(sets.c), extra)
+            params = concatenate([sets.r0, sets.r], axis=1)  # (B, 2n)
+            mv = centre + linalg.matvec(Dcols, params)
+            enc = naive.intersect(mv)
+            influence = Dcols.mag() * widths[:, None, :]  # (B, m, 2n)
+            out.append((enc, lo, hi, influence))
+        return out
+
+    def _inconsistent(self, checks) -> np.ndarray:
+        bad = None
+        for enc, lo, hi, _ in checks:
+            b = (enc.is_empty() | (enc.hi < lo) | (enc.lo > hi)).any(axis=1)
+            bad = b if bad is None else bad | b
+        return bad
+
+    # ------------------------------------------------------------------ RA(t)
+    def observe(self, t: float, sets) -> str | None:
+        """Record ``RA(t)`` (eq. (16)) for the sets after a step and say whether to test:
+        "previous" (the first local maximum was at the previous step), "now" (the
+        longest interval has passed), or None."""
+        if self._last_test_t is None:
+            self._last_test_t = self._t0 = t if not self._ra_t else self._ra_t[0]
+        if self._energy is not None:
+            X = sets.hull()
+            hh = self._eval(self._energy, X[:, : self._n_s])[:, 0]
+            hv = X[:, self._n_s]
+            inter = hh.intersect(hv)
+            wi = np.where(inter.is_empty(), 0.0, inter.width())
+            ra = float(np.sum(hh.width() - wi))
+            self._hh.append(hull(hh, axis=0))
+            self._hv.append(hull(hv, axis=0))
+        else:
+            ra = 0.0
+        self._ra_t.append(t)
+        self._ra.append(ra)
+        since = t - self._last_test_t
+        if len(self._ra) >= 3 and self._ra_t[-2] > self._last_test_t and self._ra[-2] > self._ra[-1] \
+                and self._ra[-2] >= self._ra[-3] and self._ra[-2] > 0:
+            return "previous"
+        if since >= self.max_interval * (1 - 1e-12):
+            return "now"
+        return None
+
+    def forget_last(self):
+        """The solver rolled the last step back (the test runs at the step before)."""
+        for lst in (self._ra_t, self._ra, self._hh, self._hv):
+            if lst:
+                lst.pop()
+
+    # ------------------------------------------------------------------ branch and prune
+    def _pick(self, sets, checks, k=1) -> np.ndarray:
+        """Directions (B, k) to cut, best first, by the chosen strategy."""
+        if self.strategy == "widest" or not checks:
+            score = sets.direction_widths()
+        else:
+            score = 0
+            for enc, _, _, infl in checks:
+                w = enc.width()
+                w = np.where(np.isfinite(w) & (w > 0), w, 1.0)
+                score = score + (infl / w[:, :, None]).sum(axis=1)
+        return np.argsort(-score, axis=1, kind="stable")[:, :k]
+
+    def apply(self, t: float, t_iv: Interval, sets, previous=None):
+        """Branch and prune all sets at time ``t`` (enclosed by ``t_iv``); returns the
+        surviving sets.
+
+        ``previous``: ``(sets, h_step, make_stepper)`` of the step before, for the
+        backward test (or None)."""
+        from .lohner import DoubletonSets
+
+        w0 = time.perf_counter()
+        nb0 = sets.n_sets
+        checks = self._checks(sets, t_iv)
+        alive = ~self._inconsistent(checks)
+        removed = np.zeros(nb0, dtype=np.int64)  # parts of each set found inconsistent
+        removed[~alive] += 1
+        parts, par = sets.take(np.flatnonzero(alive)), np.flatnonzero(alive)
+        checks = [(e[alive], lo, hi, inf[alive]) for e, lo, hi, inf in checks]
+        tested_hulls, tested_kept = [], []
+
+        def prune(parts, par):
+            ok = ~self._inconsistent(self._checks(parts, t_iv))
+            tested_hulls.append(parts.hull()[:, : self._n_x])
+            tested_kept.append(ok)
+            np.add.at(removed, par[~ok], 1)
+            return parts.take(np.flatnonzero(ok)), par[ok]
+
+        if self.strategy == "grid":
+            k = max(2, int(round(np.sqrt(self.splits))))
+            d = self._pick(parts, checks, 2)
+            parts = parts.subdivide_along(d[:, 0], k)
+            parts = parts.subdivide_along(np.repeat(d[:, 1], k), k)
+            parts, par = prune(parts, np.repeat(par, k * k))
+        else:
+            for _ in range(max(1, int(round(np.log2(self.splits))))):
+                if parts.n_sets == 0:
+                    break
+                d = self._pick(parts, self._checks(parts, t_iv), 1)[:, 0]
+                parts, par = prune(parts.subdivide_along(d, 2), np.repeat(par, 2))
+        self.stats["test_s"] += time.perf_counter() - w0
+        # backward consistency test on the parts the energy test could not decide
+        if self.backward_depth and previous is not None and parts.n_sets:
+            parts, par, gone = self._backward_test(parts, par, previous)
+            np.add.at(removed, gone, 1)
+        w1 = time.perf_counter()
+        # a set none of whose parts was pruned stays whole (refine="pruned"): its
+        # parts would only cost integration time
+        whole = alive & (removed == 0) if self.refine == "pruned" else np.zeros(nb0, bool)
+        keep_part = ~whole[par]
+        out = DoubletonSets.concatenate([sets.take(np.flatnonzero(whole)), parts.take(np.flatnonzero(keep_part))])
+        if out.n_sets > self.max_boxes:
+            # too many sets: keep the parents of partly pruned sets whole and drop
+            # only the sets with no consistent part at all
+            self.stats["refinements_skipped"] += 1
+            has_part = np.bincount(par, minlength=nb0) > 0
+            out = sets.take(np.flatnonzero(alive & (has_part | whole)))
+        self.stats["tests"] += 1
+        self.stats["pruned_boxes"] += int(removed.sum())
+        n_s = self._n_s
+        hv = hull(sets.hull()[:, n_s], axis=0) if self._energy is not None else None
+        empty = Interval._from_bounds(np.zeros((0, self._n_x)), np.zeros((0, self._n_x)))
+        self.record.tests.append(TestRecord(
+            t=t,
+            candidates=concatenate(tested_hulls, axis=0) if tested_hulls else empty,
+            kept=np.concatenate(tested_kept) if tested_kept else np.zeros(0, bool),
+            h_v=hv, sets_before=nb0, sets_after=out.n_sets))
+        self._last_test_t = t
+        self.stats["test_s"] += time.perf_counter() - w1
+        return out
+
+    # ------------------------------------------------------------------ backward (cases A, B, C)
+    def _backward_test(self, parts, par, previous):
+        """Integrate each part back over the last step (``h``) and compare with the
+        forward sets there: no intersection with any of them (case A) deletes the
+        part; inside one of them (case B) keeps it; otherwise (case C) bisect and
+        retest, down to ``backward_depth``; what is still undecided is kept."""
+        from .lohner import DoubletonSets
+
+        w0 = time.perf_counter()
+        prev_sets, h_step, make_stepper = previous
+        if self._backward is None:
+            self._backward = make_stepper(negated(self._graph))
+        stepper = self._backward
+        F = prev_sets.hull()  # (P, n)
+        kept_sets, kept_par, gone = [], [], []
+        cur, cur_par = parts, par
+        for depth in range(self.backward_depth + 1):
+            if cur.n_sets == 0:
+                break
+            self.stats["backward_runs"] += cur.n_sets
+            back = _one_step(stepper, cur, h_step)
+            if back is None:  # no validated backward step: undecided, keep
+                kept_sets.append(cur)
+                kept_par.append(cur_par)
+                break
+            meets = _meets_any(back, F)  # (K,)
+            inside = _inside_any(back, F)
+            self.stats["backward_deleted"] += int((~meets).sum())
+            gone.append(cur_par[~meets])
+            decided = ~meets | inside
+            keep_now = inside
+            kept_sets.append(cur.take(np.flatnonzero(keep_now)))
+            kept_par.append(cur_par[keep_now])
+            undecided = ~decided
+            if depth == self.backward_depth:
+                kept_sets.append(cur.take(np.flatnonzero(undecided)))
+                kept_par.append(cur_par[undecided])
+                break
+            und = cur.take(np.flatnonzero(undecided))
+            cur = und.subdivide_along(np.argmax(und.direction_widths(), axis=1), 2)
+            cur_par = np.repeat(cur_par[undecided], 2)
+        self.stats["backward_s"] += time.perf_counter() - w0
+        gone = np.concatenate(gone) if gone else par[:0]
+        if not kept_sets:
+            return parts.take(np.zeros(0, dtype=int)), par[:0], gone
+        return DoubletonSets.concatenate(kept_sets), np.concatenate(kept_par), gone
+
+    # ------------------------------------------------------------------ results
+    def finish(self) -> ConsistencyRecord:
+        self.record.ra_t = np.array(self._ra_t)
+        self.record.ra = np.array(self._ra)
+        empty = Interval._from_bounds(np.zeros(0), np.zeros(0))
+        self.record.h_h = concatenate([h.reshape((1,)) for h in self._hh], axis=0) if self._hh else empty
+        self.record.h_v = concatenate([h.reshape((1,)) for h in self._hv], axis=0) if self._hv else empty
+        return self.record
+
+
+def b_inputs(b: GraphBuilder) -> int:
+    return len(b.input_names)
+
+
+def _row_times(row: Interval, M: np.ndarray) -> Interval:
+    """``row @ M`` per set: (B, n) interval times (B, n, k) floats -> (B, k)."""
+    nb, n = row.shape
+    return linalg.matmul(row.reshape((nb, 1, n)), M)[:, 0, :]
+
+
+def _dot(a: Interval, b: Interval) -> Interval:
+    """Per-set dot product of two (B, n) interval arrays -> (B,)."""
+    return (a * b).sum(axis=1)
+
+
+def _one_step(stepper, sets, h):
+    """One verified Lohner step of size ``h`` (float or Interval) for all ``sets``, or None."""
+    X = sets.hull()
+    cX = stepper.coefficients(X)
+    if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
+        return None
+    hh = float(h.hi) if isinstance(h, Interval) else float(h)
+    validated = stepper.apriori(X, cX, hh)
+    if validated is None:
+        return None
+    E, cE = validated
+    return stepper.step(sets, h, X, E, cE).hull()
+
+
+def _meets_any(boxes: Interval, F: Interval) -> np.ndarray:
+    """(K,) whether each box meets at least one of the boxes F (P, n)."""
+    lo = np.maximum(boxes.lo[:, None, :], F.lo[None, :, :])
+    hi = np.minimum(boxes.hi[:, None, :], F.hi[None, :, :])
+    return (lo <= hi).all(axis=2).any(axis=1)
+
+
+def _inside_any(boxes: Interval, F: Interval) -> np.ndarray:
+    """(K,) whether each box lies inside one of the boxes F."""
+    return ((boxes.lo[:, None, :] >= F.lo[None, :, :]) & (boxes.hi[:, None, :] <= F.hi[None, :, :])).all(axis=2).any(axis=1)
