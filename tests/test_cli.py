@@ -15,15 +15,6 @@ from mbs.scene import scene_dir
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(autouse=True)
-def _simulate_module(monkeypatch):
-    try:
-        import mbs.simulate  # noqa: F401
-    except ImportError:
-        import fake_simulate
-        monkeypatch.setitem(sys.modules, "mbs.simulate", fake_simulate)
-
-
 SMALL = """
 [model]
 name = "pendulum_paper"

@@ -1,0 +1,25 @@
+"""python -m mbs bench --quick: every part of the benchmark and every stress case, small."""
+from pathlib import Path
+
+from mbs import bench
+
+
+def test_bench_quick(tmp_path):
+    lines = []
+    code = bench.run(quick=True, out=tmp_path, log=lines.append)
+    text = "\n".join(lines)
+    assert code == 0, text
+    assert "CRASH" not in text and "ESCAPED" not in text
+    md = (tmp_path / "benchmarks.md").read_text()
+    assert "python -m mbs bench --quick" in md
+    for part in ("Work-precision", "Stress tests", "Start-up", "UR5", "m2/m1", "high energy", "long horizon",
+                 "pendulum box", "l = 0.001 m"):
+        assert part in md, part
+    assert (tmp_path / "work_precision.png").stat().st_size > 5000
+
+
+def test_stress_case_never_raises():
+    # a case whose setup is invalid is reported as a crash row, not an exception
+    from verified.interval import Interval
+    row = bench.run_case("bad", "pendulum_paper", Interval([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]), 0.1)
+    assert row["status"] == "crash" and "states" in row["reason"]
