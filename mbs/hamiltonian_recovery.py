@@ -199,7 +199,7 @@ def _monomials(gens, S, degree):
     return out
 
 
-def _rref_basis(vectors, ncols):
+def _rref_basis(vectors):
     """Canonical basis (reduced row echelon form) of the span of the given row vectors
     (DomainMatrix rows) -> (DomainMatrix, pivots)."""
     R, piv = vectors.rref()
@@ -323,7 +323,6 @@ class RecoveredHamiltonian:
         f, H, dH = self._subs([*self.f], param_values), *self._subs([self.H, rate], param_values)
         rhs = from_sympy(f, x, output_names=[f"d{n}" for n in names])
         energy = from_sympy([H], x, output_names=["H"])
-        # from_sympy needs a non-constant-free graph too: a constant 0 rate is fine
         energy_rate = from_sympy([dH], x, output_names=["dHdt"])
         return System(name=name, rhs=rhs, energy=energy, energy_rate=energy_rate,
                       description="Hamiltonian recovered from the ODE (paper eqs. 9-10, 14-15)"
@@ -596,7 +595,7 @@ def recover_hamiltonian(f, q, qd, *, tau=None, basis=None, degree: int = 2,
     cols = ([N] if has_tau else []) + [c for c in support if c != N]
     null1_r = DomainMatrix([[null1[i, c].element for c in cols] for i in range(null1.shape[0])],
                            (null1.shape[0], len(cols)), QQ)
-    can1, piv1 = _rref_basis(null1_r, len(cols))
+    can1, piv1 = _rref_basis(null1_r)
 
     # --- choose a positive definite member (on phase-1 values, floats)
     fl_rng = np.random.default_rng(seed)
@@ -691,7 +690,7 @@ def recover_hamiltonian(f, q, qd, *, tau=None, basis=None, degree: int = 2,
             raise NoHamiltonianError("recover_hamiltonian: the solution space for symbolic "
                                      "parameters differs from the generic one; give parameter "
                                      "values")
-        can2, piv2 = _rref_basis(null2, len(cols))
+        can2, piv2 = _rref_basis(null2)
         if list(piv2) != list(piv1):
             raise NoHamiltonianError("recover_hamiltonian: inconsistent pivots between the "
                                      "numeric and symbolic solves; give parameter values")
