@@ -85,7 +85,8 @@ def main(argv=None):
                    help="check against N sampled true trajectories and overlay them on the figure "
                         "(default 64; 0: none)")
     p.add_argument("--no-figures", action="store_true", help="write result.json only")
-    sub.add_parser("demo", help="the paper's double pendulum in modes i, ii, iii (about a minute)")
+    p = sub.add_parser("demo", help="the paper's double pendulum in modes i, ii, iii (about a minute)")
+    p.add_argument("--out", default="out/demo", help="where the figures go (default out/demo)")
     p = sub.add_parser("check", help="compare a ready model with Pinocchio")
     p.add_argument("model", help="a name from models.registry.NAMES (e.g. ur5, puma560)")
     p.add_argument("--tol", type=float, default=1e-9)

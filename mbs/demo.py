@@ -1,29 +1,24 @@
-"""``python -m mbs demo``: what the library can prove today, on the paper's examples.
+"""``python -m mbs demo``: the paper's double pendulum in its three simulation modes.
 
-Until the verified ODE solver lands (issue #4), the demo shows the pieces it is built
-from, each against an independent check:
-
-1. The pendulum of paper sec. 5.1: its Hamiltonian (eq. 19) traced into an expression
-   graph and enclosed over the initial box [2.1, 2.2] x [3.1, 3.2], without and with
-   subdivision (all pieces in one batched call), against dense float sampling.
-2. The paper's double pendulum (eq. 22): the right-hand side enclosed over the initial
-   box (25), once from the hand-written equations and once from the SMARTMOBILE-style
-   numeric model of a DH chain traced into a graph, against sampled float values.
-3. The same double pendulum's mass matrix over a box of angles: a verified solve of
-   M(q) qdd = b (preconditioned interval Gauss elimination) against sampled solves.
-4. The verified ODE solver on that double pendulum to T = 1 (initial box split into
-   256 pieces), against the hull of 401 densely sampled DOP853 trajectories.
+The scene ``models/scenes/double_pendulum_paper.toml`` (eq. 22, initial box 25, x1(0)
+split into pieces) runs in modes (i) numeric model without test, (ii) numeric model
+with the energy consistency test, (iii) symbolic model with the energy test
+(:func:`mbs.simulate.compare_modes`). The demo prints the comparison table (break-down
+time, widths at common output times, pruned boxes, wall time), checks every
+enclosure against densely sampled DOP853 trajectories, and writes the paper's
+figures (Fig. 5 for the three modes with the sampled trajectories overlaid, Figs. 2
+and 3 of mode ii) into ``--out`` (default ``out/demo``).
 """
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
-from verified.graph import trace
-from verified.interval import Interval
-from verified.linalg import solve
+#: demo settings: chosen so the three modes together take about a minute here
+DEMO = dict(t_end=1.0, output_dt=0.05, pieces=16, samples=401)
 
 
 def _table(rows, header):
@@ -34,124 +29,82 @@ def _table(rows, header):
     return "\n".join(out)
 
 
-def _grid(lo, hi, per_axis):
-    axes = [np.linspace(a, b, per_axis) for a, b in zip(lo, hi)]
-    return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(lo))
+def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int:
+    from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
+    from .runner import check_samples
+    from .scene import load_scene
+    from .simulate import MODES, simulate, system_for
 
-
-def pendulum_energy(pieces=(1, 4, 16, 64)):
-    """Rows of (pieces, enclosure of H, width, width / sampled width, ms)."""
-    from models import pendulum
-
-    graph = trace(pendulum.hamiltonian, 2, input_names=["q", "qd"], output_names=["H"])
-    lo, hi = pendulum.initial_box()
-    box = Interval(lo, hi)
-    sampled = graph.eval_float(_grid(lo, hi, 401))[:, 0]
-    true_w = sampled.max() - sampled.min()
-    graph.eval_interval(box)  # warm up: the first call loads the compiled kernels
-    rows = []
-    for n in pieces:
+    t_all = time.perf_counter()
+    t_end = DEMO["t_end"] if t_end is None else t_end
+    pieces = DEMO["pieces"] if pieces is None else pieces
+    samples = DEMO["samples"] if samples is None else samples
+    scene = load_scene("double_pendulum_paper")
+    names = system_for("double_pendulum_paper", "ii").state_names
+    x0 = scene.initial_box(names)
+    kw = scene.simulate_kwargs(names)
+    kw.pop("mode")
+    kw["subdivision"] = [pieces, 1, 1, 1]
+    log(f"Double pendulum of the paper (eq. 22, box 25), x1(0) split into {pieces} pieces, T = {t_end:g} s,")
+    log(f"energy test every {kw.get('test_interval', 0.1):g} s with {kw.get('test_splits', 10)} splits "
+        f"(modes ii and iii).\n")
+    sols, walls = {}, {}
+    for mode in MODES:
         t0 = time.perf_counter()
-        parts = box.subdivide(n)  # n x n boxes, evaluated in one batched call
-        h = graph.eval_interval(parts)[..., 0]
-        enc = Interval(h.lo.min(), h.hi.max())
-        ms = (time.perf_counter() - t0) * 1e3
-        assert enc.lo <= sampled.min() and sampled.max() <= enc.hi, "enclosure misses a sample"
-        w = float(enc.width())
-        rows.append((f"{n}x{n}", f"[{float(enc.lo):.6f}, {float(enc.hi):.6f}]", f"{w:.5f}", f"{w / true_w:.3f}", f"{ms:.1f}"))
-    rows.append(("sampled", f"[{sampled.min():.6f}, {sampled.max():.6f}]", f"{true_w:.5f}", "1.000", ""))
-    return rows
+        sols[mode] = simulate("double_pendulum_paper", x0, t_end, mode=mode, output_dt=DEMO["output_dt"], **kw)
+        walls[mode] = time.perf_counter() - t0
+        s = sols[mode]
+        log(f"  mode {mode:>3}: {s.status} at t = {s.t_reached:.3f} s ({walls[mode]:.1f} s)")
 
+    # sampled true trajectories: x1(0) dense over its interval (the other states are points)
+    lo, hi = np.asarray(x0.lo, float), np.asarray(x0.hi, float)
+    pts = np.repeat(((lo + hi) / 2)[None], samples, axis=0)
+    pts[:, 0] = np.linspace(lo[0], hi[0], samples)
+    t_out = max((s.t for s in sols.values()), key=len)
+    dense = np.unique(np.concatenate([t_out, np.linspace(0, t_end, 201)]))
+    traj = sample_trajectories(system_for("double_pendulum_paper", "i").rhs, pts, dense)
+    escaped = 0
+    for mode, s in sols.items():
+        at = traj[:, np.searchsorted(dense, np.asarray(s.t, float)), :]
+        escaped += len(check_samples(s, at))
 
-def double_pendulum_rhs():
-    """Rows comparing the eq. (22) graph and the traced DH numeric model over box (25)."""
-    from models import double_pendulum as dp
-
-    lo, hi = dp.initial_box()
-    box = Interval(lo, hi)
-    by_hand = trace(dp.rhs, 4, output_names=["x1d", "x2d", "x3d", "x4d"])
-    numeric = dp.dh_chain().numeric()
-    by_chain = trace(lambda x, p: _chain_rhs(numeric, x), 4)
-    # x1 is the only uncertain component; sample it densely (and the corners).
-    pts = np.repeat(lo[None, :], 2001, axis=0)
-    pts[:, 0] = np.linspace(lo[0], hi[0], 2001)
-    samples = by_hand.eval_float(pts)
+    # comparison table: widths per state at a few common times
+    common = [t for t in (0.25, 0.5, 0.6, 0.75, 1.0) if t <= t_end]
     rows = []
-    for name, g in (("eq. (22) by hand", by_hand), ("DH chain, numeric model", by_chain)):
-        enc = g.eval_interval(box)
-        assert enc.contains(samples).all(), f"{name}: enclosure misses a sample"
-        for i in (2, 3):
-            rows.append((name, f"x{i + 1}'", f"[{enc.lo[i]:.6f}, {enc.hi[i]:.6f}]", f"{enc.width()[i]:.2e}"))
-    for i in (2, 3):
-        rows.append(("sampled", f"x{i + 1}'", f"[{samples[:, i].min():.6f}, {samples[:, i].max():.6f}]",
-                     f"{samples[:, i].max() - samples[:, i].min():.2e}"))
-    return rows
+    for t in common:
+        k_true = int(np.argmin(np.abs(dense - t)))
+        true_w = traj[:, k_true, :].max(axis=0) - traj[:, k_true, :].min(axis=0)
+        for mode, s in sols.items():
+            k = np.flatnonzero(np.isclose(s.t, t))
+            if k.size == 0:
+                rows.append((f"{t:g}", mode, "(broke down before)", "", ""))
+                continue
+            w = np.asarray(s.hull.width()[k[0]], float)
+            rows.append((f"{t:g}", mode, "  ".join(f"{v:8.5f}" for v in w), f"{(w / true_w).max():.3f}",
+                         str(np.asarray(s.boxes[k[0]].lo).reshape(-1, 4).shape[0])))
+        rows.append((f"{t:g}", "true", "  ".join(f"{v:8.5f}" for v in true_w), "1", ""))
+    log("\nWidths of the enclosure (hull of all boxes) at common times; ratio = worst width / sampled width")
+    log(_table(rows, ["t [s]", "mode", "widths x1 x2 x3 x4", "ratio", "boxes"]))
+    rows = []
+    for mode, s in sols.items():
+        st = s.stats
+        rows.append((mode, s.status, f"{s.t_reached:.3f}", st.get("steps"), st.get("tests", 0),
+                     st.get("pruned_boxes", 0), st.get("max_boxes"), f"{st.get('test_s', 0.0):.1f}",
+                     f"{walls[mode]:.1f}", s.reason or ""))
+    log("\n" + _table(rows, ["mode", "status", "t reached", "steps", "tests", "pruned", "max boxes",
+                            "test s", "wall s", "reason"]))
 
-
-def _chain_rhs(numeric, x):
-    q, qd = list(x[:2]), list(x[2:])
-    return qd + list(numeric.acceleration(q, qd))
-
-
-def mass_matrix_solve():
-    """Enclose qdd = M(q)^-1 b for q2 in a box, against sampled float solves."""
-    from models import double_pendulum as dp
-
-    q2 = Interval(-1.75, -1.70)
-    x = [Interval(2.3), q2, Interval(0.0), Interval(0.0)]
-    M = Interval(np.zeros((2, 2)))
-    m = dp.mass_matrix(x)
-    for i in range(2):
-        for j in range(2):
-            M[i, j] = m[i][j]
-    b = Interval([1.0, -2.0])
-    qdd = solve(M, b)
-    samples = []
-    for t in np.linspace(-1.75, -1.70, 201):
-        mp = np.array([[float(v) for v in row] for row in dp.mass_matrix([2.3, t, 0.0, 0.0])])
-        samples.append(np.linalg.solve(mp, [1.0, -2.0]))
-    samples = np.array(samples)
-    assert qdd.contains(samples).all(), "solve misses a sampled solution"
-    return [(f"qdd{i + 1}", f"[{qdd.lo[i]:.6f}, {qdd.hi[i]:.6f}]",
-             f"[{samples[:, i].min():.6f}, {samples[:, i].max():.6f}]") for i in range(2)]
-
-
-def double_pendulum_solve(pieces=256, samples=401):
-    """Rows of (state, verified width at T = 1, sampled width, ratio) and the run time."""
-    from scipy.integrate import solve_ivp
-
-    from models import double_pendulum as dp
-    from verified.solver import solve
-
-    lo, hi = dp.initial_box()
-    t0 = time.perf_counter()
-    sol = solve(trace(dp.rhs, 4), Interval(lo, hi), (0.0, 1.0), subdivision=[pieces, 1, 1, 1])
-    wall = time.perf_counter() - t0
-    if not sol.success:
-        return [("breakdown", f"t = {sol.t_reached:.3f}", sol.reason, "")], wall
-    x1 = np.linspace(lo[0], hi[0], samples)
-    y0 = np.concatenate([x1] + [np.full(samples, lo[i]) for i in (1, 2, 3)])
-    ref = solve_ivp(lambda t, y: np.concatenate(dp.rhs(y.reshape(4, samples))), (0.0, 1.0), y0,
-                    method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1].reshape(4, samples)
-    final = sol.boxes[-1]
-    inside = ((final.lo[:, None, :] - 1e-9 <= ref.T[None]) & (ref.T[None] <= final.hi[:, None, :] + 1e-9)).all(-1).any(0)
-    assert inside.all(), "a sampled trajectory is outside the verified enclosure"
-    w = sol.hull.width()[-1]
-    true_w = ref.max(axis=1) - ref.min(axis=1)
-    rows = [(f"x{i + 1}", f"{w[i]:.6f}", f"{true_w[i]:.6f}", f"{w[i] / true_w[i]:.4f}") for i in range(4)]
-    return rows, wall
-
-
-def run():
-    t0 = time.perf_counter()
-    print("1) Pendulum (paper 5.1): energy H over the initial box, by interval evaluation")
-    print(_table(pendulum_energy(), ["pieces", "enclosure of H [J]", "width", "/ sampled", "ms"]))
-    print("\n2) Double pendulum (paper eq. 22): accelerations over the initial box (25)")
-    print(_table(double_pendulum_rhs(), ["model", "state", "enclosure", "width"]))
-    print("\n3) Double pendulum mass matrix over q2 in [-1.75, -1.70]: verified solve of M qdd = b")
-    print(_table(mass_matrix_solve(), ["", "verified enclosure", "sampled range"]))
-    rows, wall = double_pendulum_solve()
-    print(f"\n4) Double pendulum, verified solver to T = 1, initial box split into 256 pieces ({wall:.1f} s)")
-    print(_table(rows, ["state", "verified width", "sampled width", "ratio"]))
-    print(f"\nEvery enclosure above contains all sampled float values. ({time.perf_counter() - t0:.1f} s)")
-    return 0
+    out = Path(out)
+    paths = [fig_enclosures(sols, out / "fig5_enclosures.png", samples=traj, sample_times=dense,
+                            title="Double pendulum (paper Fig. 5): (i) black, (ii) grey, (iii) dashed")]
+    s2 = sols["ii"]
+    if s2.consistency is not None and len(s2.consistency.ra_t) > 1:
+        paths.append(fig_reduction_area(s2, out / "fig2_reduction_area.png"))
+    if s2.consistency is not None and s2.consistency.tests:
+        paths.append(fig_consistency_plane(s2, system_for("double_pendulum_paper", "ii").energy,
+                                           out / "fig3_consistency_plane.png"))
+    log("\nFigures: " + ", ".join(str(p) for p in paths))
+    verdict = "every enclosure contains all" if not escaped else f"{escaped} sampled states OUTSIDE the enclosures of"
+    log(f"Checked against {samples} sampled trajectories: {verdict} sampled states. "
+        f"({time.perf_counter() - t_all:.1f} s)")
+    return 0 if not escaped else 1
