@@ -28,15 +28,17 @@ def initial_box():
 
 def rhs(x, p=None, m=M, l=L, g=G):
     """eq. (18) over the generic scalar: x = (q, qd) -> (qd, -(g/l) sin q)."""
+    from .double_pendulum import _sin
     q, qd = x[0], x[1]
-    return [qd, -(g / l) * np.sin(q)]
+    return [qd, -(g / l) * _sin(q)]
 
 
 def hamiltonian(x, p=None, m=M, l=L, g=G):
     """eq. (19), written as in the paper (not simplified)."""
+    from .double_pendulum import _cos, _sin, _sq
     q, qd = x[0], x[1]
-    return 0.5 * m * (np.square(l * np.sin(q) * qd) + np.square(l * np.cos(q) * qd)) \
-        + m * g * (l - l * np.cos(q))
+    return 0.5 * m * (_sq(l * _sin(q) * qd) + _sq(l * _cos(q) * qd)) \
+        + m * g * (l - l * _cos(q))
 
 
 def sympy_model(m=M, l=L, g=G):

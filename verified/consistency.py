@@ -136,8 +136,14 @@ class EnergyTest:
         Direction choice: largest ``|dG/dx . column| x width`` (the part of ``H_H``'s
         width a direction causes), largest share of the set's own width, or a grid.
     refine : "pruned" or "always"
-        Keep a set's surviving parts only when at least one part was pruned
-        ("pruned", default: splitting costs integration time), or always.
+        "pruned" (default): a set is replaced by its surviving parts (as the largest
+        consistent subtrees) only when that narrows its hull by at least
+        ``min_gain`` in some component; otherwise it stays whole (and is dropped
+        only when no part survives). Every part costs integration time, and
+        scattered small cuts multiply the sets without narrowing the enclosure.
+        "always": keep every surviving part.
+    min_gain : float
+        Relative narrowing that justifies replacing a set by its parts (default 0.1).
     backward_depth : int
         Backward consistency test on parts the energy test keeps: 0 = off; else the
         bisection depth for undecided parts (case C).
@@ -147,7 +153,8 @@ class EnergyTest:
 
     def __init__(self, energy: Graph | None = None, energy_rate="derive", constraints=(), *,
                  max_interval: float = 0.1, splits: int = 10, strategy: str = "gradient",
-                 refine: str = "pruned", backward_depth: int = 0, max_boxes: int = 4096):
+                 refine: str = "pruned", min_gain: float = 0.1, backward_depth: int = 0,
+                 max_boxes: int = 4096):
         if energy is None and not constraints:
             raise ValueError("EnergyTest needs an energy graph or at least one constraint")
         if energy is not None and (not isinstance(energy, Graph) or energy.n_outputs != 1):
@@ -171,11 +178,14 @@ class EnergyTest:
         self.splits = int(splits)
         self.strategy = strategy
         self.refine = refine
+        if not 0 <= float(min_gain) < 1:
+            raise ValueError(f"min_gain must be in [0, 1), got {min_gain!r}")
+        self.min_gain = float(min_gain)
         self.backward_depth = int(backward_depth)
         self.max_boxes = int(max_boxes)
 
     # ------------------------------------------------------------------ set-up
-    def prepare(self, rhs: Graph, integrated: Graph, n_x: int, params: Interval | None):
+    def prepare(self, rhs: Graph, integrated: Graph, n_x: int, params: Interval | None, t0: float = 0.0):
         """Bind to one solve: ``rhs`` is the user's ODE over ``(x, p)``; ``integrated``
         the graph the solver runs (its parameters possibly turned into states after
         ``x``). Returns the graph to integrate (with ``h`` appended when there is an
@@ -225,7 +235,7 @@ class EnergyTest:
         self._graph = graph
         self.record = ConsistencyRecord(np.zeros(0), np.zeros(0), Interval(np.zeros(0)), Interval(np.zeros(0)))
         self._ra_t, self._ra, self._hh, self._hv = [], [], [], []
-        self._last_test_t = None
+        self._last_test_t = float(t0)  # the interval to the first test starts at t0
         self.stats = dict(tests=0, pruned_boxes=0, test_s=0.0, backward_s=0.0, backward_runs=0,
                           backward_deleted=0, refinements_skipped=0)
         return graph
@@ -315,8 +325,6 @@ class EnergyTest:
         """Record ``RA(t)`` (eq. (16)) for the sets after a step and say whether to test:
         "previous" (the first local maximum was at the previous step), "now" (the
         longest interval has passed), or None."""
-        if self._last_test_t is None:
-            self._last_test_t = self._t0 = t if not self._ra_t else self._ra_t[0]
         if self._energy is not None:
             X = sets.hull()
             hh = self._eval(self._energy, X[:, : self._n_s])[:, 0]
@@ -361,6 +369,12 @@ class EnergyTest:
         """Branch and prune all sets at time ``t`` (enclosed by ``t_iv``); returns the
         surviving sets.
 
+        Each set is cut (bisection rounds, or one grid) into a tree of parts; parts
+        inconsistent with a constraint are discarded between rounds. What survives
+        is returned as the largest consistent subtrees: a node none of whose
+        descendants was pruned stays one set (``refine="pruned"``), so splitting
+        costs integration time only where something was cut away.
+
         ``previous``: ``(sets, h_step, make_stepper)`` of the step before, for the
         backward test (or None)."""
         from .lohner import DoubletonSets
@@ -369,50 +383,51 @@ class EnergyTest:
         nb0 = sets.n_sets
         checks = self._checks(sets, t_iv)
         alive = ~self._inconsistent(checks)
-        removed = np.zeros(nb0, dtype=np.int64)  # parts of each set found inconsistent
-        removed[~alive] += 1
-        parts, par = sets.take(np.flatnonzero(alive)), np.flatnonzero(alive)
-        checks = [(e[alive], lo, hi, inf[alive]) for e, lo, hi, inf in checks]
         tested_hulls, tested_kept = [], []
-
-        def prune(parts, par):
-            ok = ~self._inconsistent(self._checks(parts, t_iv))
-            tested_hulls.append(parts.hull()[:, : self._n_x])
-            tested_kept.append(ok)
-            np.add.at(removed, par[~ok], 1)
-            return parts.take(np.flatnonzero(ok)), par[ok]
-
+        # levels[l] = (kept parts at depth l, fan-out to them, ok mask over all children made)
+        idx = np.flatnonzero(alive)
+        levels = [(sets.take(idx), 1, alive)]
+        cur_checks = [(e[alive], lo, hi, inf[alive]) for e, lo, hi, inf in checks]
         if self.strategy == "grid":
             k = max(2, int(round(np.sqrt(self.splits))))
-            d = self._pick(parts, checks, 2)
-            parts = parts.subdivide_along(d[:, 0], k)
-            parts = parts.subdivide_along(np.repeat(d[:, 1], k), k)
-            parts, par = prune(parts, np.repeat(par, k * k))
+            plan = [k * k]
         else:
-            for _ in range(max(1, int(round(np.log2(self.splits))))):
-                if parts.n_sets == 0:
-                    break
-                d = self._pick(parts, self._checks(parts, t_iv), 1)[:, 0]
-                parts, par = prune(parts.subdivide_along(d, 2), np.repeat(par, 2))
+            plan = [2] * max(1, int(round(np.log2(self.splits))))
+        for fan in plan:
+            cur = levels[-1][0]
+            if cur.n_sets == 0:
+                break
+            if fan == 2:
+                children = cur.subdivide_along(self._pick(cur, cur_checks, 1)[:, 0], 2)
+            else:
+                k = int(round(np.sqrt(fan)))
+                d = self._pick(cur, cur_checks, 2)
+                children = cur.subdivide_along(d[:, 0], k).subdivide_along(np.repeat(d[:, 1], k), k)
+            ch_checks = self._checks(children, t_iv)
+            ok = ~self._inconsistent(ch_checks)
+            tested_hulls.append(children.hull()[:, : self._n_x])
+            tested_kept.append(ok)
+            levels.append((children.take(np.flatnonzero(ok)), fan, ok))
+            cur_checks = [(e[ok], lo, hi, inf[ok]) for e, lo, hi, inf in ch_checks]
+        parts, par, root = self._largest_consistent_subtrees(levels)
+        if self.refine == "pruned" and parts.n_sets:
+            parts, root = self._worth_refining(sets, parts, root)
         self.stats["test_s"] += time.perf_counter() - w0
         # backward consistency test on the parts the energy test could not decide
+        removed_back = np.zeros(nb0, dtype=np.int64)
         if self.backward_depth and previous is not None and parts.n_sets:
-            parts, par, gone = self._backward_test(parts, par, previous)
-            np.add.at(removed, gone, 1)
+            parts, keep_root, gone = self._backward_test(parts, root, previous)
+            root = keep_root
+            np.add.at(removed_back, gone, 1)
         w1 = time.perf_counter()
-        # a set none of whose parts was pruned stays whole (refine="pruned"): its
-        # parts would only cost integration time
-        whole = alive & (removed == 0) if self.refine == "pruned" else np.zeros(nb0, bool)
-        keep_part = ~whole[par]
-        out = DoubletonSets.concatenate([sets.take(np.flatnonzero(whole)), parts.take(np.flatnonzero(keep_part))])
+        out = parts
         if out.n_sets > self.max_boxes:
-            # too many sets: keep the parents of partly pruned sets whole and drop
-            # only the sets with no consistent part at all
+            # too many sets: keep whole every set with a consistent part
             self.stats["refinements_skipped"] += 1
-            has_part = np.bincount(par, minlength=nb0) > 0
-            out = sets.take(np.flatnonzero(alive & (has_part | whole)))
+            out = sets.take(np.unique(root))
         self.stats["tests"] += 1
-        self.stats["pruned_boxes"] += int(removed.sum())
+        n_pruned = int((~alive).sum()) + sum(int((~k).sum()) for k in tested_kept)
+        self.stats["pruned_boxes"] += n_pruned + int(removed_back.sum())
         n_s = self._n_s
         hv = hull(sets.hull()[:, n_s], axis=0) if self._energy is not None else None
         empty = Interval._from_bounds(np.zeros((0, self._n_x)), np.zeros((0, self._n_x)))
@@ -420,10 +435,65 @@ class EnergyTest:
             t=t,
             candidates=concatenate(tested_hulls, axis=0) if tested_hulls else empty,
             kept=np.concatenate(tested_kept) if tested_kept else np.zeros(0, bool),
-            h_v=hv, sets_before=nb0, sets_after=out.n_sets))
+            h_v=hv, sets_before=nb0, sets_after=out.n_sets,
+            backward_deleted=int(removed_back.sum())))
         self._last_test_t = t
         self.stats["test_s"] += time.perf_counter() - w1
+        del par
         return out
+
+    def _worth_refining(self, sets, parts, root):
+        """Keep the parts of a set only where they narrow its hull by ``min_gain``."""
+        from .lohner import DoubletonSets
+
+        nb0 = sets.n_sets
+        ph = parts.hull()
+        lo = np.full((nb0, ph.shape[1]), np.inf)
+        hi = np.full((nb0, ph.shape[1]), -np.inf)
+        np.minimum.at(lo, root, ph.lo)
+        np.maximum.at(hi, root, ph.hi)
+        own = sets.hull().width()
+        kept_w = hi - lo
+        has = np.bincount(root, minlength=nb0) > 0
+        gain = ((own - kept_w) > self.min_gain * own).any(axis=1) & has
+        whole = has & ~gain
+        use_parts = gain[root]
+        out = DoubletonSets.concatenate([sets.take(np.flatnonzero(whole)), parts.take(np.flatnonzero(use_parts))])
+        return out, np.concatenate([np.flatnonzero(whole), root[use_parts]])
+
+    def _largest_consistent_subtrees(self, levels):
+        """From the pruned tree, the maximal nodes with no pruned descendant (all
+        kept leaves with ``refine="always"``). Returns (sets, parent index in the
+        previous level (unused), root set index) of the nodes to keep."""
+        from .lohner import DoubletonSets
+
+        depth = len(levels) - 1
+        roots = [np.flatnonzero(levels[0][2])]
+        for l in range(1, depth + 1):
+            _, fan, ok = levels[l]
+            parent_root = np.repeat(roots[-1], fan)
+            roots.append(parent_root[ok])
+        if self.refine == "always" or depth == 0:
+            return levels[-1][0], None, roots[-1]
+        clean = [None] * (depth + 1)
+        clean[depth] = np.ones(levels[depth][0].n_sets, dtype=bool)
+        for l in range(depth - 1, -1, -1):
+            _, fan, ok = levels[l + 1]
+            filtered = np.cumsum(ok) - 1  # index among kept children of each child made
+            child_clean = np.zeros(ok.size, dtype=bool)
+            child_clean[ok] = clean[l + 1][filtered[ok]]
+            clean[l] = child_clean.reshape(-1, fan).all(axis=1)
+        pick_sets, pick_root = [], []
+        for l in range(depth + 1):
+            if l == 0:
+                take = clean[0]
+            else:
+                _, fan, ok = levels[l]
+                parent_of_made = np.repeat(np.arange(ok.size // fan), fan)
+                take = clean[l] & ~clean[l - 1][parent_of_made[ok]]
+            pick_sets.append(levels[l][0].take(np.flatnonzero(take)))
+            pick_root.append(roots[l][take])
+        return DoubletonSets.concatenate(pick_sets), None, np.concatenate(pick_root)
 
     # ------------------------------------------------------------------ backward (cases A, B, C)
     def _backward_test(self, parts, par, previous):

@@ -247,9 +247,10 @@ class LohnerStepper:
             guess = _inflate(guess.hull(new), factor=0.5)
         return None
 
-    def suggest_step(self, cX: Interval, tol: float) -> float:
-        """Step size that makes the order-K term of every box about ``tol`` (x 0.9)."""
-        mags = np.maximum(cX[:, self.order].mag(), 1e-300)
+    def suggest_step(self, cX: Interval, tol: float, components: int | None = None) -> float:
+        """Step size that makes the order-K term of every box about ``tol`` (x 0.9),
+        judged on the first ``components`` states (default: all)."""
+        mags = np.maximum(cX[:, self.order, :components].mag(), 1e-300)
         return float(0.9 * np.min((tol / mags) ** (1.0 / self.order)))
 
     def step(self, sets: DoubletonSets, h: float, X: Interval, E: Interval, cE: Interval):

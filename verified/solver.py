@@ -244,7 +244,7 @@ def solve(
     test = consistency
     if test is not None:
         user_graph = ode.graph if isinstance(ode, VerifiedODE) else ode
-        prob = VerifiedODE(test.prepare(user_graph, prob.graph, n_state, params))
+        prob = VerifiedODE(test.prepare(user_graph, prob.graph, n_state, params, t0=t0))
     stepper = LohnerStepper(prob.taylor, prob.variational, order, params, error_basis)
     sets = DoubletonSets.from_boxes(boxes)
     if test is not None:
@@ -252,6 +252,8 @@ def solve(
     history = []  # (sets, t_exact, t, h_step) before the last accepted steps
     max_sets = sets.n_sets
     h_max = (t1 - t0) if h_max is None else float(h_max)
+    if test is not None:
+        h_max = min(h_max, test.max_interval)  # "a test at least every max_interval seconds"
 
     out_t, out_boxes = [t0], [boxes[:, :n_state]]
     tube_t, tube = [t0], []
@@ -294,7 +296,9 @@ def solve(
             break
         gap = Fraction(float(outs[next_out])) - t_exact
         gap_lo, gap_hi = _round_down(gap), _round_up(gap)
-        h = min(stepper.suggest_step(cX, tol), h_max, h_wrap, gap_hi)
+        # an energy state added by a consistency test does not steer the step size:
+        # its rate is ~0 with wide interval coefficients (unsimplified dH/dt)
+        h = min(stepper.suggest_step(cX, tol, n_solver), h_max, h_wrap, gap_hi)
         if h >= gap_lo:
             h = gap_hi  # land on the output time; validate the enclosure up to gap_hi
         validated = None
@@ -329,7 +333,8 @@ def solve(
         # Wrapping control: the error a step injects through the spread of the
         # Jacobian over a wide set grows faster than the step itself, so keep it at
         # about wrap_target times the set's linear size by adapting the next step.
-        ratio = float(np.max(stepper.last_nonlinear_width.max(axis=1) / (sets.linear_width().max(axis=1) + 1e-300)))
+        ratio = float(np.max(stepper.last_nonlinear_width[:, :n_solver].max(axis=1)
+                            / (sets.linear_width()[:, :n_solver].max(axis=1) + 1e-300)))
         if ratio > wrap_target:
             h_wrap = h * max(0.2, np.sqrt(wrap_target / ratio))
         elif ratio < 0.25 * wrap_target:
