@@ -339,8 +339,10 @@ class EnergyTest:
         self._ra_t.append(t)
         self._ra.append(ra)
         since = t - self._last_test_t
-        if len(self._ra) >= 3 and self._ra_t[-2] > self._last_test_t and self._ra[-2] > self._ra[-1] \
-                and self._ra[-2] >= self._ra[-3] and self._ra[-2] > 0:
+        # RA(t0) = 0 (H_V(0) is H_H(0)), so the first step can be a local maximum too
+        before = self._ra[-3] if len(self._ra) >= 3 and self._ra_t[-3] > self._last_test_t else 0.0
+        if len(self._ra) >= 2 and self._ra_t[-2] > self._last_test_t and self._ra[-2] > self._ra[-1] \
+                and self._ra[-2] >= before and self._ra[-2] > 0:
             return "previous"
         if since >= self.max_interval * (1 - 1e-12):
             return "now"

@@ -1,0 +1,178 @@
+"""Issue 5's results: the energy consistency test in modes (i), (ii), (iii).
+
+    python benchmarks/bench_consistency.py            # full (a few minutes on 2 cores)
+    python benchmarks/bench_consistency.py --quick    # seconds; run by the tests
+
+Tables:
+1. the paper's double pendulum (eq. 22, box 25): widths over time per mode, worst
+   ratio to the sampled true hull, tests, pruned parts, time in the tests;
+2. single-box break-down time per mode (paper: 0.56 s without, ~0.99 s with its test);
+3. split strategies compared (same settings, mode iii);
+4. mode (iii) with dH/dt unsimplified vs simplified to 0;
+5. the pendulum of sec. 5.1: RA(t), t*, and the parts kept at t*;
+6. the damped URDF double pendulum (example-robot-data) with an uncertain angle.
+Ratios are measured side by side in one run (the machine is shared and noisy).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+from mbs.simulate import simulate, width_deviations  # noqa: E402
+from models import double_pendulum as dp  # noqa: E402
+from models import pendulum as pd  # noqa: E402
+from verified.interval import Interval  # noqa: E402
+
+
+def sampled_hull(f, lo, hi, ts, n=401):
+    from scipy.integrate import solve_ivp
+    pts = np.linspace(lo, hi, n)
+    out = np.empty((n, len(ts), lo.size))
+    for i, x0 in enumerate(pts):
+        s = solve_ivp(lambda t, x: np.asarray(f(x), float), (0, ts[-1]), x0, method="DOP853", rtol=1e-12,
+                      atol=1e-12, t_eval=ts)
+        out[i] = s.y.T
+    return out.max(axis=0) - out.min(axis=0)  # (len(ts), n)
+
+
+def _row(name, sol, true_w=None):
+    w = sol.hull[-1].width() if sol.success else np.full(4, np.nan)
+    ratio = float(np.max(w / true_w)) if (true_w is not None and sol.success) else float("nan")
+    st = sol.stats
+    return (f"{name:<28} {sol.status:<10} {sol.t_reached:6.3f}  {' '.join(f'{v:.5f}' for v in w)}  "
+            f"{ratio:7.3f}  {st.get('tests', 0):5d} {st.get('pruned_boxes', 0):8d} {st.get('max_boxes', 0):6d} "
+            f"{st.get('test_s', 0.0):7.2f} {st['wall_s']:7.2f}")
+
+
+HEADER = (f"{'run':<28} {'status':<10} {'t_end':>6}  {'widths x1..x4 at t_end':<39}  {'ratio':>7}  "
+          f"{'tests':>5} {'pruned':>8} {'sets':>6} {'test_s':>7} {'wall_s':>7}")
+
+
+def double_pendulum_modes(T, pieces, quick):
+    lo, hi = dp.initial_box()
+    ts = np.round(np.arange(1, int(round(T / 0.1)) + 1) * 0.1, 12)
+    true_w = sampled_hull(lambda x: dp.rhs(x), lo, hi, ts, n=101 if quick else 401)
+    print(f"\n## 1. Double pendulum, box (25) split into {pieces} pieces along x1, T = {T}")
+    print("(i)/(ii): numeric model of the DH chain; (iii): eq. (22)/(24); 'eq22 no test' isolates the test")
+    print(HEADER)
+    sols = {}
+    runs = [("i", dict(mode="i")), ("ii (0.1 s, 10)", dict(mode="ii")), ("iii (0.01 s, 50)", dict(mode="iii")),
+            ("iii (0.1 s, 10)", dict(mode="iii", test_interval=0.1, test_splits=10))]
+    for name, kw in runs:
+        sols[name] = simulate("double_pendulum_paper", Interval(lo, hi), T, output_dt=0.1,
+                              subdivision=[pieces, 1, 1, 1], **kw)
+        print(_row(name, sols[name], true_w[-1]), flush=True)
+    from verified.solver import solve
+    ref = solve(dp.rhs_graph(), Interval(lo, hi), (0, T), t_eval=ts, subdivision=[pieces, 1, 1, 1])
+    print(_row("eq22 no test", ref, true_w[-1]))
+    print("\nwidth over time divided by the sampled true hull (worst state):")
+    print("t      " + " ".join(f"{k:>16}" for k in list(sols) + ["eq22 no test"]))
+    for j, t in enumerate(ts):
+        cells = []
+        for s in list(sols.values()) + [ref]:
+            k = j + 1
+            cells.append(f"{np.max(s.hull[k].width() / true_w[j]):16.3f}" if k < len(s.t) else f"{'-':>16}")
+        print(f"{t:4.1f}  " + " ".join(cells))
+    a, b = sols["ii (0.1 s, 10)"], sols["iii (0.01 s, 50)"]
+    k = min(len(a.t), len(b.t))
+    if k > 1:
+        dev = np.max(np.abs(a.hull[:k].width() - b.hull[:k].width()), axis=0)
+        print(f"\nlargest width deviation (ii) vs (iii) per state up to t = {a.t[k - 1]:.1f}: "
+              + ", ".join(f"{v:.4f}" for v in dev) + "   (paper: 0.0018, 0.0072, 0.0066, 0.0444)")
+    return sols
+
+
+def single_box_breakdown(T):
+    lo, hi = dp.initial_box()
+    print(f"\n## 2. Single-box break-down (box (25) unsplit, up to T = {T})")
+    print(HEADER)
+    runs = [("i", dict(mode="i")), ("ii", dict(mode="ii")), ("iii", dict(mode="iii")),
+            ("iii refine='always'", dict(mode="iii", refine="always", max_boxes=512)),
+            ("iii + backward depth 2", dict(mode="iii", backward_depth=2))]
+    for name, kw in runs:
+        s = simulate("double_pendulum_paper", Interval(lo, hi), T, **kw)
+        print(_row(name, s), flush=True)
+    from verified.solver import solve
+    print(_row("eq22 no test", solve(dp.rhs_graph(), Interval(lo, hi), (0, T))))
+    print("(paper: VALENCIA-IVP 0.56 s without its tests, about 0.99 s with them)")
+
+
+def strategies(T, pieces):
+    lo, hi = dp.initial_box()
+    true_w = sampled_hull(lambda x: dp.rhs(x), lo, hi, np.array([T]), n=201)[-1]
+    print(f"\n## 3. Split strategies, mode iii, {pieces} pieces, T = {T}")
+    print(HEADER)
+    for strat in ("gradient", "widest", "grid"):
+        s = simulate("double_pendulum_paper", Interval(lo, hi), T, mode="iii", subdivision=[pieces, 1, 1, 1],
+                     split_strategy=strat)
+        print(_row(strat, s, true_w), flush=True)
+
+
+def simplified_vs_not(T, pieces):
+    lo, hi = dp.initial_box()
+    true_w = sampled_hull(lambda x: dp.rhs(x), lo, hi, np.array([T]), n=201)[-1]
+    print(f"\n## 4. Mode iii: dH/dt unsimplified (integrated) vs simplified to 0, {pieces} pieces, T = {T}")
+    print(HEADER)
+    for er in ("unsimplified", "simplified"):
+        s = simulate("double_pendulum_paper", Interval(lo, hi), T, mode="iii", subdivision=[pieces, 1, 1, 1],
+                     energy_rate=er)
+        print(_row(er, s, true_w), flush=True)
+
+
+def pendulum_ra():
+    lo, hi = pd.initial_box()
+    print("\n## 5. Pendulum of sec. 5.1, box [2.1, 2.2] x [3.1, 3.2], mode iii (dH/dt unsimplified)")
+    s = simulate("pendulum_paper", Interval(lo, hi), 1.0, mode="iii", test_interval=0.1, test_splits=50)
+    rec = s.consistency
+    print(f"status {s.status}, {s.stats['tests']} tests, {s.stats['pruned_boxes']} parts pruned, "
+          f"final widths {s.hull[-1].width()}")
+    for i in range(0, len(rec.ra_t), max(1, len(rec.ra_t) // 12)):
+        print(f"  t = {rec.ra_t[i]:.3f}  RA = {rec.ra[i]:.5f}  H_H = [{rec.h_h.lo[i]:.4f}, {rec.h_h.hi[i]:.4f}]"
+              f"  H_V = [{rec.h_v.lo[i]:.4f}, {rec.h_v.hi[i]:.4f}]")
+    first = rec.tests[0]
+    print(f"first test t* = {first.t:.3f}: {int(first.kept.sum())} of {first.kept.size} parts kept, "
+          f"H_V = {first.h_v}")
+
+
+def urdf_robot(T):
+    from models.robots import double_pendulum
+    chain = double_pendulum()
+    num = chain.numeric()
+    lo = np.array([np.pi - 0.3, 0.0, 0.0, 0.0])
+    hi = np.array([np.pi - 0.29, 0.0, 0.0, 0.0])
+    true_w = sampled_hull(lambda x: num.rhs(list(x)), lo, hi, np.array([T]), n=101)[-1]
+    print(f"\n## 6. Damped URDF double pendulum (example-robot-data, damping 0.05), q1(0) in [pi-0.3, pi-0.29],"
+          f" 8 pieces, T = {T}")
+    print(HEADER)
+    for mode in ("i", "ii", "iii"):
+        s = simulate(chain, Interval(lo, hi), T, mode=mode, subdivision=[8, 1, 1, 1], test_interval=0.05,
+                     test_splits=10)
+        print(_row(mode, s, true_w), flush=True)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small sizes (seconds)")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    if args.quick:
+        double_pendulum_modes(0.3, 4, True)
+        pendulum_ra()
+    else:
+        double_pendulum_modes(1.0, 64, False)
+        single_box_breakdown(1.2)
+        strategies(1.0, 64)
+        simplified_vs_not(1.0, 64)
+        pendulum_ra()
+        urdf_robot(0.3)
+    print(f"\ntotal {time.perf_counter() - t0:.1f} s")
+
+
+if __name__ == "__main__":
+    main()
