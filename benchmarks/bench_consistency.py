@@ -167,8 +167,8 @@ def main(argv=None):
     else:
         double_pendulum_modes(1.0, 64, False)
         single_box_breakdown(1.2)
-        strategies(1.0, 64)
-        simplified_vs_not(1.0, 64)
+        strategies(1.0, 16)
+        simplified_vs_not(1.0, 16)
         pendulum_ra()
         urdf_robot(0.3)
     print(f"\ntotal {time.perf_counter() - t0:.1f} s")

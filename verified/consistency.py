@@ -498,51 +498,42 @@ class EnergyTest:
         return DoubletonSets.concatenate(pick_sets), None, np.concatenate(pick_root)
 
     # ------------------------------------------------------------------ backward (cases A, B, C)
-    def _backward_test(self, parts, par, previous):
+    def _backward_test(self, parts, root, previous):
         """Integrate each part back over the last step (``h``) and compare with the
-        forward sets there: no intersection with any of them (case A) deletes the
-        part; inside one of them (case B) keeps it; otherwise (case C) bisect and
-        retest, down to ``backward_depth``; what is still undecided is kept."""
-        from .lohner import DoubletonSets
-
+        forward sets there (sec. 4): a part whose backward image meets none of them
+        holds no true state (case A, deleted); one inside a forward set is consistent
+        (case B, kept); the rest (case C) is bisected and retested down to
+        ``backward_depth``. A part is kept whole unless every one of its pieces ends
+        in case A (keeping pieces would multiply the sets). Returns the kept parts,
+        their root set indices, and the root index of each deleted part."""
         w0 = time.perf_counter()
         prev_sets, h_step, make_stepper = previous
         if self._backward is None:
             self._backward = make_stepper(negated(self._graph))
         stepper = self._backward
         F = prev_sets.hull()  # (P, n)
-        kept_sets, kept_par, gone = [], [], []
-        cur, cur_par = parts, par
+        alive = np.zeros(parts.n_sets, dtype=bool)  # some piece not in case A
+        cur, owner = parts, np.arange(parts.n_sets)
         for depth in range(self.backward_depth + 1):
             if cur.n_sets == 0:
                 break
             self.stats["backward_runs"] += cur.n_sets
             back = _one_step(stepper, cur, h_step)
             if back is None:  # no validated backward step: undecided, keep
-                kept_sets.append(cur)
-                kept_par.append(cur_par)
+                alive[owner] = True
                 break
             meets = _meets_any(back, F)  # (K,)
-            inside = _inside_any(back, F)
-            self.stats["backward_deleted"] += int((~meets).sum())
-            gone.append(cur_par[~meets])
-            decided = ~meets | inside
-            keep_now = inside
-            kept_sets.append(cur.take(np.flatnonzero(keep_now)))
-            kept_par.append(cur_par[keep_now])
-            undecided = ~decided
+            undecided = meets & ~_inside_any(back, F)
+            alive[owner[meets & ~undecided]] = True  # case B
             if depth == self.backward_depth:
-                kept_sets.append(cur.take(np.flatnonzero(undecided)))
-                kept_par.append(cur_par[undecided])
+                alive[owner[undecided]] = True
                 break
             und = cur.take(np.flatnonzero(undecided))
             cur = und.subdivide_along(np.argmax(und.direction_widths(), axis=1), 2)
-            cur_par = np.repeat(cur_par[undecided], 2)
+            owner = np.repeat(owner[undecided], 2)
+        self.stats["backward_deleted"] += int((~alive).sum())
         self.stats["backward_s"] += time.perf_counter() - w0
-        gone = np.concatenate(gone) if gone else par[:0]
-        if not kept_sets:
-            return parts.take(np.zeros(0, dtype=int)), par[:0], gone
-        return DoubletonSets.concatenate(kept_sets), np.concatenate(kept_par), gone
+        return parts.take(np.flatnonzero(alive)), root[alive], root[~alive]
 
     # ------------------------------------------------------------------ results
     def finish(self) -> ConsistencyRecord:
