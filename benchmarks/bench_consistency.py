@@ -108,6 +108,8 @@ def strategies(T, pieces):
     true_w = sampled_hull(lambda x: dp.rhs(x), lo, hi, np.array([T]), n=201)[-1]
     print(f"\n## 3. Split strategies, mode iii (tests every 0.05 s, 16 parts), {pieces} pieces, T = {T}")
     print(HEADER)
+    from verified.solver import solve
+    print(_row("eq22 no test", solve(dp.rhs_graph(), Interval(lo, hi), (0, T), subdivision=[pieces, 1, 1, 1]), true_w))
     for strat in ("gradient", "widest", "grid"):
         s = simulate("double_pendulum_paper", Interval(lo, hi), T, mode="iii", subdivision=[pieces, 1, 1, 1],
                      split_strategy=strat, test_interval=0.05, test_splits=16, max_boxes=1024)
