@@ -73,10 +73,10 @@ def _prove_conservative(mod, n: int):
     0 for the float parameter values too (simplifying with the float values leaves
     rounding residues such as 7e-15 x3 sin x1)."""
     import sympy
+    import inspect
     xs = list(sympy.symbols(f"x1:{n + 1}", real=True))
-    ps = {k: sympy.Symbol(k, positive=True) for k in ("m", "l", "g") if mod.__name__.endswith("pendulum")
-          and not mod.__name__.endswith("double_pendulum")} or \
-        {k: sympy.Symbol(k, positive=True) for k in ("m1", "m2", "l1", "l2", "g")}
+    names = [k for k in inspect.signature(mod.rhs).parameters if k not in ("x", "p")]  # m, l, g, ...
+    ps = {k: sympy.Symbol(k, positive=True) for k in names}
     f = mod.rhs(xs, **ps)
     H = mod.hamiltonian(xs, **ps)
     rate = sympy.simplify(sum(sympy.diff(H, x) * fx for x, fx in zip(xs, f)))

@@ -228,7 +228,7 @@ class EnergyTest:
             if k != n_x:
                 raise ValueError(f"constraint {c.name!r} takes {k} states; the ODE has {n_x}")
             b = GraphBuilder(self._n_aug + (1 if c.time_dependent else 0), 0)
-            xs = [b.input(i) for i in range(b_inputs(b))]
+            xs = [b.input(i) for i in range(len(b.input_names))]
             args = xs[:n_x] + ([xs[-1]] if c.time_dependent else [])
             self._constraints.append((c, b.build(embed(b, c.graph, args), c.graph.output_names)))
         self._backward = None
@@ -293,7 +293,8 @@ class EnergyTest:
         nb = sets.n_sets
         X = sets.hull()
         cols = sets.direction_columns()  # (B, n, 2n)
-        widths = np.concatenate([sets.r0.width(), sets.r.width()], axis=1)  # (B, 2n)
+        params = concatenate([sets.r0, sets.r], axis=1)  # (B, 2n): the set's parameters
+        widths = params.width()
         out = []
         todo = []
         if self._energy is not None:
@@ -306,7 +307,6 @@ class EnergyTest:
             D = self._jac(g, X.hull(point(sets.c)), extra)[..., : self._n_aug]  # (B, m, n)
             Dcols = linalg.matmul(D, cols)  # (B, m, 2n)
             centre = self._eval(g, point(sets.c), extra)
-            params = concatenate([sets.r0, sets.r], axis=1)  # (B, 2n)
             mv = centre + linalg.matvec(Dcols, params)
             enc = naive.intersect(mv)
             influence = Dcols.mag() * widths[:, None, :]  # (B, m, 2n)
@@ -411,16 +411,15 @@ class EnergyTest:
             tested_kept.append(ok)
             levels.append((children.take(np.flatnonzero(ok)), fan, ok))
             cur_checks = [(e[ok], lo, hi, inf[ok]) for e, lo, hi, inf in ch_checks]
-        parts, par, root = self._largest_consistent_subtrees(levels)
+        parts, root = self._largest_consistent_subtrees(levels)
         if self.refine == "pruned" and parts.n_sets:
             parts, root = self._worth_refining(sets, parts, root)
         self.stats["test_s"] += time.perf_counter() - w0
         # backward consistency test on the parts the energy test could not decide
-        removed_back = np.zeros(nb0, dtype=np.int64)
+        removed_back = 0
         if self.backward_depth and previous is not None and parts.n_sets:
-            parts, keep_root, gone = self._backward_test(parts, root, previous)
-            root = keep_root
-            np.add.at(removed_back, gone, 1)
+            parts, root, gone = self._backward_test(parts, root, previous)
+            removed_back = gone.size
         w1 = time.perf_counter()
         out = parts
         if out.n_sets > self.max_boxes:
@@ -429,7 +428,7 @@ class EnergyTest:
             out = sets.take(np.unique(root))
         self.stats["tests"] += 1
         n_pruned = int((~alive).sum()) + sum(int((~k).sum()) for k in tested_kept)
-        self.stats["pruned_boxes"] += n_pruned + int(removed_back.sum())
+        self.stats["pruned_boxes"] += n_pruned + removed_back
         n_s = self._n_s
         hv = hull(sets.hull()[:, n_s], axis=0) if self._energy is not None else None
         empty = Interval._from_bounds(np.zeros((0, self._n_x)), np.zeros((0, self._n_x)))
@@ -438,10 +437,9 @@ class EnergyTest:
             candidates=concatenate(tested_hulls, axis=0) if tested_hulls else empty,
             kept=np.concatenate(tested_kept) if tested_kept else np.zeros(0, bool),
             h_v=hv, sets_before=nb0, sets_after=out.n_sets,
-            backward_deleted=int(removed_back.sum())))
+            backward_deleted=removed_back))
         self._last_test_t = t
         self.stats["test_s"] += time.perf_counter() - w1
-        del par
         return out
 
     def _worth_refining(self, sets, parts, root):
@@ -465,8 +463,8 @@ class EnergyTest:
 
     def _largest_consistent_subtrees(self, levels):
         """From the pruned tree, the maximal nodes with no pruned descendant (all
-        kept leaves with ``refine="always"``). Returns (sets, parent index in the
-        previous level (unused), root set index) of the nodes to keep."""
+        kept leaves with ``refine="always"``). Returns the nodes to keep and the
+        index of the set each came from."""
         from .lohner import DoubletonSets
 
         depth = len(levels) - 1
@@ -476,7 +474,7 @@ class EnergyTest:
             parent_root = np.repeat(roots[-1], fan)
             roots.append(parent_root[ok])
         if self.refine == "always" or depth == 0:
-            return levels[-1][0], None, roots[-1]
+            return levels[-1][0], roots[-1]
         clean = [None] * (depth + 1)
         clean[depth] = np.ones(levels[depth][0].n_sets, dtype=bool)
         for l in range(depth - 1, -1, -1):
@@ -495,7 +493,7 @@ class EnergyTest:
                 take = clean[l] & ~clean[l - 1][parent_of_made[ok]]
             pick_sets.append(levels[l][0].take(np.flatnonzero(take)))
             pick_root.append(roots[l][take])
-        return DoubletonSets.concatenate(pick_sets), None, np.concatenate(pick_root)
+        return DoubletonSets.concatenate(pick_sets), np.concatenate(pick_root)
 
     # ------------------------------------------------------------------ backward (cases A, B, C)
     def _backward_test(self, parts, root, previous):
@@ -543,10 +541,6 @@ class EnergyTest:
         self.record.h_h = concatenate([h.reshape((1,)) for h in self._hh], axis=0) if self._hh else empty
         self.record.h_v = concatenate([h.reshape((1,)) for h in self._hv], axis=0) if self._hv else empty
         return self.record
-
-
-def b_inputs(b: GraphBuilder) -> int:
-    return len(b.input_names)
 
 
 def _row_times(row: Interval, M: np.ndarray) -> Interval:

@@ -245,7 +245,7 @@ def solve(
     if test is not None:
         user_graph = ode.graph if isinstance(ode, VerifiedODE) else ode
         prob = VerifiedODE(test.prepare(user_graph, prob.graph, n_state, params, t0=t0))
-    stepper = LohnerStepper(prob.taylor, prob.variational, order, params, error_basis)
+    stepper = _stepper(prob, order, params, error_basis)
     sets = DoubletonSets.from_boxes(boxes)
     if test is not None:
         sets = test.initial_sets(sets)
@@ -353,8 +353,7 @@ def solve(
                 prev = None
                 if test.backward_depth and history:
                     prev_sets, _, _, prev_h = history[-1]
-                    prev = (prev_sets, prev_h, lambda g: LohnerStepper(
-                        VerifiedODE(g).taylor, VerifiedODE(g).variational, order, params, error_basis))
+                    prev = (prev_sets, prev_h, lambda g: _stepper(VerifiedODE(g), order, params, error_basis))
                 sets = test.apply(t, t_iv, sets, prev)
                 history = []
                 if sets.n_sets == 0:
@@ -415,6 +414,10 @@ def solve(
         result.stats.update(test.stats)
         result.stats["wall_s"] = time.perf_counter() - wall0
     return result
+
+
+def _stepper(prob: VerifiedODE, order, params, error_basis) -> LohnerStepper:
+    return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis)
 
 
 def _round_up(q: Fraction) -> float:
