@@ -510,19 +510,10 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     for k, v in _table(data, "solver", source).items():
         if k not in _SOLVER:
             _unknown({k: v}, _SOLVER, where)
-        typ = _SOLVER[k]
         if k == "subdivision":
             solver[k] = _subdivision(v, f"{where} subdivision")
-        elif typ is bool:
-            if not isinstance(v, bool):
-                raise SceneError(f"{where} {k}: expected true or false, got {v!r}")
-            solver[k] = v
-        elif typ is str:
-            if not isinstance(v, str):
-                raise SceneError(f"{where} {k}: expected a string, got {v!r}")
-            solver[k] = v
         else:
-            solver[k] = _number(v, f"{where} {k}", typ, positive=True)
+            solver[k] = _typed(v, _SOLVER[k], f"{where} {k}", positive=True)
     if "error_basis" in solver and solver["error_basis"] not in ("qr", "auto"):
         raise SceneError(f"{where} error_basis: {solver['error_basis']!r} is not 'qr' or 'auto'")
     if "order" in solver and solver["order"] < 2:
@@ -534,13 +525,7 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     for k, v in _table(data, "consistency", source).items():
         if k not in _CONSISTENCY:
             _unknown({k: v}, _CONSISTENCY, where)
-        typ = _CONSISTENCY[k]
-        if typ is str:
-            if not isinstance(v, str):
-                raise SceneError(f"{where} {k}: expected a string, got {v!r}")
-            cons[k] = v
-        else:
-            cons[k] = _number(v, f"{where} {k}", typ, positive=(k != "backward_depth"))
+        cons[k] = _typed(v, _CONSISTENCY[k], f"{where} {k}", positive=(k != "backward_depth"))
     if cons.get("backward_depth", 0) < 0:
         raise SceneError(f"{where} backward_depth: must be >= 0")
     if "energy_rate" in cons and cons["energy_rate"] not in _ENERGY_RATES:
@@ -555,6 +540,19 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         raise SceneError(f"{source}: [solver] subdivision has {len(solver['subdivision'])} entries, "
                          f"the initial box {len(initial)}")
     return scene
+
+
+def _typed(v, typ, where: str, positive: bool):
+    """A scalar setting of type ``typ`` (bool, str, int or float), checked."""
+    if typ is bool:
+        if not isinstance(v, bool):
+            raise SceneError(f"{where}: expected true or false, got {v!r}")
+        return v
+    if typ is str:
+        if not isinstance(v, str):
+            raise SceneError(f"{where}: expected a string, got {v!r}")
+        return v
+    return _number(v, where, typ, positive=positive)
 
 
 def _subdivision(v, where):
