@@ -193,11 +193,25 @@ class Chain:
                 known[p] = known[p] and known[i]
         for i in range(self.n):
             if known[i] and acc[i] == 0.0:
-                b = self.bodies[i]
-                raise ModelError(
-                    f"joint {b.joint.name!r} moves only massless links (link {b.name!r} and its "
-                    "children have no mass and no inertia, e.g. a missing <inertial>): the mass "
-                    "matrix would be singular. Give the link an inertial, or lock the joint.")
+                raise ModelError(self._massless_message(i))
+
+    def _massless_message(self, i: int) -> str:
+        """Why body ``i`` and its subtree make M singular, in the terms of the input
+        the chain came from (a DH table, a URDF, or bodies built in code)."""
+        b = self.bodies[i]
+        head = f"joint {b.joint.name!r} moves only massless links"
+        tail = "the mass matrix would be singular"
+        rows = self.source.get("rows")  # DH tables (also after subs/lock)
+        row = next((k for k, r in enumerate(rows or ()) if r.get("name") == b.joint.name), None)
+        if row is not None:
+            return (f"{head}: DH row {row} (link {b.name!r}) and the rows after it have mass 0 and "
+                    f"inertia 0, so {tail}. Give DH row {row} (or a later row) a mass > 0 or an "
+                    "inertia (row entries 'mass', 'inertia'), or lock the joint.")
+        if self.source.get("kind") == "urdf":
+            return (f"{head} (link {b.name!r} and its children have no mass and no inertia, e.g. a "
+                    f"missing <inertial>): {tail}. Give the link an <inertial>, or lock the joint.")
+        return (f"{head} (link {b.name!r} and its children have mass 0 and inertia 0): {tail}. "
+                "Give the link a mass or an inertia, or lock the joint.")
 
     # ------------------------------------------------------------------ constructors
     @classmethod

@@ -146,3 +146,22 @@ def test_not_a_tree():
                          '<child link="base"/></joint></robot>')
     with pytest.raises(ModelError):
         Chain.from_urdf(xml)
+
+
+def test_massless_link_message_fits_the_input():
+    """Issue 12, item 6: a DH chain is told about its DH row and the DH mass/inertia
+    entries, not about URDF <inertial>; a URDF still gets the <inertial> hint."""
+    with pytest.raises(ModelError, match=r"joint 'elbow'.*massless.*DH row 1") as info:
+        Chain.from_dh([dict(joint="R", a=1, mass=1), dict(joint="R", a=1, name="elbow")])
+    msg = str(info.value)
+    assert "<inertial>" not in msg and "URDF" not in msg and "'mass'" in msg and "'inertia'" in msg, msg
+    # also when the zero mass comes from substituting a DH parameter
+    m = sympy.Symbol("m", positive=True)
+    with pytest.raises(ModelError, match=r"joint 'joint2'.*DH row 1") as info:
+        Chain.from_dh([dict(joint="R", a=1, mass=1), dict(joint="R", a=1, mass=m)]).subs({m: 0})
+    assert "<inertial>" not in str(info.value)
+    # a URDF link without <inertial>
+    xml = urdf().split("<link name=\"arm\">")[0] + '<link name="arm"/>' + urdf().split("</inertial></link>")[1]
+    with pytest.raises(ModelError, match=r"joint 'shoulder'.*massless.*<inertial>") as info:
+        Chain.from_urdf(xml)
+    assert "DH" not in str(info.value)

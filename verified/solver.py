@@ -26,8 +26,9 @@ from fractions import Fraction
 import numpy as np
 
 from .graph import Graph
-from .interval import Interval, _as_interval, concatenate, hull, stack
+from .interval import Interval, concatenate, hull, stack
 from .lohner import DoubletonSets, LohnerStepper
+from .solver_args import check_graph, check_params, check_settings, initial_boxes
 from .taylor import TaylorODE
 from .variational import params_as_states, variational_graph
 
@@ -41,9 +42,7 @@ class VerifiedODE:
     """
 
     def __init__(self, graph: Graph):
-        if not isinstance(graph, Graph):
-            raise TypeError(f"expected a verified.graph.Graph, got {type(graph).__name__}")
-        self.graph = graph
+        self.graph = check_graph(graph)
         self.taylor = TaylorODE(graph)
         self.variational = TaylorODE(variational_graph(graph))
         self.n = graph.n_inputs
@@ -114,23 +113,6 @@ class Solution:
         )
 
 
-def _initial_boxes(x0, n, subdivision):
-    if isinstance(x0, (list, tuple)) and x0 and isinstance(x0[0], Interval):
-        boxes = concatenate([_as_interval(b).reshape(-1, n) for b in x0], axis=0)
-    else:
-        boxes = _as_interval(x0)
-    if boxes.shape[-1] != n:
-        raise ValueError(f"initial boxes must have {n} components (last axis), got shape {boxes.shape}")
-    boxes = boxes.reshape(-1, n)
-    if boxes.is_empty().any():
-        raise ValueError("an initial box is empty")
-    if not (np.isfinite(boxes.lo).all() and np.isfinite(boxes.hi).all()):
-        raise ValueError("initial boxes must be bounded")
-    if subdivision is not None:
-        boxes = boxes.subdivide(subdivision).reshape(-1, n)
-    return boxes
-
-
 def solve(
     ode,
     x0,
@@ -164,15 +146,18 @@ def solve(
         Initial boxes (their union is the initial set).
     t_span : (t0, t1) with t1 > t0
     params : Interval or floats, shape (p,) (or (B, p) per initial box)
-    t_eval : array of output times in [t0, t1] (default: t1 only; t0 is always included)
+    t_eval : sorted (non-decreasing) finite output times in [t0, t1] (default: t1 only;
+        t0 is always included; repeated times are reported once)
     order : Taylor order K (default 12)
     tol : target size of the order-K term per step (absolute, state units; default
         1e-10). Defaults chosen from the double pendulum's work-precision table
         (benchmarks/bench_solver.py --work-precision): higher orders with loose
         tolerances take long steps over which the Jacobian of a wide set varies
         too much.
-    subdivision : int or sequence of int: split each initial box into a uniform grid
-    h_max, h_min : step-size bounds; a step that cannot be validated above h_min breaks down
+    subdivision : int >= 1 or a sequence of n ints >= 1: split each initial box into a
+        uniform grid (pieces per state)
+    h_max, h_min : step-size bounds (h_max None: t1 - t0; 0 < h_min < h_max); a step
+        that cannot be validated above h_min breaks down
     max_steps : break down after this many steps
     max_width : break down when a component's enclosure gets wider than this
     adaptive : split a set in two (along its widest direction) when the error its
@@ -205,31 +190,28 @@ def solve(
     Returns
     -------
     Solution
+
+    Raises
+    ------
+    ValueError
+        for a bad argument, before any work (see :mod:`verified.solver_args`): for
+        example ``tol`` or ``h_max`` not a finite number > 0, NaN in ``t_eval`` or
+        ``x0``, an empty batch of boxes, or ``subdivision`` of the wrong length.
+    TypeError
+        when ``ode`` is not a Graph or VerifiedODE.
     """
     wall0 = time.perf_counter()
-    prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(ode)
-    n = prob.n
-    t0, t1 = (float(v) for v in t_span)
-    if not (np.isfinite(t0) and np.isfinite(t1)) or not t1 > t0:
-        raise ValueError(f"t_span must be finite with t1 > t0, got {t_span}")
-    if order < 2:
-        raise ValueError(f"order must be >= 2, got {order}")
-    outs = np.array([t1] if t_eval is None else np.asarray(t_eval, dtype=float).ravel())
-    if outs.size and (outs.min() < t0 or outs.max() > t1 or np.any(np.diff(outs) < 0)):
-        raise ValueError("t_eval must be sorted and lie within t_span")
-    outs = np.unique(np.concatenate([[t0], outs]))
-    boxes = _initial_boxes(x0, n, subdivision)
+    # every argument is checked before the tapes are built and before any step
+    t0, t1, outs, h_max = check_settings(
+        t_span=t_span, t_eval=t_eval, order=order, tol=tol, h_max=h_max, h_min=h_min, max_steps=max_steps,
+        max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
+        wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, progress=progress)
+    graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
+    n = graph.n_inputs
+    boxes = initial_boxes(x0, n, subdivision)
     nb = boxes.shape[0]
-    if prob.graph.n_params:
-        if params is None:
-            raise ValueError(f"the ODE has parameters {prob.graph.param_names}: pass params")
-        params = _as_interval(params)
-        if params.shape[-1] != prob.graph.n_params:
-            raise ValueError(f"params must have {prob.graph.n_params} components, got shape {params.shape}")
-        if params.ndim == 2 and params.shape[0] != nb:
-            if subdivision is not None:
-                raise ValueError("per-box params cannot be combined with subdivision")
-            raise ValueError(f"per-box params need one row per initial box ({nb}), got {params.shape[0]}")
+    params = check_params(params, graph, nb, subdivision)
+    prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(graph)
     n_state = n
     param_boxes = None
     if params is not None and (params.width() > 0).any():
@@ -251,7 +233,6 @@ def solve(
         sets = test.initial_sets(sets)
     history = []  # (sets, t_exact, t, h_step) before the last accepted steps
     max_sets = sets.n_sets
-    h_max = (t1 - t0) if h_max is None else float(h_max)
     if test is not None:
         h_max = min(h_max, test.max_interval)  # "a test at least every max_interval seconds"
 

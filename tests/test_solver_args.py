@@ -1,0 +1,185 @@
+"""Bad arguments of verified.solve (issue 12, item 5): each one is refused up front
+with a one-line ValueError naming the argument and the bad value.
+
+"Up front" is checked by replacing the Taylor-tape construction and the stepper with
+functions that fail the test: the error must come before the ODE is prepared and
+before any step (formerly ``tol=0`` or ``h_max=0`` took zero-length steps until
+``max_steps``, ``tol=nan`` surfaced as an interval NaN error, ``h_max=nan`` was
+ignored and ``subdivision=[4, 4]`` for 4 states leaked a numpy broadcast error).
+"""
+import numpy as np
+import pytest
+
+import verified.solver as solver_mod
+from verified.graph import trace
+from verified.interval import Interval, empty
+from verified.solver import solve
+
+NAN, INF = float("nan"), float("inf")
+
+
+def _oscillator(n=2):
+    if n == 2:
+        return trace(lambda x, p: [x[1], -x[0]], 2)
+    return trace(lambda x, p: [x[2], x[3], -x[0], -x[1]], 4)
+
+
+BOX2 = Interval([0.9, -0.1], [1.1, 0.1])
+BOX4 = Interval([0.9, -0.1, 0.0, 0.0], [1.1, 0.1, 0.0, 0.0])
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Fail the test if solve prepares the ODE or builds a stepper."""
+    def prepared(*a, **k):
+        raise AssertionError("the ODE was prepared before the arguments were checked")
+
+    def stepped(*a, **k):
+        raise AssertionError("integration started before the arguments were checked")
+
+    monkeypatch.setattr(solver_mod, "TaylorODE", prepared)
+    monkeypatch.setattr(solver_mod, "_stepper", stepped)
+
+
+def _refused(match, call, exc=ValueError):
+    with pytest.raises(exc, match=match) as info:
+        call()
+    msg = str(info.value)
+    assert "\n" not in msg, msg
+    return msg
+
+
+# (argument named in the message, keyword arguments of solve on the 2-state oscillator)
+SETTINGS = [
+    ("tol", dict(tol=0.0)),
+    ("tol", dict(tol=-1e-10)),
+    ("tol", dict(tol=NAN)),
+    ("tol", dict(tol=INF)),
+    ("tol", dict(tol="1e-10")),
+    ("h_max", dict(h_max=0.0)),
+    ("h_max", dict(h_max=-0.1)),
+    ("h_max", dict(h_max=NAN)),
+    ("h_min", dict(h_min=-1e-9)),
+    ("h_min", dict(h_min=NAN)),
+    ("h_min", dict(h_min=0.0)),        # would let step halving reach a zero-length step
+    ("h_min", dict(h_min=0.1, h_max=0.1)),
+    ("h_min", dict(h_min=0.5, h_max=0.1)),
+    ("order", dict(order=1)),
+    ("order", dict(order=0)),
+    ("order", dict(order=2.5)),
+    ("order", dict(order=True)),
+    ("max_steps", dict(max_steps=0)),
+    ("max_steps", dict(max_steps=-3)),
+    ("max_steps", dict(max_steps=10.5)),
+    ("max_boxes", dict(max_boxes=0)),
+    ("max_width", dict(max_width=0.0)),
+    ("max_width", dict(max_width=NAN)),
+    ("t_span", dict(t_span=(1.0, 0.0))),
+    ("t_span", dict(t_span=(0.0, 0.0))),
+    ("t_span", dict(t_span=(0.0, NAN))),
+    ("t_span", dict(t_span=(0.0, INF))),
+    ("t_span", dict(t_span=(0.0,))),
+    ("t_span", dict(t_span=(0.0, 1.0, 2.0))),
+    ("t_eval", dict(t_eval=[0.5, NAN])),
+    ("t_eval", dict(t_eval=[INF])),
+    ("t_eval", dict(t_eval=[2.0])),
+    ("t_eval", dict(t_eval=[-0.5, 1.0])),
+    ("t_eval", dict(t_eval=[0.5, 0.25])),
+    ("subdivision", dict(subdivision=0)),
+    ("subdivision", dict(subdivision=[4, 0])),
+    ("subdivision", dict(subdivision=[4, 4, 4])),
+    ("subdivision", dict(subdivision=2.5)),
+    ("subdivision", dict(subdivision="4")),
+    ("error_basis", dict(error_basis="lu")),
+    ("split_ratio", dict(split_ratio=0.0)),
+    ("split_ratio", dict(split_ratio=NAN)),
+    ("wrap_target", dict(wrap_target=0.0)),
+    ("wrap_target", dict(wrap_target=NAN)),
+    ("merge_slack", dict(merge_slack=-0.1)),
+    ("merge_slack", dict(merge_slack=NAN)),
+    ("adaptive", dict(adaptive="yes")),
+    ("progress", dict(progress=3)),
+]
+
+
+@pytest.mark.parametrize("name, kwargs", SETTINGS, ids=[f"{n}={list(k.values())}" for n, k in SETTINGS])
+def test_bad_setting_is_refused_up_front(no_work, name, kwargs):
+    kw = dict(kwargs)
+    t_span = kw.pop("t_span", (0.0, 1.0))
+    _refused(rf"^{name}\b", lambda: solve(_oscillator(), BOX2, t_span, **kw))
+
+
+def test_subdivision_of_wrong_length_names_the_expected_length(no_work):
+    """The reported case: [4, 4] for a system with 4 states."""
+    msg = _refused("subdivision", lambda: solve(_oscillator(4), BOX4, (0.0, 1.0), subdivision=[4, 4]))
+    assert "4" in msg and "[4, 4]" in msg and "broadcast" not in msg
+
+
+def test_h_max_nan_is_not_ignored(no_work):
+    _refused(r"h_max .*nan", lambda: solve(_oscillator(), BOX2, (0.0, 1.0), h_max=NAN))
+
+
+@pytest.mark.parametrize("x0, words", [
+    (Interval(np.zeros((0, 2))), "empty batch"),                     # an empty batch of boxes
+    (np.array([NAN, 0.0]), "NaN"),
+    (Interval([0.0, 0.0, 0.0]), "2 components"),
+    (empty((2,)), "empty"),                                          # an empty interval [inf, -inf]
+    (Interval([-INF, 0.0], [0.0, 0.0], allow_unbounded=True), "bounded"),
+    ([BOX2, Interval([0.0, 0.0, 0.0])], "2 components"),
+])
+def test_bad_initial_boxes(no_work, x0, words):
+    msg = _refused("^x0", lambda: solve(_oscillator(), x0, (0.0, 1.0)))
+    assert words in msg, msg
+
+
+def test_zero_dimensional_system(no_work):
+    g = trace(lambda x, p: [], 0)
+    _refused("no states", lambda: solve(g, Interval(np.zeros(0)), (0.0, 1.0)))
+
+
+@pytest.mark.parametrize("params, words", [
+    (None, "pass params"),
+    ([0.5, 0.7], r"shape \(1,\)"),
+    (Interval([[0.5], [0.6], [0.7]]), "one row per initial box"),
+    (np.array([NAN]), "params"),
+])
+def test_bad_params(no_work, params, words):
+    g = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
+    _refused(words, lambda: solve(g, Interval([1.0], [2.0]), (0.0, 1.0), params=params))
+
+
+def test_params_for_an_ode_without_parameters(no_work):
+    _refused("no parameters", lambda: solve(_oscillator(), BOX2, (0.0, 1.0), params=[1.0]))
+
+
+def test_simulate_passes_the_solver_error_through(no_work):
+    """mbs.simulate gives the same one-line error (it does not repeat the checks)."""
+    from mbs.simulate import simulate
+    box = Interval([2.1, 3.1], [2.2, 3.2])
+    _refused("^tol must be", lambda: simulate("pendulum_paper", box, 1.0, mode="i", tol=0.0))
+    _refused("^subdivision", lambda: simulate("pendulum_paper", box, 1.0, mode="i", subdivision=[4, 4, 4]))
+    _refused("^h_max", lambda: simulate("pendulum_paper", box, 1.0, mode="i", h_max=NAN))
+
+
+def test_scene_runner_reports_the_solver_error(no_work, tmp_path):
+    """Settings each valid on their own but refused together reach the user of a
+    scene as a one-line SceneError carrying the solver's message."""
+    from mbs.runner import run_scene
+    from mbs.scene import SceneError, load_scene, scene_dir
+    text = (scene_dir() / "pendulum_paper.toml").read_text()
+    text = text.replace("tol = 1e-10", "tol = 1e-10\nh_min = 0.5\nh_max = 0.1").replace('mode = "ii"', 'mode = "i"')
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    scene = load_scene(path)
+    msg = _refused("h_min must be smaller than h_max", lambda: run_scene(scene, tmp_path / "out", figures=False,
+                                                                         samples=0, progress=False), SceneError)
+    assert "bad.toml" in msg
+
+
+def test_good_arguments_still_accepted():
+    """The checks accept what the solver accepts: numpy scalars, h_max = inf, a
+    per-state subdivision given as a numpy array, repeated output times."""
+    sol = solve(_oscillator(), BOX2, (np.float64(0.0), np.float64(0.5)), t_eval=[0.25, 0.25, 0.5],
+                order=np.int64(8), tol=np.float64(1e-8), h_max=INF, subdivision=np.array([2, 1]),
+                max_steps=np.int64(1000))
+    assert sol.success and list(sol.t) == [0.0, 0.25, 0.5] and sol.stats["boxes"] == 2
