@@ -165,18 +165,33 @@ def sqr(a, b):
 
 @njit(cache=_CACHE)
 def _pow_pos_lo(x, n):
-    # x >= 0: a product of lower bounds of non-negative factors is a lower bound.
+    """Lower bound of ``x ** n`` for ``x >= 0`` and ``n >= 0``, by repeated squaring.
+
+    A product of lower bounds of non-negative factors, each rounded down (and kept
+    >= 0), is a lower bound of the exact product; so is every square. ``log2(n)``
+    squarings instead of ``n`` products: cheaper and fewer roundings."""
     r = 1.0
-    for _ in range(n):
-        r = max(rd(r * x), 0.0)
+    base = x
+    while n > 0:
+        if n & 1:
+            r = max(rd(r * base), 0.0)
+        n >>= 1
+        if n > 0:
+            base = max(rd(base * base), 0.0)
     return r
 
 
 @njit(cache=_CACHE)
 def _pow_pos_hi(x, n):
+    """Upper bound of ``x ** n`` for ``x >= 0``, ``n >= 0`` (see :func:`_pow_pos_lo`)."""
     r = 1.0
-    for _ in range(n):
-        r = ru(r * x)
+    base = x
+    while n > 0:
+        if n & 1:
+            r = ru(r * base)
+        n >>= 1
+        if n > 0:
+            base = ru(base * base)
     return r
 
 
@@ -283,21 +298,36 @@ def _cos_narrow(a, b):
 _FULL_PERIOD = 6.2831853  # just below 2 pi: wider intervals map onto [-1, 1]
 
 
+_NARROW = 3.0  # widest piece handed to _periodic_narrow (< pi: one critical point at most)
+
+
 @njit(cache=_CACHE)
 def _periodic(a, b, is_cos):
+    """Range of sin or cos over ``[a, b]``.
+
+    An interval of width >= 2 pi maps onto [-1, 1]. A narrower one is cut into at
+    most three pieces, each of which must be at most 3 < pi wide so that
+    :func:`_periodic_narrow` (one critical point at most) applies. The cut points are
+    floats: where the floats are sparse (ulp 4 for ``|x|`` in [2^54, 2^55), so an
+    interval one ulp wide is 4 > pi wide and cannot be cut at all), a piece can stay
+    wider than 3; the range is then taken as [-1, 1]: sound, and only reached for
+    ``|x| >= 2^54`` where such an interval is at least one ulp = 4 > pi wide.
+    """
     if is_empty(a, b):
         return INF, -INF
     w = b - a
     if not (w < _FULL_PERIOD):  # also catches infinite bounds
         return -1.0, 1.0
-    if w <= 3.0:
+    if w <= _NARROW:
         return _cos_narrow(a, b) if is_cos else _sin_narrow(a, b)
-    # Three pieces of width < 2.1 whose union is exactly [a, b].
+    # Three pieces whose union is exactly [a, b]; in exact arithmetic each is < 2.1 wide.
     m1 = min(a + w / 3.0, b)
     m2 = max(min(a + 2.0 * w / 3.0, b), m1)
     lo = 1.0
     hi = -1.0
     for (p, q) in ((a, m1), (m1, m2), (m2, b)):
+        if not (q - p <= _NARROW):  # rounding of the cut points left a piece too wide
+            return -1.0, 1.0
         l, h = _cos_narrow(p, q) if is_cos else _sin_narrow(p, q)
         lo = min(lo, l)
         hi = max(hi, h)

@@ -5,11 +5,12 @@ broadcasts like numpy, so one operation processes thousands of boxes at once. A 
 is an ``Interval`` whose last axis indexes the state components: shape ``(..., n)``.
 
 Every operation returns an enclosure of the exact image of its operands (see
-:mod:`verified._kernels` for the rounding model). Floats and arrays mixed into an
-operation are taken as exact point values; ints and ``fractions.Fraction`` values
-are enclosed exactly (``Interval(1.0) / 3`` is exact to rounding, ``Interval(1.0) *
-Fraction(1, 3)`` encloses one third). To enclose a decimal such as ``0.1`` use
-``Fraction("0.1")`` or ``Interval(0.1).widen_ulps(1)``.
+:mod:`verified._kernels` for the rounding model). Floats and float arrays, in the
+constructor or mixed into an operation, are taken as exact point values; ints beyond
+2**53, ``fractions.Fraction`` and ``decimal.Decimal`` values are enclosed, never
+rounded (``Interval(Fraction(1, 3))`` and ``Interval(1.0) * Fraction(1, 3)`` contain
+one third, ``Interval(2**53 + 1)`` contains 2**53 + 1). To enclose a decimal such as
+``0.1`` use ``Decimal("0.1")``, ``Fraction("0.1")`` or ``Interval(0.1).widen_ulps(1)``.
 
 Conventions:
 
@@ -22,7 +23,13 @@ Conventions:
 * Division by an interval that contains zero returns the hull of the exact image,
   which is unbounded (``[1, 2] / [0, 1] = [1, inf]``, ``[1, 2] / [-1, 1] = [-inf, inf]``).
 * A NaN, an inverted pair of bounds or (by default) an infinite bound given by a user
-  raises :class:`IntervalError`.
+  raises :class:`IntervalError`; so do ``[inf, inf]`` and ``[-inf, -inf]``, which
+  contain no real number (IEEE 1788), even with ``allow_unbounded=True``.
+* ``==``, ``!=``, ``<`` and the truth value raise ``TypeError``: use
+  :meth:`Interval.equals` (the same sets), :meth:`~Interval.issubset`,
+  :meth:`~Interval.overlaps` or :meth:`~Interval.contains`.
+* Integer powers use repeated squaring (``log2(n)`` roundings); exponents must be
+  finite, ``|n| < 2**62``.
 
 numpy ufuncs dispatch here, so generic model code such as ``np.sin(q) * l`` runs on
 floats, float arrays and intervals alike.
@@ -31,6 +38,7 @@ floats, float arrays and intervals alike.
 from __future__ import annotations
 
 import numbers
+from decimal import Decimal
 from fractions import Fraction
 
 import numpy as np
@@ -66,12 +74,78 @@ class IntervalError(ValueError):
     """Invalid interval input: NaN, inverted bounds, or a non-finite bound."""
 
 
-def _as_float_array(value, what):
+def _enclose_number(v, what):
+    """(lo, hi) floats around one exact number: a float is its own enclosure; an int
+    beyond 2**53, a ``Fraction`` or a ``Decimal`` lies between two neighbouring floats."""
+    if isinstance(v, np.integer):
+        v = int(v)
+    if isinstance(v, Decimal):
+        if not v.is_finite():
+            return float(v), float(v)  # NaN and +-inf: the caller's checks refuse them
+        v = Fraction(v)
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+        raise IntervalError(f"{what} must be real numbers, got {type(v).__name__}: {v!r}")
+    if not isinstance(v, numbers.Rational):  # float, np.floating: exact in float64 (longdouble aside)
+        f = float(v)
+        if isinstance(v, np.floating) and np.finfo(type(v)).nmant > 52 and np.isfinite(v):
+            lo = f if np.longdouble(f) <= v else float(np.nextafter(f, -np.inf))
+            hi = f if np.longdouble(f) >= v else float(np.nextafter(f, np.inf))
+            return lo, hi
+        return f, f
     try:
-        arr = np.asarray(value, dtype=np.float64)
+        f = float(v)
+    except OverflowError:
+        raise IntervalError(f"{what}: the number {v!r} is beyond the float range") from None
+    exact = Fraction(f)
+    lo = f if exact <= v else float(np.nextafter(f, -np.inf))
+    hi = f if exact >= v else float(np.nextafter(f, np.inf))
+    return lo, hi
+
+
+def _needs_enclosure(value):
+    """Whether a (nested) list or tuple holds a number that float64 cannot hold exactly."""
+    if isinstance(value, (list, tuple)):
+        return any(_needs_enclosure(v) for v in value)
+    if isinstance(value, (bool, float, np.floating)) and not isinstance(value, np.longdouble):
+        return False
+    if isinstance(value, int):
+        return abs(value) > 2**53
+    return isinstance(value, (Fraction, Decimal, np.longdouble))
+
+
+def _enclose(value, what):
+    """(lo, hi) float64 arrays that enclose the exact values given.
+
+    Floats (and float arrays) are taken as exact. Integers beyond 2**53, ``Fraction``
+    and ``Decimal`` values, in scalars or nested sequences, are enclosed between
+    neighbouring floats, never rounded to nearest: ``Interval(Fraction(1, 3))``
+    contains one third."""
+    if isinstance(value, np.ndarray) and value.dtype == np.float64:
+        return value, value
+    if isinstance(value, float):
+        arr = np.asarray(value)
+        return arr, arr
+    try:
+        # numpy turns a list holding 2**63 + 1 into float64 (rounded): look first
+        arr = np.asarray(value, dtype=object) if _needs_enclosure(value) else np.asarray(value)
     except (TypeError, ValueError) as exc:
         raise IntervalError(f"{what} must be real numbers, got {type(value).__name__}: {exc}") from None
-    return arr
+    kind = arr.dtype.kind
+    if kind == "f" and arr.dtype.itemsize <= 8:  # float16/32 values are exact in float64
+        f = arr.astype(np.float64)
+        return f, f
+    if kind in "iu" and (arr.size == 0 or (arr.min() >= -(2**53) and arr.max() <= 2**53)):
+        f = arr.astype(np.float64)  # every integer up to 2**53 is a float
+        return f, f
+    if kind in "fiuO":  # big ints, longdouble, Fractions, Decimals, mixtures: one by one
+        # tolist() gives Python ints (numpy ints would overflow in Fraction comparisons);
+        # longdouble items stay numpy scalars, which tolist() would round to float
+        items = list(arr.reshape(-1)) if kind == "f" else arr.reshape(-1).tolist()
+        pairs = [_enclose_number(v, what) for v in items]
+        lo = np.array([p[0] for p in pairs], dtype=np.float64).reshape(arr.shape)
+        hi = np.array([p[1] for p in pairs], dtype=np.float64).reshape(arr.shape)
+        return lo, hi
+    raise IntervalError(f"{what} must be real numbers, got {type(value).__name__} of dtype {arr.dtype}")
 
 
 def _check_user_bounds(lo, hi, allow_unbounded):
@@ -88,6 +162,10 @@ def _check_user_bounds(lo, hi, allow_unbounded):
         raise IntervalError(
             "interval bounds must be finite (pass allow_unbounded=True to build unbounded intervals)"
         )
+    if (lo == np.inf).any() or (hi == -np.inf).any():
+        # IEEE 1788: [inf, inf] and [-inf, -inf] contain no real number (inf - inf would be NaN)
+        raise IntervalError("an interval cannot have lower bound +inf or upper bound -inf "
+                            "([inf, inf] contains no real number)")
 
 
 _OPERAND_TYPES = (numbers.Real, np.ndarray, list, tuple)  # Interval added below
@@ -119,8 +197,11 @@ class Interval:
             self.lo = lo.lo.copy()
             self.hi = lo.hi.copy()
             return
-        lo = _as_float_array(lo, "lower bounds")
-        hi = lo if hi is None else _as_float_array(hi, "upper bounds")
+        if hi is None:
+            lo, hi = _enclose(lo, "bounds")
+        else:
+            lo = _enclose(lo, "lower bounds")[0]
+            hi = _enclose(hi, "upper bounds")[1]
         try:
             lo, hi = np.broadcast_arrays(lo, hi)
         except ValueError:
@@ -429,6 +510,18 @@ class Interval:
 
     __lt__ = __le__ = __gt__ = __ge__ = _no_order
 
+    # ``==`` has two meanings for intervals (the same set? the same point?) and the
+    # default, object identity, is a silent trap: refuse it as IntervalArithmetic.jl does.
+    def __eq__(self, other):
+        if isinstance(other, _OPERAND_TYPES):
+            raise TypeError(
+                "== and != are not defined for intervals; use x.equals(y) (the same sets), "
+                "x.issubset(y), x.overlaps(y) or x.contains(values)"
+            )
+        return NotImplemented
+
+    __ne__ = __eq__
+
     def __bool__(self):
         raise TypeError("the truth value of an Interval is ambiguous; use .is_empty() or .contains()")
 
@@ -438,6 +531,8 @@ class Interval:
     def __array_ufunc__(self, ufunc, method, *inputs, **kwargs):
         if method != "__call__" or kwargs:
             return NotImplemented
+        if ufunc in (np.equal, np.not_equal):  # np.float64(1) == x lands here, not in __eq__
+            Interval.__eq__(self, self)
         fn = _UFUNCS.get(ufunc)
         if fn is None:
             return NotImplemented
@@ -459,24 +554,14 @@ def _k_round_up(x):
 
 
 def _bounds(x):
-    """(lo, hi) float arrays of an Interval or of exact float values."""
+    """(lo, hi) float arrays of an Interval, or enclosing exact values (floats are
+    exact; big ints, Fractions and Decimals are enclosed, see :func:`_enclose`)."""
     if isinstance(x, Interval):
         return x.lo, x.hi
-    if isinstance(x, numbers.Real) and not isinstance(x, bool):
-        v = float(x)
-        if v != v or v in (np.inf, -np.inf):
-            raise IntervalError(f"non-finite number {x!r} used in interval arithmetic")
-        if isinstance(x, numbers.Rational) and Fraction(v) != x:
-            # an int beyond 2**53 or a Fraction such as 1/3: enclose, do not round
-            lo = v if Fraction(v) <= x else float(np.nextafter(v, -np.inf))
-            hi = v if Fraction(v) >= x else float(np.nextafter(v, np.inf))
-            return np.asarray(lo), np.asarray(hi)
-        arr = np.asarray(v)
-        return arr, arr
-    arr = _as_float_array(x, "operand")
-    if not np.isfinite(arr).all():
-        raise IntervalError("non-finite value (NaN or inf) used in interval arithmetic")
-    return arr, arr
+    lo, hi = _enclose(x, "operand")
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        raise IntervalError(f"non-finite value (NaN or inf) used in interval arithmetic: {x!r}")
+    return lo, hi
 
 
 def _flat(arr, shape):
@@ -507,15 +592,40 @@ def _unary(loop, x):
     return Interval._from_bounds(lo, hi)
 
 
+_MAX_EXPONENT = 2**62  # integer exponents are evaluated in int64 by repeated squaring
+
+
+def _integer_exponent(n):
+    """``n`` as a Python int, or a one-line error for a non-integer, infinite or absurd one."""
+    if isinstance(n, (bool, np.bool_)):
+        raise TypeError(f"integer exponent expected, got {n!r}")
+    if not isinstance(n, numbers.Integral):
+        try:
+            f = float(n)
+        except (TypeError, ValueError):
+            raise TypeError(f"integer exponent expected, got {type(n).__name__}: {n!r}") from None
+        if not np.isfinite(f):
+            raise IntervalError(f"exponent {n!r} is not finite")
+        if not f.is_integer():
+            raise TypeError(f"integer exponent expected, got {n!r}")
+        n = int(f)
+    n = int(n)
+    if abs(n) >= _MAX_EXPONENT:
+        raise IntervalError(f"integer exponent {n} is too large (|n| < 2**62 supported)")
+    return n
+
+
 def _power(x, exponent):
     if isinstance(exponent, Interval):
         raise TypeError("interval exponents are not supported; use exp(y * log(x))")
-    e = float(exponent)
-    if e == int(e) and abs(e) < 2**31:
-        return ipow(x, int(e))
-    if e == 0.5:
+    if not isinstance(exponent, numbers.Integral) and isinstance(exponent, numbers.Real) \
+            and float(exponent) == 0.5:
         return sqrt(x)
-    raise TypeError(f"only integer exponents (and 0.5) are supported, got {exponent!r}")
+    try:
+        n = _integer_exponent(exponent)
+    except TypeError:
+        raise TypeError(f"only integer exponents (and 0.5) are supported, got {exponent!r}") from None
+    return ipow(x, n)
 
 
 # ----------------------------------------------------------- public functions
@@ -578,13 +688,12 @@ def sqr(x):
 
 def ipow(x, n):
     """Integer power ``x ** n`` (even powers are non-negative; ``n < 0`` divides)."""
-    if int(n) != n:
-        raise TypeError(f"ipow needs an integer exponent, got {n!r}")
+    n = _integer_exponent(n)
     xl, xh = _bounds(x)
     shape = xl.shape
     lo = np.empty(shape)
     hi = np.empty(shape)
-    _k.ipow_loop(_flat(xl, shape), _flat(xh, shape), int(n), lo.reshape(-1), hi.reshape(-1))
+    _k.ipow_loop(_flat(xl, shape), _flat(xh, shape), n, lo.reshape(-1), hi.reshape(-1))
     return Interval._from_bounds(lo, hi)
 
 
