@@ -254,3 +254,11 @@ def test_integer_powers_by_squaring_contain_exact_image(a, w, n):
     with np.errstate(all="ignore"):
         check_enclosure(float(r.lo), float(r.hi), elo, ehi,
                         (4 * abs(n) + 4) if finite else None, what=f"ipow [{a}, {b}] {n}")
+
+
+@pytest.mark.parametrize("e, message", [(math.inf, "not finite"), (math.nan, "not finite"), (2**70, "too large")])
+def test_traced_powers_refuse_non_finite_and_absurd_exponents(e, message):
+    from verified.graph import trace
+
+    with pytest.raises(ValueError, match=message):
+        trace(lambda x, p: [x[0] ** e], 1)

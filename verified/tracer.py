@@ -202,8 +202,12 @@ def _power(builder: GraphBuilder, node: int, exponent) -> int:
         exponent = exponent[()]
     try:
         q = Fraction(exponent)
-    except (TypeError, ValueError):
+    except (OverflowError, ValueError):  # inf, nan
+        raise ValueError(f"exponent {exponent!r} is not finite") from None
+    except TypeError:
         raise TypeError(f"unsupported exponent {exponent!r}") from None
+    if abs(q) >= 2**62:
+        raise ValueError(f"exponent {exponent!r} is too large (|n| < 2**62 supported)")
     if q.denominator == 1:
         return builder.pow(node, q.numerator)
     if q.denominator == 2:
