@@ -9,11 +9,11 @@ Main entry points::
     num = chain.numeric()      # generic scalar: mass_matrix (crba), bias (rnea), acceleration
     chain.to_pinocchio()       # the referee; mbs.check.compare_with_pinocchio(chain)
 """
-from .errors import ModelError, UnsupportedJointError
+from .errors import ModelError, SingularMassMatrixError, UnsupportedJointError
 from .inertia import RigidInertia
 from .chain import Chain, Joint, Body, build_tree
 from . import robots, cache
 from .check import compare_with_pinocchio
 
-__all__ = ["Chain", "Joint", "Body", "RigidInertia", "ModelError", "UnsupportedJointError",
+__all__ = ["Chain", "Joint", "Body", "RigidInertia", "ModelError", "SingularMassMatrixError", "UnsupportedJointError",
            "build_tree", "robots", "cache", "compare_with_pinocchio"]

@@ -14,3 +14,18 @@ class ModelError(ValueError):
 
 class UnsupportedJointError(ModelError):
     """A joint type (floating, planar, mimic, ...) that this library refuses."""
+
+
+class SingularMassMatrixError(ModelError):
+    """The mass matrix M(q) is singular (or not proven positive definite) although the
+    model passed validation, e.g. because the links a joint moves have their masses on
+    its axis.  ``joints`` names the joints whose LDL^T pivots are zero / not proven
+    positive (``indices`` are their positions in ``q``); ``kind`` says how that was
+    found: "constant" (for every q), "float" (at a point) or "interval" (on a box)."""
+
+    def __init__(self, message, joints=(), indices=(), kind=None, batch_index=0):
+        super().__init__(message)
+        self.joints = tuple(joints)
+        self.indices = tuple(indices)
+        self.kind = kind
+        self.batch_index = batch_index

@@ -21,17 +21,21 @@ Algorithms (Featherstone, "Rigid Body Dynamics Algorithms"; Pinocchio's names):
 - :meth:`rnea` / :meth:`bias` / :meth:`gravity_torque` -- recursive Newton-Euler,
 - :meth:`acceleration` -- qdd from M qdd = tau - D qd - bias(q, qd), solved by an LDL^T
   factorization written over the generic scalar (M is symmetric positive definite, no
-  pivoting, so it traces into a fixed graph).
+  pivoting, so it traces into a fixed graph).  A pivot that is not (proven) positive --
+  M singular, e.g. masses on a joint axis -- raises :class:`~mbs.errors.SingularMassMatrixError`
+  naming the joints (floats, constants, intervals); never a silent 0.
 
 Vectors are returned as numpy arrays when every input is a float / float array, else as
 Python lists of generic scalars (matrices: list of rows).
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
-from .errors import ModelError
-from .scalar import add, sub, mul, div, neg, dot, square, total, is_sympy, is_zero
+from .errors import ModelError, SingularMassMatrixError
+from .scalar import add, sub, mul, div, neg, dot, square, total, is_sympy, is_zero, is_const
 from . import spatial as sp3
 
 
@@ -74,6 +78,10 @@ def _seq(x, n, what):
     if len(seq) != n:
         raise ModelError(f"{what} must have {n} entries, got {len(seq)}")
     return seq
+
+
+def _fmt_vec(v) -> str:
+    return "[" + ", ".join(f"{float(x):.6g}" for x in np.ravel(v)) + "]"
 
 
 def _plain_out(vals, *inputs):
@@ -303,8 +311,87 @@ class NumericModel:
         b = self._rnea(X, qd, [0] * self.n)
         M = self._crba(X)
         rhs = [sub(t, bb) for t, bb in zip(tt, b)]
-        qdd = ldl_solve(M, rhs)
+        try:
+            U, D = ldl_factor(M)
+        except SingularMassMatrixError as e:
+            raise self._singular_error(e, q) from None
+        qdd = ldl_substitute(U, D, rhs)
         return _plain_out(qdd, q, qd, tt)
+
+    # ------------------------------------------------------------------ singular M
+    def mass_matrix_pivots(self, q):
+        """LDL^T pivots D_k(q) of M(q), unchecked: M(q) is positive definite iff every
+        D_k > 0 (over intervals: proven positive definite on the box if every lower bound
+        is > 0).  Pivot k belongs to joint k."""
+        q = _seq(q, self.n, "q")
+        M = self._crba(self.joint_transforms(q))
+        _, D = ldl_factor(M, check=False)
+        return _plain_out(D, q)
+
+    def pivot_graph(self):
+        """Expression graph q -> (D_1, ..., D_n), the LDL^T pivots of M(q) (used by
+        :mod:`mbs.simulate` to prove M positive definite on the boxes of a verified
+        run).  Raises :class:`~mbs.errors.SingularMassMatrixError` when a pivot is the
+        constant 0 (M singular for every q)."""
+        if getattr(self, "_pivot_graph", None) is None:
+            from verified.graph import trace
+            def fn(x, p):
+                x = list(x)
+                try:
+                    _, D = ldl_factor(self._crba(self.joint_transforms(x)))
+                except SingularMassMatrixError as e:
+                    raise self._singular_error(e, x) from None
+                return D
+            self._pivot_graph = trace(fn, self.n, 0, input_names=self._names()[:self.n],
+                                      output_names=[f"D{i + 1}" for i in range(self.n)])
+        return self._pivot_graph
+
+    def check_mass_matrix(self, q, where=None):
+        """Raise :class:`~mbs.errors.SingularMassMatrixError` naming the joints if M(q) is
+        singular (pivots at rounding level) at the float configuration ``q``."""
+        qf = np.asarray(q, dtype=float).reshape(self.n)
+        M = np.asarray(self.mass_matrix(qf), dtype=float)
+        _, sing = float_pivots(M)
+        if sing:
+            where = where or f"at q = {_fmt_vec(qf)}"
+            raise SingularMassMatrixError(
+                singular_mass_matrix_message(self.chain.joint_names, self.kinds, M, sing, where),
+                joints=[self.chain.joint_names[k] for k in sing], indices=sing, kind="float")
+
+    def _singular_error(self, err, q):
+        """The SingularMassMatrixError of a failed pivot check, with joint names."""
+        names = self.chain.joint_names
+        k = err.indices[0]
+        idx = err.batch_index
+        if err.kind == "interval":
+            parts = []
+            for i, v in enumerate(q):
+                if _is_interval(v):
+                    lo, hi = np.ravel(v.lo), np.ravel(v.hi)
+                    j = idx if lo.size > idx else 0
+                    parts.append(f"{names[i]} in [{lo[j]:.6g}, {hi[j]:.6g}]")
+                elif _is_plain(v) or is_const(v):
+                    a = np.ravel(np.asarray(float(v) if is_const(v) else v, dtype=float))
+                    parts.append(f"{names[i]} = {a[idx if a.size > idx else 0]:.6g}")
+            enclosure = str(err).rsplit("encloses ", 1)[-1]
+            return SingularMassMatrixError(
+                f"mass matrix M(q) is not proven positive definite for {', '.join(parts)}: the LDL^T pivot "
+                f"of joint {names[k]!r} encloses {enclosure} (M(q) may be singular there: do the links it "
+                "moves have inertia about its axis?)", joints=[names[k]], indices=[k], kind="interval")
+        if err.kind == "float":
+            arrs = [np.ravel(np.asarray(v, dtype=float)) for v in q]
+            qf = np.array([a[idx] if a.size > idx else a[0] for a in arrs])
+            where = f"at q = {_fmt_vec(qf)}"
+        elif all(_is_plain(v) or is_const(v) for v in q):  # float q, constant pivot
+            qf = np.array([np.ravel(np.asarray(float(v) if is_const(v) else v, dtype=float))[0] for v in q])
+            where = f"at q = {_fmt_vec(qf)} and at every other q (a constant zero pivot)"
+        else:  # traced: a constant pivot <= 0, singular for every q
+            qf = np.zeros(self.n)
+            where = "for every q (a constant zero pivot)"
+        M = np.asarray(self.mass_matrix(qf), dtype=float)
+        sing = float_pivots(M)[1] or [k]
+        return SingularMassMatrixError(singular_mass_matrix_message(names, self.kinds, M, sing, where),
+                                       joints=[names[j] for j in sing], indices=sing, kind=err.kind)
 
     def rhs(self, x, tau=None):
         """ODE right-hand side for x = (q, qd): returns (qd, qdd) as one list (eq. (1))."""
@@ -350,20 +437,76 @@ class NumericModel:
         return trace(fn, 2 * n, 0, input_names=self._names(), output_names=["dHdt"])
 
 
-def ldl_solve(M, b):
-    """Solve M x = b for symmetric positive definite M (list of rows) over the generic
-    scalar: symmetric Gaussian elimination without pivoting (an LDL^T factorization
-    kept as U = D L^T), so it traces into a fixed graph.
+#: float pivots at or below ``PIVOT_TOL * n * max_k |M_kk|`` count as zero: about the
+#: rounding error of the composite-rigid-body sums and of the elimination
+PIVOT_TOL = 8 * float(np.finfo(float).eps)
+
+
+def _is_interval(x) -> bool:
+    mod = sys.modules.get("verified.interval")
+    return mod is not None and isinstance(x, mod.Interval)
+
+
+def _pivot_tol(M):
+    """Zero threshold for plain-float / constant pivots (array for a batch): rounding
+    level relative to the largest plain diagonal entry (0 if there is none)."""
+    n = len(M)
+    scale = 0.0
+    for k in range(n):
+        d = M[k][k]
+        if is_const(d) or _is_plain(d):
+            scale = np.maximum(scale, np.abs(np.asarray(d, dtype=float)))
+    return PIVOT_TOL * n * scale
+
+
+def _check_pivot(k, d, tol):
+    """Raise SingularMassMatrixError if the pivot ``d`` of row ``k`` is not (proven)
+    positive: a constant or float at or below ``tol``, an Interval whose lower bound is
+    not > 0.  A traced (state-dependent) pivot has no value yet: :mod:`mbs.simulate`
+    proves it positive on the boxes of a run."""
+    if is_const(d) or _is_plain(d):
+        v = np.asarray(float(d) if is_const(d) else d, dtype=float)
+        bad = np.broadcast_to(v <= tol, np.broadcast_shapes(v.shape, np.shape(tol)))
+        if bad.any():
+            where = int(np.flatnonzero(bad.ravel())[0])
+            kind = "constant" if is_const(d) else "float"
+            raise SingularMassMatrixError(
+                f"matrix is singular: LDL^T pivot {k} is {float(np.broadcast_to(v, bad.shape).ravel()[where]):.3g}",
+                indices=[k], kind=kind, batch_index=where)
+    elif _is_interval(d):
+        bad = np.asarray(d.lo) <= 0
+        if bad.any():
+            where = int(np.flatnonzero(bad.ravel())[0])
+            raise SingularMassMatrixError(
+                f"matrix is not proven positive definite: LDL^T pivot {k} encloses "
+                f"[{float(np.ravel(d.lo)[where]):.3g}, {float(np.ravel(d.hi)[where]):.3g}]",
+                indices=[k], kind="interval", batch_index=where)
+
+
+def ldl_factor(M, check=True):
+    """LDL^T factorization (kept as U = D L^T) of a symmetric positive definite M (list
+    of rows) over the generic scalar, without pivoting (so it traces into a fixed
+    graph): returns ``(U, D)``.
+
+    With ``check`` every pivot ``D[k]`` must be (proven) positive before it is used:
+    a float or model constant above rounding level (:data:`PIVOT_TOL`), an Interval
+    with a positive lower bound; otherwise :class:`~mbs.errors.SingularMassMatrixError`
+    (``indices`` = the row).  A zero pivot is never skipped: the elimination skips
+    only *constant zero* entries ``U[k][i]``, whose terms ``U^2 / D`` are exactly 0
+    once ``D[k] > 0``.
 
     Written for tight interval enclosures: the diagonal updates are
     ``A_ii - U_ki^2 / D_k`` (a square, each pivot used once per term) rather than
     ``A_ii - L_ik^2 D_k`` with ``L_ik = U_ki / D_k``, which uses the pivot twice."""
-    n = len(b)
+    n = len(M)
     A = [list(row) for row in M]
     U = [[0] * n for _ in range(n)]
     D = [0] * n
+    tol = _pivot_tol(M) if check else None
     for k in range(n):
         D[k] = A[k][k]
+        if check:
+            _check_pivot(k, D[k], tol)
         for j in range(k + 1, n):
             U[k][j] = A[k][j]
         for i in range(k + 1, n):
@@ -373,6 +516,17 @@ def ldl_solve(M, b):
             for j in range(i + 1, n):
                 if not is_zero(U[k][j]):
                     A[i][j] = sub(A[i][j], div(mul(U[k][i], U[k][j]), D[k]))
+    return U, D
+
+
+def ldl_substitute(U, D, b):
+    """Solve with the factors of :func:`ldl_factor`: x = M^{-1} b.  Every pivot enters
+    the result (``x[i] = s / D[i]`` is kept even for a constant 0 numerator ``s`` when
+    ``D[i]`` is state dependent).  Over intervals a pivot containing 0 then makes the
+    result unbounded, except where the numerator is exactly [0, 0] ([0, 0] / D = [0, 0]
+    in IEEE 1788): :mod:`mbs.simulate` therefore proves the pivots (:meth:`NumericModel.pivot_graph`)
+    on every box of a verified run separately."""
+    n = len(b)
     y = [0] * n
     for i in range(n):
         s = b[i]
@@ -387,3 +541,61 @@ def ldl_solve(M, b):
             s = sub(s, mul(U[i][j], x[j]))
         x[i] = div(s, D[i])
     return x
+
+
+def ldl_solve(M, b):
+    """Solve M x = b for symmetric positive definite M (list of rows) over the generic
+    scalar: symmetric Gaussian elimination without pivoting (:func:`ldl_factor`, which
+    refuses a pivot that is not (proven) positive, then :func:`ldl_substitute`)."""
+    U, D = ldl_factor(M)
+    return ldl_substitute(U, D, b)
+
+
+def float_pivots(M):
+    """Pivots of a float symmetric positive semi-definite matrix (n, n), skipping the
+    rows whose pivot is at rounding level (their off-diagonal part is then ~0 too):
+    returns ``(pivots, singular)`` with ``singular`` the indices of those rows."""
+    A = np.array(M, dtype=float)
+    n = A.shape[0]
+    tol = PIVOT_TOL * n * (np.max(np.abs(np.diag(A))) if n else 0.0)
+    piv, singular = np.zeros(n), []
+    for k in range(n):
+        d = A[k, k]
+        piv[k] = d
+        if not d > tol:
+            singular.append(k)
+            continue
+        u = A[k, k + 1:].copy()
+        A[k + 1:, k + 1:] -= np.outer(u, u) / d
+    return piv, singular
+
+
+def singular_mass_matrix_message(names, kinds, M, indices, where):
+    """One-line description of why M is singular at ``where`` ("at q = [...]"),
+    naming the joints ``indices`` (from :func:`float_pivots` of the float ``M``)."""
+    M = np.asarray(M, dtype=float)
+    tol = PIVOT_TOL * len(M) * (np.max(np.abs(np.diag(M))) if len(M) else 0.0)
+    empty = [k for k in indices if not M[k, k] > tol]
+    dependent = [k for k in indices if k not in empty]
+    parts = []
+    if empty:
+        ax = lambda k: "about" if kinds[k] == "revolute" else "along"
+        js = ", ".join(repr(names[k]) for k in empty)
+        if len(empty) == 1:
+            k = empty[0]
+            parts.append(f"joint {js} has no inertia {ax(k)} its axis (its diagonal entry of M(q) is {M[k, k]:.3g}: "
+                         f"the links it moves have their masses on the axis and no rotational inertia {ax(k)} it)")
+        else:
+            parts.append(f"joints {js} have no inertia about/along their axes (zero diagonal entries of "
+                         "M(q): the links they move have their masses on the axes and no rotational inertia "
+                         "about them)")
+    for k in dependent:
+        parts.append(f"joint {names[k]!r} adds no inertia of its own (its column of M(q) is a "
+                     "combination of the earlier joints' columns, e.g. coinciding axes)")
+    advice = []
+    if empty:
+        advice.append("give the links mass off the joint axes or rotational inertia")
+    if dependent:
+        advice.append("separate the joint axes")
+    return (f"mass matrix M(q) is singular {where}: " + "; ".join(parts)
+            + ". " + ", ".join(advice).capitalize() + ", or lock the joint(s).")

@@ -97,7 +97,13 @@ def mul(a, b):
 
 
 def div(a, b):
-    if is_zero(a):
+    """a / b.  ``0 / b`` folds to 0 only for a *nonzero constant* b: folding it for a
+    state-dependent b (a Tracer, an Interval, an array) would drop b from the result, and
+    with it the only sign that b can be 0 there (an LDL^T pivot of a singular mass
+    matrix); ``0 / 0`` is never 0."""
+    if is_zero(b):
+        raise ZeroDivisionError("division by the constant 0")
+    if is_zero(a) and is_const(b):
         return a
     if is_one(b):
         return a

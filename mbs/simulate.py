@@ -31,6 +31,7 @@ from verified.interval import Interval, _as_interval
 from verified.solver import Solution, solve
 
 from .errors import ModelError
+from .numeric import PIVOT_TOL
 from .system import System
 
 __all__ = ["MODES", "PAPER_MODELS", "simulate", "compare_modes", "system_for", "width_deviations",
@@ -103,24 +104,34 @@ def _chain_system(chain, mode: str, energy_rate: str, name: str | None = None) -
 
 def system_for(model, mode: str = "ii", *, energy_rate: str = "unsimplified") -> System:
     """The :class:`System` that ``mode`` integrates for ``model`` (see module docstring)."""
+    return _system_and_chain(model, mode, energy_rate)[0]
+
+
+def _system_and_chain(model, mode: str, energy_rate: str):
+    """(System, the Chain behind it or None) -- the chain for the mass-matrix checks."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if energy_rate not in ("unsimplified", "simplified"):
         raise ValueError(f"energy_rate must be 'unsimplified' or 'simplified', got {energy_rate!r}")
     if isinstance(model, System):
         if mode == "i":
-            return System(name=model.name, rhs=model.rhs, params=model.params, description=model.description)
+            return System(name=model.name, rhs=model.rhs, params=model.params, description=model.description), None
         if not model.has_energy:
             raise ModelError(f"{model.name}: mode {mode} needs an energy graph (System.energy)")
-        return model
+        return model, None
     if isinstance(model, str):
         if model in PAPER_MODELS:
-            return _paper_system(model, mode, energy_rate)
+            from models import double_pendulum as dp
+            from models import pendulum as pd
+            # the paper's models are these chains (mode iii: the same M, hand-written)
+            chain = pd.chain() if model == "pendulum_paper" else dp.dh_chain()
+            return _paper_system(model, mode, energy_rate), chain
         from models.registry import get
-        return _chain_system(get(model), mode, energy_rate, name=model)
+        chain = get(model)
+        return _chain_system(chain, mode, energy_rate, name=model), chain
     from .chain import Chain
     if isinstance(model, Chain):
-        return _chain_system(model, mode, energy_rate)
+        return _chain_system(model, mode, energy_rate), model
     raise TypeError(f"model must be a model name, an mbs.Chain or an mbs.system.System, got {type(model).__name__}")
 
 
@@ -188,11 +199,13 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     verified.solver.Solution with ``mode`` and ``state_names`` set, and
     ``consistency`` (RA(t), H_H, H_V, tests) in modes ii and iii.
     """
-    system = system_for(model, mode, energy_rate=energy_rate)
+    system, chain = _system_and_chain(model, mode, energy_rate)
     t0, t_end = float(t0), float(t_end)
     if not (np.isfinite(t_end) and t_end > t0):
         raise ValueError(f"t_end must be a finite time after t0 = {t0}, got {t_end!r}")
     box = _initial_box(x0, system.n, system.name)
+    if chain is not None:
+        _check_initial_mass_matrix(chain, box)
     if split_strategy not in STRATEGIES:
         raise ValueError(f"split_strategy must be one of {STRATEGIES}, got {split_strategy!r}")
     test = None
@@ -212,9 +225,155 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     sol = solve(system.rhs, box, (t0, t_end), t_eval=output_times(t0, t_end, output_dt), params=ode_params,
                 order=order, tol=tol, subdivision=subdivision, consistency=test, progress=progress,
                 **solver_kwargs)
+    if chain is not None:
+        _prove_mass_matrix(chain, sol)
     sol.mode = mode
     sol.state_names = system.state_names
     return sol
+
+
+# ---------------------------------------------------------------------- M(q) > 0
+# A verified run of a chain is only meaningful where M(q) is positive definite (else
+# qdd is not defined).  Model validation catches massless subtrees; masses on joint
+# axes (M = 0, M = diag(2, 0), singular configurations) are caught here:
+#  - before integrating: a constant zero LDL^T pivot raises while the graphs are
+#    traced (mbs.numeric.ldl_factor), and M at the centre of each initial box must be
+#    nonsingular in floats (SingularMassMatrixError naming the joints);
+#  - after integrating: the interval pivots D_k(q) of M must be proven > 0 on every
+#    box the solver used (the tube: each step's a-priori enclosure contains the sets
+#    the step starts from).  A zero pivot usually makes the rhs enclosure unbounded
+#    (a break-down), but [0, 0] / D = [0, 0] for D containing 0, so this does not rely
+#    on it; where the proof fails the run is cut back to that time and reported as a
+#    break-down naming the joint.
+
+def _check_initial_mass_matrix(chain, box: Interval):
+    """Raise SingularMassMatrixError (naming the joints) if M is singular for every q
+    (a constant zero pivot, found while tracing) or at the centre of an initial box."""
+    num = chain.numeric()
+    num.pivot_graph()
+    n = num.n
+    mids = np.atleast_2d(box.mid())[:, :n]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        D = np.asarray(num.mass_matrix_pivots(mids.T), dtype=float).reshape(n, -1)
+    M = np.asarray(num.mass_matrix(mids.T), dtype=float).reshape(n, n, -1)
+    tol = PIVOT_TOL * n * np.max(np.abs(np.diagonal(M, axis1=0, axis2=1)), axis=-1)
+    for b in np.flatnonzero(~(D > tol).all(axis=0)):  # at most one raises, normally the first
+        num.check_mass_matrix(mids[b], where=f"at q = [{', '.join(f'{v:.6g}' for v in mids[b])}] "
+                                              "(centre of the initial box)")
+
+
+_CHUNK_ROWS = 8192
+_BISECTIONS = 6
+_MAX_BISECTED = 64
+
+
+def _proven(graph, lo: np.ndarray, hi: np.ndarray, depth: int = _BISECTIONS) -> np.ndarray:
+    """Which rows (boxes of q, shape (B, n)) have every pivot proven > 0.  A box that
+    fails is bisected along its widest component, up to ``depth`` times, so that
+    interval overestimation alone does not fail it (only the first
+    ``_MAX_BISECTED`` failing rows: the earliest failure is the one that counts)."""
+    ok = np.zeros(lo.shape[0], dtype=bool)
+    finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
+    if finite.any():
+        D = graph.eval_interval(Interval(lo[finite], hi[finite]))
+        ok[finite] = np.all(D.lo > 0, axis=-1)
+    if depth == 0:
+        return ok
+    rows = np.flatnonzero(~ok & finite)[:_MAX_BISECTED]
+    j = np.argmax(hi[rows] - lo[rows], axis=1)
+    splittable = hi[rows, j] > lo[rows, j]  # a point box stays failed
+    rows, j = rows[splittable], j[splittable]
+    if rows.size == 0:
+        return ok
+    cut = 0.5 * (lo[rows, j] + hi[rows, j])
+    lower_hi, upper_lo = hi[rows].copy(), lo[rows].copy()
+    lower_hi[np.arange(rows.size), j] = cut
+    upper_lo[np.arange(rows.size), j] = cut
+    halves = _proven(graph, np.concatenate([lo[rows], upper_lo]), np.concatenate([lower_hi, hi[rows]]), depth - 1)
+    ok[rows] = halves[:rows.size] & halves[rows.size:]
+    return ok
+
+
+def _first_unproven(graph, pieces, n):
+    """(index, q-box lo, q-box hi) of the first of ``pieces`` (Interval (B, >= n) each,
+    in time order) with a box on which M is not proven positive definite, or None."""
+    los = [p.lo.reshape(-1, p.shape[-1])[:, :n] for p in pieces]
+    his = [p.hi.reshape(-1, p.shape[-1])[:, :n] for p in pieces]
+    start = 0
+    while start < len(pieces):
+        stop, rows = start + 1, los[start].shape[0]
+        while stop < len(pieces) and rows + los[stop].shape[0] <= _CHUNK_ROWS:
+            rows += los[stop].shape[0]
+            stop += 1
+        lo, hi = np.concatenate(los[start:stop]), np.concatenate(his[start:stop])
+        ok = _proven(graph, lo, hi)
+        if not ok.all():
+            i = int(np.flatnonzero(~ok)[0])
+            owner = start + int(np.searchsorted(np.cumsum([x.shape[0] for x in los[start:stop]]), i, side="right"))
+            return owner, lo[i], hi[i]
+        start = stop
+    return None
+
+
+def _prove_mass_matrix(chain, sol: Solution):
+    """Prove M(q) positive definite on every box of ``sol``; where that fails, cut the
+    solution back to that time and make it a break-down that names the joint."""
+    num = chain.numeric()
+    n = num.n
+    graph = num.pivot_graph()
+    # (time, boxes, the time in words): the initial sets, then each step's tube boxes
+    # (a-priori enclosure over [t_j, t_j+1], which contains the sets the step started
+    # from), and after a break-down at an output time the sets the failed step had
+    pieces = [(float(sol.t[0]), sol.boxes[0], f"t = {float(sol.t[0]):.6g}")]
+    pieces += [(float(sol.tube_t[j]), sol.tube[j], f"t in [{float(sol.tube_t[j]):.6g}, {float(sol.tube_t[j + 1]):.6g}]")
+               for j in range(len(sol.tube))]
+    if sol.status != "completed" and len(sol.t) > 1 and sol.t[-1] >= sol.t_reached:
+        pieces.append((float(sol.t[-1]), sol.boxes[-1], f"t = {float(sol.t[-1]):.6g}"))
+    found = _first_unproven(graph, [p[1] for p in pieces], n)
+    if found is None:
+        return
+    piece, lo, hi = found
+    T, _, span = pieces[piece]
+    names = chain.joint_names
+    D = graph.eval_interval(Interval(lo, hi))
+    k = int(np.flatnonzero(~(D.lo > 0))[0])
+    box = ", ".join(f"{names[i]} in [{lo[i]:.6g}, {hi[i]:.6g}]" for i in range(n))
+    reason = (f"mass matrix M(q) not proven positive definite on the enclosure for {span}: the LDL^T "
+              f"pivot of joint {names[k]!r} encloses [{float(D.lo[k]):.3g}, {float(D.hi[k]):.3g}] for {box}")
+    try:
+        num.check_mass_matrix(0.5 * (lo + hi), where="at the centre of that box")
+    except ModelError as e:
+        reason += f"; {e}"
+    else:
+        reason += " (M(q) is singular or nearly so there: do the links this joint moves have inertia about its axis?)"
+    if sol.status == "completed" or T < sol.t_reached:
+        _truncate(sol, T)
+        reason = reason if not sol.reason else f"{reason} (the integration then stopped: {sol.reason})"
+    else:
+        reason = f"{sol.reason}; {reason}"
+    sol.status, sol.reason = "breakdown", reason
+
+
+def _truncate(sol: Solution, T: float):
+    """Keep only what ``sol`` verified up to time ``T``."""
+    keep = np.flatnonzero(sol.t <= T)
+    sol.t = sol.t[keep]
+    sol.boxes = [sol.boxes[i] for i in keep]
+    sol.hull = sol.hull[keep]
+    steps = int(np.sum(sol.tube_t[1:] <= T))
+    sol.tube = sol.tube[:steps]
+    sol.tube_t = sol.tube_t[:steps + 1]
+    sol.tube_hull = sol.tube_hull[:steps]
+    sol.t_reached = T
+    rec = sol.consistency
+    if rec is not None:
+        m = np.asarray(rec.ra_t) <= T
+        rec.ra_t, rec.ra = np.asarray(rec.ra_t)[m], np.asarray(rec.ra)[m]
+        if rec.h_h.shape[:1] == m.shape:
+            rec.h_h = rec.h_h[m]
+        if rec.h_v.shape[:1] == m.shape:
+            rec.h_v = rec.h_v[m]
+        rec.tests = [r for r in rec.tests if r.t <= T]
 
 
 def compare_modes(model, x0, t_end: float, modes=MODES, **kwargs) -> dict:

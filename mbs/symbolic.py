@@ -29,9 +29,10 @@ from __future__ import annotations
 
 from functools import cached_property
 
+import numpy as np
 import sympy
 
-from .errors import ModelError
+from .errors import ModelError, SingularMassMatrixError
 from .scalar import add, sub, mul, dot, total
 from . import spatial as sp3
 
@@ -244,7 +245,7 @@ class SymbolicModel:
 
     def H_of_p(self):
         """H(q, p) = 1/2 p^T M^{-1} p + P, eq. (3) (explicit inverse: small n only)."""
-        Minv_p = self.M.LUsolve(self.p)
+        Minv_p = self._solve_M(self.p)
         return (self.p.T * Minv_p)[0, 0] / 2 + self.P
 
     @cached_property
@@ -254,7 +255,7 @@ class SymbolicModel:
 
     def qdd_solution(self):
         """qdd = M^{-1}(tau - D qd - c - g) as explicit sympy (LU solve; small n only)."""
-        return self.M.LUsolve(self.generalized_forces - self.bias)
+        return self._solve_M(self.generalized_forces - self.bias)
 
     def dHdt_unsimplified(self, explicit=None):
         """dH/dt by the chain rule, NOT simplified (as the paper uses it in sec. 5.1):
@@ -268,6 +269,23 @@ class SymbolicModel:
         qdd = self.qdd_solution() if explicit else self.qdd
         expr += sum((sympy.diff(H, self.qd[i]) * qdd[i] for i in range(self.n)), sympy.Integer(0))
         return expr
+
+    def _solve_M(self, b):
+        """M^{-1} b (sympy LU); a singular M raises SingularMassMatrixError naming the
+        joints (when the chain has numbers to check), not sympy's error."""
+        try:
+            return self.M.LUsolve(b)
+        except ValueError as e:  # sympy's NonInvertibleMatrixError
+            names = self.chain.joint_names
+            try:
+                num = self.chain.numeric()
+                num.check_mass_matrix(np.zeros(self.n), where="for every q (symbolically)")
+            except SingularMassMatrixError as named:
+                raise named from None
+            except ModelError:
+                pass
+            raise SingularMassMatrixError(f"mass matrix M(q) of chain {self.chain.name!r} is singular for every q "
+                                          f"(sympy: {e}); joints {names}", kind="constant") from None
 
     @cached_property
     def dMdq(self):
@@ -285,13 +303,14 @@ class SymbolicModel:
         v = self.qd
         pdot = sympy.Matrix([(v.T * self.dMdq[i] * v)[0, 0] / 2 - self.gravity[i]
                              + self.generalized_forces[i] for i in range(self.n)])
-        return {"p": self.M * self.qd, "qdot": self.M.LUsolve(self.p) if explicit else None,
+        return {"p": self.M * self.qd, "qdot": self._solve_M(self.p) if explicit else None,
                 "pdot": pdot}
 
     # ------------------------------------------------------------------ evaluation
     def lambdified(self):
         """Float evaluator (q, qd, tau) -> dict fk, M, K, P, g, c, qdd (numpy, cse'd)."""
         import numpy as np
+        from .numeric import float_pivots, singular_mass_matrix_message
         n = self.n
         fk = self.world_transforms
         flat_fk = [sympy.sympify(x) for R, p in fk for row in R for x in row] + \
@@ -313,6 +332,13 @@ class SymbolicModel:
             K = float(vals[k]); P = float(vals[k + 1]); k += 2
             g = np.array(vals[k:k + n], float); k += n
             c = np.array(vals[k:k + n], float)
+            singular = float_pivots(M)[1]
+            if singular:
+                names = self.chain.joint_names
+                raise SingularMassMatrixError(
+                    singular_mass_matrix_message(names, self.kinds, M, singular,
+                                                 "at q = [" + ", ".join(f"{float(v):.6g}" for v in q) + "]"),
+                    joints=[names[j] for j in singular], indices=singular, kind="float")
             qdd = np.linalg.solve(M, np.asarray(tau, float) - D * np.asarray(qd, float) - c - g)
             return {"fk": list(zip(Rs, ps)), "M": M, "K": K, "P": P, "g": g, "c": c, "qdd": qdd}
         return ev
@@ -358,7 +384,6 @@ def _sym_rhs_graph(self, tau_params=False):
     M qdd = tau - D qd - c - g (tau = 0 unless ``tau_params``: then tau are the graph's
     parameters).  Cached on disk (see :mod:`mbs.cache`)."""
     from verified.graph import trace
-    from .numeric import ldl_solve
     n = self.n
     def build():
         mb = self.generic_functions()[0]
@@ -376,12 +401,28 @@ def _sym_rhs_graph(self, tau_params=False):
                 if tau_params:
                     r = r + p[i]
                 rhs.append(r)
-            return x[n:] + ldl_solve(M, rhs)
+            return x[n:] + _ldl_solve_named(self, M, rhs, x)
         names = [str(s) for s in list(self.q) + list(self.qd)]
         return trace(fn, 2 * n, n if tau_params else 0, input_names=names,
                      param_names=[str(s) for s in self.tau] if tau_params else None,
                      output_names=[f"d{s}" for s in names])
     return _cached_graph(self.chain, f"sym-rhs-tau{int(bool(tau_params))}", build)
+
+
+def _ldl_solve_named(self, M, rhs, x):
+    """:func:`mbs.numeric.ldl_solve` whose SingularMassMatrixError names the joints."""
+    from .numeric import ldl_factor, ldl_substitute
+    try:
+        U, D = ldl_factor(M)
+    except SingularMassMatrixError as e:
+        try:
+            num = self.chain.numeric()
+        except ModelError:
+            k = e.indices[0]
+            raise SingularMassMatrixError(f"{e} (joint {self.chain.joint_names[k]!r})",
+                                          joints=[self.chain.joint_names[k]], indices=[k], kind=e.kind) from None
+        raise num._singular_error(e, x[:self.n]) from None
+    return ldl_substitute(U, D, rhs)
 
 
 def _sym_energy_graph(self):
@@ -404,7 +445,6 @@ def _sym_energy_rate_graph(self, simplified=False):
       interval enclosure is not a point.
     Cached on disk."""
     from verified.graph import from_sympy, trace
-    from .numeric import ldl_solve
     from .sympy_eval import compile_generic
     n = self.n
     inputs = list(self.q) + list(self.qd)
@@ -427,7 +467,7 @@ def _sym_energy_rate_graph(self, simplified=False):
             k = n * n
             b, gq, gqd = vals[k:k + n], vals[k + n:k + 2 * n], vals[k + 2 * n:k + 3 * n]
             rhs = [(-b[i] - d[i] * x[n + i]) if d[i] != 0 else -b[i] for i in range(n)]
-            qdd = ldl_solve(M, rhs)
+            qdd = _ldl_solve_named(self, M, rhs, x)
             r = 0
             for i in range(n):
                 r = r + gq[i] * x[n + i] + gqd[i] * qdd[i]
