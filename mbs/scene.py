@@ -96,7 +96,7 @@ _SIMULATION = {"t_end", "output_dt", "mode"}
 # solver settings: name -> (type check, description)
 _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_min": float,
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
-           "split_ratio": float, "error_basis": str, "wrap_target": float}
+           "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str}
 _ENERGY_RATES = ("unsimplified", "simplified")
@@ -516,6 +516,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
             solver[k] = _typed(v, _SOLVER[k], f"{where} {k}", positive=True)
     if "error_basis" in solver and solver["error_basis"] not in ("qr", "auto"):
         raise SceneError(f"{where} error_basis: {solver['error_basis']!r} is not 'qr' or 'auto'")
+    if "arithmetic" in solver and solver["arithmetic"] not in ("interval", "affine"):
+        raise SceneError(f"{where} arithmetic: {solver['arithmetic']!r} is not 'interval' or 'affine'")
     if "order" in solver and solver["order"] < 2:
         raise SceneError(f"{where} order: must be >= 2")
 

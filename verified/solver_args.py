@@ -17,9 +17,18 @@ import numpy as np
 from .graph import Graph
 from .interval import Interval, _as_interval, concatenate
 
-__all__ = ["check_graph", "check_settings", "initial_boxes", "check_params", "ERROR_BASES"]
+__all__ = ["check_graph", "check_settings", "initial_boxes", "check_params", "check_arithmetic",
+           "ERROR_BASES", "ARITHMETICS"]
 
 ERROR_BASES = ("qr", "auto")
+ARITHMETICS = ("interval", "affine")
+
+
+def check_arithmetic(arithmetic) -> str:
+    """``arithmetic`` of :func:`~verified.solver.solve`, refused unless one of ARITHMETICS."""
+    if arithmetic not in ARITHMETICS:
+        raise ValueError(f"arithmetic must be one of {ARITHMETICS}, got {arithmetic!r}")
+    return arithmetic
 
 
 def check_graph(graph) -> Graph:
