@@ -104,7 +104,7 @@ def main(argv=None):
         return bench_run(quick=args.quick, out=args.out)
     if args.command == "demo":
         from .demo import run
-        return run()
+        return run(out=args.out)
     return 2
 
 

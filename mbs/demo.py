@@ -1,13 +1,17 @@
 """``python -m mbs demo``: the paper's double pendulum in its three simulation modes.
 
 The scene ``models/scenes/double_pendulum_paper.toml`` (eq. 22, initial box 25, x1(0)
-split into pieces) runs in modes (i) numeric model without test, (ii) numeric model
-with the energy consistency test, (iii) symbolic model with the energy test
-(:func:`mbs.simulate.compare_modes`). The demo prints the comparison table (break-down
-time, widths at common output times, pruned boxes, wall time), checks every
-enclosure against densely sampled DOP853 trajectories, and writes the paper's
+split into 256 pieces, ``error_basis="auto"``) runs in modes (i) numeric model without
+test, (ii) numeric model with the energy consistency test, (iii) symbolic model with
+the energy test, each with the same solver settings. The demo prints the comparison
+table (time reached, widths at common output times, pruned boxes, wall time), checks
+every enclosure against densely sampled DOP853 trajectories, and writes the paper's
 figures (Fig. 5 for the three modes with the sampled trajectories overlaid, Figs. 2
 and 3 of mode ii) into ``--out`` (default ``out/demo``).
+
+It exits with 1 when a sampled state lies outside an enclosure or when a mode breaks
+down before ``T`` (the demo must reach what it shows; ``tests/test_demo_and_scenes.py``
+checks the same settings).
 """
 
 from __future__ import annotations
@@ -17,8 +21,28 @@ from pathlib import Path
 
 import numpy as np
 
-#: demo settings: chosen so the three modes together take about a minute here
-DEMO = dict(t_end=1.0, output_dt=0.05, pieces=16, samples=401)
+#: demo settings. 256 pieces with the scene's error_basis="auto": every mode reaches
+#: T = 1 (16 pieces broke down at 0.53 s in modes i/ii, 64 pieces at 0.63 s; with the
+#: "qr" basis even 256 pieces break down at 0.97 s in mode i); the three modes together
+#: take about 45 s of CPU time (see README)
+DEMO = dict(t_end=1.0, output_dt=0.05, pieces=256, samples=401)
+
+
+def settings(pieces=None):
+    """``(x0, kwargs)`` of the demo's runs: the scene's initial box and its solver and
+    consistency settings (without ``mode``), x1(0) split into ``pieces`` (default
+    ``DEMO["pieces"]``); ``simulate("double_pendulum_paper", x0, T, mode=m,
+    output_dt=DEMO["output_dt"], **kwargs)`` is what the demo runs for mode ``m``."""
+    from .scene import load_scene
+    from .simulate import system_for
+
+    scene = load_scene("double_pendulum_paper")
+    names = system_for("double_pendulum_paper", "ii").state_names
+    x0 = scene.initial_box(names)
+    kw = scene.simulate_kwargs(names)
+    kw.pop("mode")
+    kw["subdivision"] = [DEMO["pieces"] if pieces is None else pieces, 1, 1, 1]
+    return x0, kw
 
 
 def _table(rows, header):
@@ -32,20 +56,15 @@ def _table(rows, header):
 def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int:
     from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
     from .runner import check_samples
-    from .scene import load_scene
     from .simulate import MODES, simulate, system_for
 
     t_all = time.perf_counter()
     t_end = DEMO["t_end"] if t_end is None else t_end
     pieces = DEMO["pieces"] if pieces is None else pieces
     samples = DEMO["samples"] if samples is None else samples
-    scene = load_scene("double_pendulum_paper")
-    names = system_for("double_pendulum_paper", "ii").state_names
-    x0 = scene.initial_box(names)
-    kw = scene.simulate_kwargs(names)
-    kw.pop("mode")
-    kw["subdivision"] = [pieces, 1, 1, 1]
-    log(f"Double pendulum of the paper (eq. 22, box 25), x1(0) split into {pieces} pieces, T = {t_end:g} s,")
+    x0, kw = settings(pieces)
+    log(f"Double pendulum of the paper (eq. 22, box 25), x1(0) split into {pieces} pieces "
+        f"(error basis {kw.get('error_basis', 'qr')!r}), T = {t_end:g} s,")
     log(f"energy test every {kw.get('test_interval', 0.1):g} s with {kw.get('test_splits', 10)} splits "
         f"(modes ii and iii).\n")
     sols, walls = {}, {}
@@ -107,4 +126,8 @@ def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int
     verdict = "every enclosure contains all" if not escaped else f"{escaped} sampled states OUTSIDE the enclosures of"
     log(f"Checked against {samples} sampled trajectories: {verdict} sampled states. "
         f"({time.perf_counter() - t_all:.1f} s)")
-    return 0 if not escaped else 1
+    short = [m for m, s in sols.items() if s.status != "completed" or s.t_reached < t_end]
+    if short:
+        log("FAILED: mode " + ", ".join(f"{m} broke down at t = {sols[m].t_reached:.3f} s" for m in short)
+            + f" before T = {t_end:g} s")
+    return 0 if not escaped and not short else 1
