@@ -533,10 +533,34 @@ class AffineTaylorODE:
         ps = np.where(pwide, xwide.sum() + np.cumsum(pwide) - 1, -1)
         X = box_forms(x.lo, x.hi, xs, m)
         P = box_forms(np.ascontiguousarray(plo), np.ascontiguousarray(phi), ps, m)
+        return self._run(X, P, order, m0), m
+
+    def series(self, X, order, params=None):
+        """Interval enclosures of ``x_[0..order]`` from given input forms ``X``
+        (n, B, m0 + 2) over ``m0`` symbols of the caller's choosing (for example a
+        set's own parameters, :meth:`verified.lohner.DoubletonSets.affine_forms`).
+        Parameters are taken as intervals without symbols. Returns (B, order + 1, n).
+        """
+        n, nb, m2 = X.shape
+        m0 = m2 - 2
+        order = int(order)
+        m = m0 + self.n_fresh * order
+        Xf = np.zeros((n, nb, m + 2))
+        Xf[..., : m0 + 1] = X[..., : m0 + 1]
+        Xf[..., m + 1] = X[..., m0 + 1]
+        if self.n_params:
+            p = _as_interval(params).broadcast_to((nb, self.n_params))
+            P = box_forms(p.lo, p.hi, np.full(self.n_params, -1), m)
+        else:
+            P = np.zeros((0, nb, m + 2))
+        lo, hi = forms_to_interval(self._run(Xf, P, order, m0))
+        return Interval._from_bounds(lo, hi)
+
+    def _run(self, X, P, order, m0):
         t = self._tape
         F, _ = _affine_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.clo, t.chi, t.outputs, X, P, order,
                               m0, self.n_fresh)
-        return np.ascontiguousarray(F.transpose(2, 1, 0, 3)), m
+        return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
 
     def coefficients(self, x, order, params=None):
         """Interval enclosures of ``x_[0..order]``, shape (B, order + 1, n)."""

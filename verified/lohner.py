@@ -65,6 +65,32 @@ class DoubletonSets:
         """Interval hull of each set, shape (B, n)."""
         return (linalg.matvec(self.C, self.r0) + linalg.matvec(self.Q, self.r)) + self.c
 
+    def affine_forms(self, extra: int = 0) -> np.ndarray:
+        """Affine forms of the sets over their own ``2n`` parameters, shape
+        (n + extra, B, 2n + 2) (the ``extra`` rows are zero, for inputs the caller fills).
+
+        ``x = c + C a + Q b`` with ``a = mid(r0') + rad(r0') eps_a`` and likewise ``b``,
+        where ``r0' = hull(r0, 0)`` and ``r' = hull(r, 0)``: the forms cover the set and
+        its centre ``c`` (a mean-value form needs every segment from ``c`` into the set).
+        Column 0 is the centre, ``1..n`` the ``eps_a``, ``n+1..2n`` the ``eps_b``
+        coefficients, the last an error radius holding every rounding.
+        """
+        nb, n = self.c.shape
+        r0 = self.r0.hull(0.0)
+        r = self.r.hull(0.0)
+        ma, ra = r0.mid(), r0.rad()
+        mb, rb = r.mid(), r.rad()
+        centre = point(self.c) + linalg.matvec(self.C, point(ma)) + linalg.matvec(self.Q, point(mb))
+        cols_a = Interval(self.C) * ra[:, None, :]
+        cols_b = Interval(self.Q) * rb[:, None, :]
+        F = np.zeros((n + extra, nb, 2 * n + 2))
+        F[:n, :, 0] = centre.mid().T
+        F[:n, :, 1 : n + 1] = cols_a.mid().transpose(1, 0, 2)
+        F[:n, :, n + 1 : 2 * n + 1] = cols_b.mid().transpose(1, 0, 2)
+        err = centre.rad() + cols_a.rad().sum(axis=-1) + cols_b.rad().sum(axis=-1)
+        F[:n, :, 2 * n + 1] = (err * (1.0 + 2.0**-40) + 1e-300).T
+        return F
+
     def take(self, index) -> "DoubletonSets":
         return DoubletonSets(self.c[index], self.C[index], self.r0[index], self.Q[index], self.r[index])
 
@@ -216,6 +242,8 @@ class LohnerStepper:
         self.order = int(order)
         self.n = taylor.n
         self.params = params
+        # an affine Jacobian evaluator can take the set's own forms (see step)
+        self.jacobian_over_set = hasattr(variational, "series")
 
     # -------------------------------------------------------------- pieces
     def coefficients(self, x: Interval) -> Interval:
@@ -264,9 +292,16 @@ class LohnerStepper:
         # 4. Jacobian of the Taylor map over X. The mean value form needs it on every
         # segment from c to a point of the set; c lies in X whenever r0 and r contain
         # 0 (they do by construction), and the hull below makes that unconditional.
-        Xc = X.hull(point(sets.c))
-        v0 = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
-        vc = self.variational.coefficients(concatenate([Xc, v0], axis=1), K - 1, self._params(nb))
+        if self.jacobian_over_set:
+            # affine forms over the set's own parameters: the set (a parallelepiped
+            # plus an error box, often flat in the state space) instead of its hull
+            forms = sets.affine_forms(extra=n * n)
+            forms[n:, :, 0] = np.eye(n).reshape(-1)[:, None]
+            vc = self.variational.series(forms, K - 1, self._params(nb))
+        else:
+            Xc = X.hull(point(sets.c))
+            v0 = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
+            vc = self.variational.coefficients(concatenate([Xc, v0], axis=1), K - 1, self._params(nb))
         V = vc[:, :, n:].reshape((nb, K, n, n))
         J = horner(V, h)
         # 5. doubleton update
