@@ -1,10 +1,10 @@
 """Disk cache (location, keying) and a small, fast version of the derivation benchmark."""
 import importlib.util
+import math
 import os
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from mbs import cache
 from models import planar
@@ -35,7 +35,6 @@ def test_default_cache_dir_is_user_cache_not_repo(monkeypatch):
 
 
 def test_cache_hit_returns_equal_graph_and_is_keyed_by_content(tmp_path):
-    pytest.importorskip("verified.graph")
     with cache.enabled(True, tmp_path):
         a = planar.planar_chain(2, masses=1.0)
         g1 = a.symbolic().rhs_graph()
@@ -57,18 +56,20 @@ def test_cache_hit_returns_equal_graph_and_is_keyed_by_content(tmp_path):
 
 
 def test_cache_disabled(tmp_path):
-    pytest.importorskip("verified.graph")
     with cache.enabled(False, tmp_path):
         planar.planar_chain(2).symbolic().energy_graph()
     assert list(tmp_path.iterdir()) == []
 
 
 def test_small_benchmark(tmp_path):
-    pytest.importorskip("verified.graph")
+    """The benchmark runs and reports sane rows. How much the cache saves is measured by
+    ``python benchmarks/bench_derivation.py`` (timings are not asserted in tests); that
+    the cached graphs are the derived ones is checked above."""
     bench = _bench()
     rows = bench.run(["planar2", "planar6"], inprocess=True, cache_root=str(tmp_path))
     table = bench.format_table(rows)
     assert "planar6" in table
+    assert [(r["model"], r["dof"]) for r in rows] == [("planar2", 2), ("planar6", 6)]
     for r in rows:
-        assert r["cold"] < 10.0 and r["cached"] < 1.0
-        assert r["cached"] < r["cold"]
+        assert math.isfinite(r["cold"]) and r["cold"] > 0 and math.isfinite(r["cached"]) and r["cached"] > 0
+        assert r["rhs_nodes"] > 0 and r["energy_nodes"] > 0
