@@ -25,7 +25,6 @@ def test_batch_equals_loop(ur5):
 
 
 def test_intervals_enclose_floats(ur5):
-    pytest.importorskip("verified.interval")
     from verified.interval import Interval
     num = ur5.numeric()
     rng = np.random.default_rng(1)
@@ -41,7 +40,6 @@ def test_intervals_enclose_floats(ur5):
 
 
 def test_traced_graphs(ur5):
-    pytest.importorskip("verified.graph")
     num = ur5.numeric()
     g, e = num.rhs_graph(), num.energy_graph()
     x = np.random.default_rng(2).normal(size=12)
@@ -98,7 +96,6 @@ def test_rnea_inverts_acceleration():
 
 def test_interval_batch_arrays(ur5):
     """x as one Interval array of shape (2n, B): each row is a batch of intervals."""
-    pytest.importorskip("verified.interval")
     from verified.interval import Interval
     num = ur5.numeric()
     x = np.random.default_rng(8).normal(size=(12, 4))
@@ -110,7 +107,6 @@ def test_interval_batch_arrays(ur5):
 
 
 def test_ldl_solve_intervals_are_sound():
-    pytest.importorskip("verified.interval")
     from verified.interval import Interval
     rng = np.random.default_rng(12)
     A = rng.normal(size=(5, 5))

@@ -130,7 +130,6 @@ def test_coriolis_equals_christoffel_form():
 
 @pytest.mark.parametrize("make", [lambda: planar.planar_chain(2, damping=0.05), robots.ur5])
 def test_graphs_match_numeric(make):
-    pytest.importorskip("verified.graph")
     from verified.interval import Interval
     chain = make()
     s, num = chain.symbolic(), chain.numeric()
@@ -157,7 +156,6 @@ def test_graphs_match_numeric(make):
 
 
 def test_compile_generic_rationals_exact_on_intervals():
-    pytest.importorskip("verified.interval")
     from verified.interval import Interval
     from mbs.sympy_eval import compile_generic
     x, y = sympy.symbols("x y")
