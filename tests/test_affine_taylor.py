@@ -1,0 +1,756 @@
+"""Soundness of the affine-arithmetic Taylor coefficients (verified.affine_taylor).
+
+Oracles (none shares code with the affine kernel or with verified.taylor):
+
+* python-flint ``arb_series`` at 256 bits: the Taylor coefficients of the solution
+  through a *point* of the box by Picard iteration, ``x <- x0 + integral(f(x))`` on
+  truncated power series (each pass fixes one more coefficient), with ``f`` the graph
+  evaluated by ``verified.evaluate`` in an arb-series domain -- no recurrence of ours
+  is involved. Containment is decided by certain arb comparisons, no allowance;
+  constants are taken at their double value, a point of their enclosure.
+* arb evaluation of the graph (``tests/test_graph_interval.arb_eval``) for ranges;
+* Pinocchio's ``aba`` for the 3-link arm's accelerations;
+* scipy DOP853 trajectories (``tests/sampling.py``; for the arm with Pinocchio's
+  ``aba`` as right-hand side) for the solver-level checks.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+
+import flint
+import numpy as np
+import pytest
+from flint import arb, arb_series
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import verified.affine_taylor as at
+from sampling import in_union, misses, sample_initial_points, trajectories
+from test_graph import all_ops
+from test_graph_interval import _program, arb_eval, assert_encloses_arb, box_samples, random_boxes, run_program
+from verified import evaluate as ev
+from verified.affine_taylor import AffineTaylorODE
+from verified.graph import Op, trace
+from verified.interval import Interval
+from verified.taylor import TaylorODE
+
+INF = math.inf
+FRESH = [None, 0]  # the solver uses both: fresh symbols for x, none for the variational series
+
+
+# --------------------------------------------------------------------------- exact oracle
+
+
+class ArbSeriesDomain(ev.Domain):
+    """Graph values as arb power series in t (flint.arb_series) or arb constants."""
+
+    def const(self, lo, hi, value):
+        return arb(value)
+
+    def sqr(self, a):
+        return a * a
+
+    def pow(self, a, k):
+        return a**k
+
+    def sqrt(self, a):
+        return a.sqrt()
+
+    def exp(self, a):
+        return a.exp()
+
+    def log(self, a):
+        return a.log()
+
+    def sin(self, a):
+        return a.sin()
+
+    def cos(self, a):
+        return a.cos()
+
+    def tan(self, a):
+        return a.tan()
+
+    def atan(self, a):
+        return a.atan()
+
+
+@contextlib.contextmanager
+def arb_precision(bits=256, cap=None):
+    """flint's global precision (and series length cap) for a block, restored after."""
+    old = flint.ctx.prec, flint.ctx.cap
+    flint.ctx.prec = bits
+    if cap is not None:
+        flint.ctx.cap = cap
+    try:
+        yield
+    finally:
+        flint.ctx.prec, flint.ctx.cap = old
+
+
+def arb_taylor(graph, x0, p, order):
+    """Exact (arb) x_[0..order] of the solution of x' = f(x, p) through the float point x0:
+    object array (order + 1, n). Picard iteration on series truncated after t^order."""
+    with arb_precision(256, cap=order + 1):
+        c0 = [arb(float(v)) for v in x0]
+        ps = [arb(float(v)) for v in (() if p is None else p)]
+        xs = [arb_series([c]) for c in c0]
+        dom = ArbSeriesDomain()
+        for _ in range(order):
+            fs = ev.evaluate(graph, dom, xs, ps)
+            xs = [c + (f if isinstance(f, arb_series) else arb_series([f])).integral() for c, f in zip(c0, fs)]
+        out = np.empty((order + 1, len(c0)), dtype=object)
+        for i, s in enumerate(xs):
+            cs = s.coeffs()
+            for k in range(order + 1):
+                out[k, i] = cs[k] if k < len(cs) else arb(0)
+        return out
+
+
+def assert_inside(lo, hi, exact, what=""):
+    """Elementwise: certainly lo <= exact <= hi (floats lo, hi; arb exact); never NaN."""
+    for idx in np.ndindex(exact.shape):
+        l, h, e = float(lo[idx]), float(hi[idx]), exact[idx]
+        ok = not (math.isnan(l) or math.isnan(h))
+        ok = ok and (l == -INF or bool(arb(l) <= e)) and (h == INF or bool(e <= arb(h)))
+        if not ok:
+            raise AssertionError(f"{what}: exact {e.str(20, radius=True)} outside [{l!r}, {h!r}] at (k, i) = {idx}")
+
+
+def affine_coefficients(graph, lo, hi, order, plo=None, phi=None, fresh_symbols=None):
+    ode = AffineTaylorODE(graph, fresh_symbols=fresh_symbols)
+    params = None if not graph.n_params else Interval(np.asarray(plo, float), np.asarray(phi, float),
+                                                      allow_unbounded=True)
+    C = ode.coefficients(Interval(np.asarray(lo, float), np.asarray(hi, float), allow_unbounded=True), order, params)
+    assert not (np.isnan(C.lo).any() or np.isnan(C.hi).any())
+    assert (C.lo <= C.hi).all()
+    return C
+
+
+def check_affine_taylor(graph, lo, hi, order, plo=None, phi=None, *, fresh_symbols=None, n_random=4, seed=0,
+                        C=None):
+    """Assert the affine enclosures of x_[0..order] over each box [lo, hi] (B, n) (and the
+    parameter box [plo, phi]) contain the exact coefficients at the box corners (n <= 6),
+    its centre and random points (paired with corners/random points of the parameter box)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = np.atleast_2d(np.asarray(lo, float)), np.atleast_2d(np.asarray(hi, float))
+    if C is None:
+        C = affine_coefficients(graph, lo, hi, order, plo, phi, fresh_symbols)
+    pts = box_samples(lo, hi, n_random, rng)  # (S, B, n)
+    if graph.n_params:
+        ppts = box_samples(np.atleast_2d(plo), np.atleast_2d(phi), n_random, rng)[:, 0]
+        ppts = ppts[rng.permutation(len(ppts))]
+    for s in range(pts.shape[0]):
+        p = ppts[s % len(ppts)] if graph.n_params else None
+        for b in range(pts.shape[1]):
+            exact = arb_taylor(graph, pts[s, b], p, order)
+            assert_inside(C.lo[b], C.hi[b], exact, f"box {b}, point {pts[s, b].tolist()}, p {p}")
+    return C
+
+
+def has_op(graph, op):
+    return any(node.op == op for node in graph.nodes)
+
+
+def test_arb_oracle_matches_closed_forms_and_point_enclosures():
+    """The Picard oracle itself: closed forms, and TaylorODE's rigorous point enclosures."""
+    g = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
+    e = arb_taylor(g, [0.75], [1.25], 10)
+    e2 = arb_taylor(trace(lambda x, p: [np.exp(x[0])], 1), [0.0], None, 9)
+    with arb_precision(256):
+        for k in range(11):
+            assert abs(e[k, 0] - arb(0.75) * arb(-1.25) ** k / math.factorial(k)) < 1e-60
+        # x' = exp(x), x(0) = 0: x = -log(1 - t), x_[k] = 1 / k
+        assert all(abs(e2[k, 0] - arb(1) / k) < 1e-60 for k in range(1, 10)) and abs(e2[0, 0]) < 1e-60
+    from models import double_pendulum as dp
+
+    x0 = dp.initial_point()
+    c = TaylorODE(_dp_graph()).coefficients(Interval(x0), 8)
+    assert_inside(c.lo, c.hi, arb_taylor(_dp_graph(), x0, None, 8), "TaylorODE at a point")
+
+
+# --------------------------------------------------------------------------- 1. per operation
+
+# (name, rhs, op that must be in the graph, centre range of x, max radius of x, centre range of p,
+#  max radius of p); the ranges keep every operation inside its domain over the box
+CASES = [
+    ("add", lambda x, p: [x[0] + p[0]], Op.ADD, (-2, 2), 0.5, (-1, 1), 0.3),
+    ("sub", lambda x, p: [p[0] - x[0]], Op.SUB, (-2, 2), 0.5, (-1, 1), 0.3),
+    ("neg", lambda x, p: [-np.sin(x[0] * p[0])], Op.NEG, (-2, 2), 0.5, (-1, 1), 0.3),
+    ("mul", lambda x, p: [x[0] * (p[0] - x[0])], Op.MUL, (-2, 2), 0.5, (-1, 1), 0.3),
+    ("sqr", lambda x, p: [p[0] - np.square(x[0])], Op.SQR, (-1.5, 1.5), 0.4, (-1, 1), 0.3),
+    ("pow3", lambda x, p: [p[0] * x[0] ** 3], Op.POW, (-1.2, 1.2), 0.3, (-1, 1), 0.3),
+    ("pow4", lambda x, p: [x[0] ** 4 - p[0]], Op.POW, (-1.2, 1.2), 0.3, (-1, 1), 0.3),
+    ("pow7", lambda x, p: [p[0] * x[0] ** 7], Op.POW, (-1.1, 1.1), 0.2, (-1, 1), 0.3),
+    ("div", lambda x, p: [1 / (p[0] + x[0])], Op.DIV, (-2, 2), 0.5, (3, 4), 0.3),
+    ("div_series", lambda x, p: [x[0] * p[0] / (1 + x[0] * x[0])], Op.DIV, (-2, 2), 0.5, (-1, 1), 0.3),
+    ("sqrt", lambda x, p: [np.sqrt(x[0] * p[0])], Op.SQRT, (0.6, 3), 0.4, (0.5, 2), 0.2),
+    ("exp", lambda x, p: [np.exp(p[0] * x[0])], Op.EXP, (-2, 1), 0.5, (-1, 1), 0.3),
+    ("log", lambda x, p: [p[0] * np.log(x[0])], Op.LOG, (0.6, 3), 0.4, (-1, 1), 0.3),
+    ("sin", lambda x, p: [np.sin(p[0] * x[0])], Op.SIN, (-3, 3), 0.5, (-2, 2), 0.3),
+    ("cos", lambda x, p: [np.cos(x[0]) + p[0]], Op.COS, (-3, 3), 0.5, (-1, 1), 0.3),
+    ("sin*cos", lambda x, p: [np.sin(x[0]) * np.cos(x[0]) * p[0]], Op.COS, (-3, 3), 0.5, (-2, 2), 0.3),
+    ("tan", lambda x, p: [p[0] * np.tan(x[0])], Op.TAN, (-1.1, 1.1), 0.2, (-1, 1), 0.3),
+    ("atan", lambda x, p: [np.arctan(p[0] * x[0])], Op.ATAN, (-3, 3), 0.5, (-2, 2), 0.3),
+]
+_GRAPHS = {}
+
+
+def case_graph(name):
+    if name not in _GRAPHS:
+        case = next(c for c in CASES if c[0] == name)
+        g = trace(case[1], 1, 1)
+        assert has_op(g, case[2]), f"{name}: the traced graph has no {case[2].name}"
+        _GRAPHS[name] = g
+    return _GRAPHS[name]
+
+
+def _radius(max_rad):
+    # exact points, tiny boxes and wide boxes
+    return st.one_of(st.just(0.0), st.floats(0.0, 1e-7), st.floats(0.0, max_rad))
+
+
+@pytest.mark.parametrize("name", [c[0] for c in CASES])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_each_operation_contains_exact_coefficients(name, data):
+    """x' = f(x, p) with one operation of interest: the affine enclosures of x_[0..K]
+    over a random box (and parameter box) contain the exact (arb-series) coefficients
+    at its corners, centre and random points inside."""
+    _, _, _, (clo, chi), xrad, (pclo, pchi), prad = next(c for c in CASES if c[0] == name)
+    g = case_graph(name)
+    c, r = data.draw(st.floats(clo, chi), "x centre"), data.draw(_radius(xrad), "x radius")
+    pc, pr = data.draw(st.floats(pclo, pchi), "p centre"), data.draw(_radius(prad), "p radius")
+    order = data.draw(st.integers(1, 8), "order")
+    fresh = data.draw(st.sampled_from(FRESH), "fresh_symbols")
+    check_affine_taylor(g, [c - r], [c + r], order, [pc - pr], [pc + pr], fresh_symbols=fresh, n_random=3,
+                        seed=data.draw(st.integers(0, 2**32 - 1)))
+
+
+def _dp_graph():
+    from models import double_pendulum as dp
+
+    return dp.rhs_graph()
+
+
+@pytest.mark.parametrize("fresh", FRESH + [2])
+@pytest.mark.parametrize("rad", [0.0, 1e-9, 1e-4, 1e-2, 0.1])
+def test_double_pendulum_coefficients(rad, fresh):
+    """Eq. (22) of the paper, order 8, boxes of several widths around the paper's point
+    (all four states wide), and the paper's own initial box eq. (25) (one wide state) in
+    the same batch; fresh symbols for all, none, or the first two states."""
+    from models import double_pendulum as dp
+
+    g = _dp_graph()
+    x0 = dp.initial_point()
+    boxes_lo = np.stack([x0 - rad, dp.initial_box()[0]])
+    boxes_hi = np.stack([x0 + rad, dp.initial_box()[1]])
+    check_affine_taylor(g, boxes_lo, boxes_hi, 8, fresh_symbols=fresh, n_random=6, seed=int(rad * 1e9))
+
+
+@pytest.mark.parametrize("fresh", FRESH)
+def test_all_ops_four_states_batch_with_interval_parameter(fresh):
+    """Every opcode (tests/test_graph.all_ops) as a 4-state ODE, a batch of random boxes
+    (some of them points) and an interval parameter."""
+    g = trace(lambda x, p: all_ops((x[0], x[1]), p), 4, 1)
+    rng = np.random.default_rng(5)
+    lo, hi = random_boxes(4, 6, rng, center_scale=1.0, max_rad=0.1)
+    check_affine_taylor(g, lo, hi, 6, [0.6], [0.8], fresh_symbols=fresh, n_random=2, seed=1)
+
+
+def _program_ode(program):
+    """A 2-state ODE from a random straight-line program (tests/test_graph_interval)."""
+
+    def rhs(x, p):
+        vals = run_program(program, x[0], x[1])
+        return [vals[-1], vals[len(vals) // 2] + x[0] * 0.5]
+
+    return trace(rhs, 2)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(program=_program, seed=st.integers(0, 2**32 - 1), order=st.integers(1, 6), fresh=st.sampled_from(FRESH))
+def test_random_programs_contain_exact_coefficients(program, seed, order, fresh):
+    g = _program_ode(program)
+    rng = np.random.default_rng(seed)
+    lo, hi = random_boxes(2, 3, rng, center_scale=1.0, max_rad=0.2)
+    check_affine_taylor(g, lo, hi, order, fresh_symbols=fresh, n_random=2, seed=seed)
+
+
+def _arm():
+    from models.planar import planar_chain
+
+    chain = planar_chain(3)
+    return chain, chain.numeric().rhs_graph()
+
+
+ARM_Q0 = np.array([0.5, -0.3, 0.2])
+
+
+@pytest.mark.parametrize("fresh", FRESH)
+def test_three_link_arm_coefficients(fresh):
+    """The motivating deep graph (crba/rnea + elimination, 6 states), order 5, box of
+    radius 0.01 in q and 0.05 in qd: exact coefficients at all 64 corners and more."""
+    _, g = _arm()
+    x0 = np.concatenate([ARM_Q0, [0.1, -0.2, 0.3]])
+    r = np.array([0.01] * 3 + [0.05] * 3)
+    check_affine_taylor(g, x0 - r, x0 + r, 5, fresh_symbols=fresh, n_random=4, seed=3)
+
+
+def random_forms(n, nb, m0, rng, scale=0.05):
+    """Input forms (n, B, m0 + 2) as the solver builds them: centre, symbol coefficients,
+    an error radius (never below 1e-12 relative, so float samples are inside the set)."""
+    X = np.zeros((n, nb, m0 + 2))
+    X[..., 0] = rng.uniform(-1.5, 1.5, (n, nb))
+    X[..., 1:-1] = rng.uniform(-scale, scale, (n, nb, m0)) * (rng.uniform(size=(n, nb, m0)) < 0.7)
+    X[..., -1] = rng.uniform(0, scale / 10, (n, nb)) * (rng.uniform(size=(n, nb)) < 0.5) + 1e-12 * (
+        1 + np.abs(X[..., 0]))
+    return X
+
+
+def check_series(graph, X, order, plo=None, phi=None, *, fresh_symbols=None, n_random=6, seed=0):
+    """AffineTaylorODE.series on caller-given forms X (n, B, m0 + 2), parameters as
+    intervals without symbols: the exact coefficients at points c + A eps + delta (eps in
+    [-1, 1]^m0, |delta| <= 0.9 e, extremes included) and sampled parameters must be inside."""
+    rng = np.random.default_rng(seed)
+    n, nb, m2 = X.shape
+    params = Interval(np.asarray(plo, float), np.asarray(phi, float)) if graph.n_params else None
+    C = AffineTaylorODE(graph, fresh_symbols=fresh_symbols).series(X, order, params)
+    assert C.shape == (nb, order + 1, n)
+    ppts = box_samples(np.atleast_2d(plo), np.atleast_2d(phi), n_random, rng)[:, 0] if graph.n_params else [None]
+    for b in range(nb):
+        for s in range(n_random):
+            eps = rng.choice([-1.0, 1.0], m2 - 2) if s % 2 else rng.uniform(-1, 1, m2 - 2)
+            delta = 0.9 * X[:, b, -1] * (rng.choice([-1.0, 1.0], n) if s % 3 == 0 else rng.uniform(-1, 1, n))
+            x = X[:, b, 0] + X[:, b, 1:-1] @ eps + delta
+            p = ppts[s % len(ppts)]
+            assert_inside(C.lo[b], C.hi[b], arb_taylor(graph, x, p, order), f"series, box {b}, x {x.tolist()}, p {p}")
+    return C
+
+
+@pytest.mark.parametrize("fresh", FRESH)
+def test_series_on_caller_forms_with_wide_parameters(fresh):
+    """The solver's variational path: forms over the sets' own symbols (here random), and
+    parameters that are intervals *without* a symbol (their radius is the error e)."""
+    rng = np.random.default_rng(21)
+    check_series(_dp_graph(), random_forms(4, 3, 8, rng), 6, fresh_symbols=fresh, seed=1)
+    g = trace(lambda x, p: all_ops((x[0], x[1]), p), 4, 1)
+    check_series(g, random_forms(4, 3, 5, rng), 5, [0.5], [0.9], fresh_symbols=fresh, seed=2)
+    g = trace(lambda x, p: [-p[0] * x[0] + p[1] * np.sin(x[1]), x[0]], 2, 2)
+    check_series(g, random_forms(2, 4, 3, rng, scale=0.3), 6, [0.8, -0.5], [1.2, 0.5], fresh_symbols=fresh,
+                 n_random=10, seed=3)
+
+
+# --------------------------------------------------------------------------- 2. ranges
+
+
+RANGE_GRAPHS = {
+    "all_ops": (lambda: trace(lambda x, p: all_ops((x[0], x[1]), p), 4, 1), (0.5, 0.9)),
+    "double_pendulum": (_dp_graph, None),
+    "arm": (lambda: _arm()[1], None),
+}
+_RANGE_CACHE = {}
+
+
+def check_range(graph, lo, hi, plo=None, phi=None, n_random=8, seed=0, fresh_symbols=None):
+    """The order-1 coefficient of x' = f(x) is f over the box: it must contain arb's f
+    at the corners, the centre and random points (with sampled parameters)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = np.atleast_2d(np.asarray(lo, float)), np.atleast_2d(np.asarray(hi, float))
+    C = affine_coefficients(graph, lo, hi, 1, plo, phi, fresh_symbols)
+    F = C[:, 1]  # (B, n)
+    pts = box_samples(lo, hi, n_random, rng)  # (S, B, n)
+    P = None
+    if graph.n_params:
+        P = box_samples(np.atleast_2d(plo), np.atleast_2d(phi), n_random, rng)[:, 0]
+        P = P[rng.integers(0, len(P), size=pts.shape[:2])]  # (S, B, p)
+    exact = arb_eval(graph, pts, P)  # (S, B, n)
+    assert_encloses_arb(F[None], exact, "affine range")
+    return F
+
+
+@pytest.mark.parametrize("name", sorted(RANGE_GRAPHS))
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_order_one_range_contains_arb_values(name, data):
+    if name not in _RANGE_CACHE:
+        _RANGE_CACHE[name] = RANGE_GRAPHS[name][0]()
+    g, prange = _RANGE_CACHE[name], RANGE_GRAPHS[name][1]
+    n = g.n_inputs
+    c = np.array(data.draw(st.lists(st.floats(-2.0, 2.0), min_size=n, max_size=n), "centre"))
+    scale = data.draw(st.sampled_from([0.0, 1e-6, 1e-3, 0.05, 0.3]), "radius scale")
+    r = scale * np.array(data.draw(st.lists(st.floats(0.0, 1.0), min_size=n, max_size=n), "radius"))
+    plo = phi = None
+    if prange:
+        pc = data.draw(st.floats(*prange), "p")
+        plo, phi = [pc - 0.05], [pc + 0.05]
+    check_range(g, (c - r)[None], (c + r)[None], plo, phi, n_random=4 if n > 4 else 8,
+                seed=data.draw(st.integers(0, 2**32 - 1)), fresh_symbols=data.draw(st.sampled_from(FRESH)))
+
+
+# --------------------------------------------------------------------------- 3. special inputs
+
+
+@pytest.mark.parametrize("fresh", FRESH)
+def test_point_boxes_have_no_symbols_and_are_tight(fresh):
+    """Point boxes: m = 0 box symbols (only the fresh ones), widths ~ rounding, exact inside."""
+    g = _dp_graph()
+    rng = np.random.default_rng(8)
+    X = rng.uniform(-2, 2, size=(5, 4))
+    F, m = AffineTaylorODE(g, fresh_symbols=fresh).forms(Interval(X), 6)
+    assert m == (0 if fresh == 0 else 4 * 6)  # no box symbol; fresh ones only if asked for
+    C = check_affine_taylor(g, X, X, 6, fresh_symbols=fresh, n_random=0)
+    exact_scale = np.maximum(np.abs(C.mid()), 1.0)
+    assert (C.width() <= 1e-10 * exact_scale).all()
+
+
+def _cancellation_cases(rng, count):
+    """[(graph, points (S, n))] where float rounding errors are as large as the result:
+    each first output sums terms that cancel to far below their own magnitude (or feeds a
+    rounded large argument to sin, whose slope then amplifies the rounding error)."""
+    big = rng.uniform(1, 2, count) * 10.0 ** rng.uniform(0, 15, count)
+    small = rng.uniform(-1, 1, count)
+    mid = rng.uniform(1, 2, count) * 10.0 ** rng.uniform(2, 7, count)
+    f = lambda x: np.stack(x, -1)  # noqa: E731
+    return [
+        (trace(lambda x, p: [(x[0] + x[1]) + x[2], x[1] * 0.5, x[0] - x[2]], 3), f([big, small, -big])),
+        (trace(lambda x, p: [x[0] * x[1] + x[2], x[0] * 0.0, x[1] * 0.0], 3), f([big, small, -(big * small)])),
+        (trace(lambda x, p: [np.square(x[0]) + x[1], x[0] * 0.0], 2), f([big, -np.square(big)])),
+        (trace(lambda x, p: [x[0] / x[1] + x[2], x[1] * 0.0, x[2] * 0.0], 3),
+         f([big, small + 2.0, -big / (small + 2.0)])),
+        (trace(lambda x, p: [np.sin(x[0]) + x[1], x[1] * 0.0], 2), f([small, -np.sin(small)])),
+        # the rounding error of a large argument, times cos, is far above sin's ulp
+        (trace(lambda x, p: [np.sin(x[0] * x[1]) + x[2], x[1] * 0.0, x[2] * 0.0], 3),
+         f([mid, small + 2.0, -np.sin(mid * (small + 2.0))])),
+        (trace(lambda x, p: [np.sin(np.square(x[0])) + x[1], x[1] * 0.0], 2),
+         f([np.sqrt(mid), -np.sin(np.square(np.sqrt(mid)))])),
+        (trace(lambda x, p: [np.sin(x[0] / x[1]) + x[2], x[1] * 0.0, x[2] * 0.0], 3),
+         f([mid, small + 2.0, -np.sin(mid / (small + 2.0))])),
+        (trace(lambda x, p: [np.sin(x[0] + x[1]) + x[2], x[1] * 0.0, x[2] * 0.0], 3),
+         f([mid, small, -np.sin(mid + small)])),
+    ]
+
+
+@pytest.mark.parametrize("fresh", FRESH)
+def test_rounding_errors_are_bounded_under_cancellation(fresh):
+    """Point boxes (the tightest results) where every float operation's rounding error is
+    as large as the result: the exact coefficients must still be inside."""
+    rng = np.random.default_rng(12)
+    for g, X in _cancellation_cases(rng, 25):
+        check_affine_taylor(g, X, X, 4, fresh_symbols=fresh, n_random=0)
+    # symbol coefficients: x0 (p0 + p1) with p1 ~ -p0 over a wide box; the two products'
+    # roundings decide the sign of the linear coefficient
+    g = trace(lambda x, p: [x[0] * p[0] + x[0] * p[1] + x[1], x[1] * 0.0], 2, 2)
+    for _ in range(20):
+        p0 = rng.uniform(1, 2) * 10.0 ** rng.uniform(0, 10)
+        p1 = -p0 * (1 + rng.integers(-4, 5) * 2.0**-52)
+        c, r = rng.uniform(-2, 2), rng.uniform(0, 1)
+        check_affine_taylor(g, [c - r, 0.0], [c + r, 0.0], 3, [p0, p1], [p0, p1], fresh_symbols=fresh,
+                            n_random=3, seed=int(rng.integers(1 << 30)))
+
+
+def _unbounded(lo, hi):
+    return (lo == -INF) | (hi == INF)
+
+
+def test_infinite_bounds_give_unbounded_or_sound_results():
+    """Boxes with infinite ends: no NaN ever; coefficients that depend on the infinite
+    component are unbounded; those that do not stay finite and contain the exact ones."""
+    # x0' = x1, x1' = -sin(x1): x0 does not enter f, so x_[k >= 1] are finite
+    g = trace(lambda x, p: [x[1], -np.sin(x[1])], 2)
+    for x0lo, x0hi in ((-INF, INF), (1.0, INF), (-INF, -1.0)):
+        for fresh in FRESH:
+            C = affine_coefficients(g, [[x0lo, 0.1]], [[x0hi, 0.3]], 6, fresh_symbols=fresh)[0]
+            assert _unbounded(C.lo[0, 0], C.hi[0, 0])
+            assert np.isfinite(C.lo[1:]).all() and np.isfinite(C.hi[1:]).all()
+            assert np.isfinite(C.lo[:, 1]).all() and np.isfinite(C.hi[:, 1]).all()
+            pts = [[v, s] for v in (x0lo, x0hi, 0.0, 5.0) if np.isfinite(v) and x0lo <= v <= x0hi
+                   for s in (0.1, 0.2, 0.3)]
+            for x in pts:
+                assert_inside(C.lo, C.hi, arb_taylor(g, x, None, 6), f"x = {x}")
+    # the infinite component enters f: everything downstream is unbounded, nothing NaN
+    cases = [
+        (lambda x, p: [-x[0]], [[0.0]], [[INF]]),
+        (lambda x, p: [np.exp(x[0])], [[0.0]], [[INF]]),
+        (lambda x, p: [x[0] * x[0]], [[-INF]], [[INF]]),
+        (lambda x, p: [np.sin(x[0])], [[-INF]], [[0.0]]),
+        (lambda x, p: [np.sin(x[0]) * x[1], x[0] - x[1]], [[-INF, 1.0]], [[INF, 2.0]]),
+    ]
+    for rhs, lo, hi in cases:
+        g = trace(rhs, len(lo[0]))
+        for fresh in FRESH:
+            C = affine_coefficients(g, lo, hi, 5, fresh_symbols=fresh)[0]
+            assert _unbounded(C.lo[1:, 0], C.hi[1:, 0]).all()
+    # huge finite bounds that overflow inside the kernel
+    g = trace(lambda x, p: [x[0] * x[0] * x[0]], 1)
+    C = affine_coefficients(g, [[-1e300]], [[1e300]], 4)[0]
+    assert _unbounded(C.lo[1:, 0], C.hi[1:, 0]).all()
+
+
+DOMAIN_CASES = [
+    # (name, rhs, x box, p box or None)
+    ("log reaching 0", lambda x, p: [np.log(x[0])], (0.0, 1.0), None),
+    ("log across 0", lambda x, p: [np.log(x[0])], (-0.5, 1.0), None),
+    ("log below 0", lambda x, p: [np.log(x[0])], (-2.0, -1.0), None),
+    ("sqrt across 0", lambda x, p: [np.sqrt(x[0])], (-1.0, 1.0), None),
+    ("sqrt below 0", lambda x, p: [np.sqrt(x[0])], (-2.0, -1.0), None),
+    ("sqrt of a series reaching 0", lambda x, p: [np.sqrt(x[0] * x[0] - 1.0)], (1.0, 2.0), None),
+    ("tan across pi/2", lambda x, p: [np.tan(x[0])], (1.0, 2.0), None),
+    ("tan across -pi/2", lambda x, p: [np.tan(x[0]) * 2.0], (-2.0, -1.5), None),
+    ("1/x across 0", lambda x, p: [1.0 / x[0]], (-1.0, 1.0), None),
+    ("1/x reaching 0", lambda x, p: [1.0 / x[0]], (0.0, 1.0), None),
+    ("x/(x-1) across 1", lambda x, p: [x[0] / (x[0] - 1.0)], (0.5, 1.5), None),
+    ("1/p across 0", lambda x, p: [x[0] / p[0]], (1.0, 2.0), (-1.0, 1.0)),
+    ("log(p) at 0", lambda x, p: [x[0] * np.log(p[0])], (1.0, 2.0), (0.0, 0.0)),
+]
+
+
+@pytest.mark.parametrize("fresh", FRESH)
+@pytest.mark.parametrize("name, rhs, xbox, pbox", DOMAIN_CASES, ids=[c[0] for c in DOMAIN_CASES])
+def test_domain_violations_are_unbounded(name, rhs, xbox, pbox, fresh):
+    """log/sqrt of a box reaching <= 0, tan across a pole, a divisor containing 0: the
+    coefficients x_[k >= 1] come out unbounded (a finite interval could be wrong), never NaN."""
+    g = trace(rhs, 1, 0 if pbox is None else 1)
+    plo, phi = (None, None) if pbox is None else ([pbox[0]], [pbox[1]])
+    C = affine_coefficients(g, [[xbox[0]]], [[xbox[1]]], 4, plo, phi, fresh_symbols=fresh)[0]
+    assert _unbounded(C.lo[1:, 0], C.hi[1:, 0]).all(), (C.lo[:, 0], C.hi[:, 0])
+
+
+@pytest.mark.parametrize("fresh", FRESH)
+def test_parameters_with_and_without_width(fresh):
+    """x' = -p x: x_[k] = x0 (-p)^k / k!; a wide parameter gets a symbol, a point one none."""
+    g = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
+    ode = AffineTaylorODE(g, fresh_symbols=fresh)
+    nf = 0 if fresh == 0 else 8
+    for (plo, phi), m_want in (((1.0, 1.0), 1 + nf), ((0.9, 1.1), 2 + nf), ((0.1, 0.1), 1 + nf)):
+        _, m = ode.forms(Interval([[1.0]], [[2.0]]), 8, Interval([plo], [phi]))
+        assert m == m_want
+        C = check_affine_taylor(g, [1.0], [2.0], 8, [plo], [phi], fresh_symbols=fresh, n_random=6)
+        for x0 in (1.0, 2.0):
+            for a in {plo, phi}:
+                for k in range(9):
+                    with arb_precision(256):
+                        exact = arb(x0) * (-arb(a)) ** k / math.factorial(k)
+                    assert_inside(C.lo[0, k:k + 1, :1], C.hi[0, k:k + 1, :1], np.array([[exact]], dtype=object))
+    # a parameter given per box: a point in one box, wide in the other
+    C = ode.coefficients(Interval([[1.0], [1.0]], [[2.0], [2.0]]), 4, Interval([[0.5], [0.4]], [[0.5], [0.6]]))
+    assert (C.width()[0] <= C.width()[1]).all()
+    check_affine_taylor(g, [[1.0]], [[2.0]], 4, [0.4], [0.6], fresh_symbols=fresh, C=C[1:])
+
+
+# --------------------------------------------------------------------------- 4. comparison
+
+
+def test_linear_odes_not_wider_than_interval():
+    """x' = A x + b (and the harmonic oscillator): affine <= 2 x interval + tiny, every order."""
+    rng = np.random.default_rng(4)
+    graphs = [trace(lambda x, p: [x[1], -x[0]], 2)]
+    for _ in range(4):
+        A = rng.uniform(-1, 1, (3, 3)).round(3)
+        b = rng.uniform(-1, 1, 3).round(3)
+        graphs.append(trace(lambda x, p, A=A, b=b: [sum(A[i, j] * x[j] for j in range(3)) + b[i] for i in range(3)], 3))
+    for g in graphs:
+        n = g.n_inputs
+        lo, hi = random_boxes(n, 5, rng, max_rad=1.0)
+        for fresh in FRESH:
+            Ca = AffineTaylorODE(g, fresh_symbols=fresh).coefficients(Interval(lo, hi), 8)
+            Ci = TaylorODE(g).coefficients(Interval(lo, hi), 8)
+            assert (Ca.width() <= 2 * Ci.width() + 1e-12).all()
+        check_affine_taylor(g, lo, hi, 8, C=Ca, n_random=2)
+
+
+def test_bilinear_with_interval_parameter_not_wider_than_interval():
+    """x' = -p x, p in [0.9, 1.1], x in boxes up to [0, 10]: measured ratio <= 1.53 at order 8."""
+    g = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
+    lo, hi = np.array([[0.0], [1.0], [-3.0]]), np.array([[10.0], [2.0], [-2.5]])
+    P = Interval([0.9], [1.1])
+    for fresh in FRESH:
+        Ca = AffineTaylorODE(g, fresh_symbols=fresh).coefficients(Interval(lo, hi), 8, P)
+        Ci = TaylorODE(g).coefficients(Interval(lo, hi), 8, P)
+        assert (Ca.width() <= 2 * Ci.width() + 1e-12).all()
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="known looseness: the mean-value form of sin/atan/exp is not "
+                   "intersected with the range f(X), so over wide boxes the affine coefficients are far "
+                   "wider than the interval ones (sin over [0, 10]: order 1 7.8x, order 8 1.7e8x; "
+                   "exp(-x^2) over [0, 10]: order 1 9e12x) -- sound, but absurd")
+def test_wide_box_nonlinear_not_absurdly_wider_than_interval():
+    for f in (np.sin, np.arctan, lambda x: np.exp(-np.square(x))):
+        g = trace(lambda x, p, f=f: [f(x[0])], 1)
+        box = Interval([[0.0]], [[10.0]])
+        Ca = AffineTaylorODE(g).coefficients(box, 8)
+        Ci = TaylorODE(g).coefficients(box, 8)
+        assert (Ca.width() <= 2 * Ci.width() + 1e-12).all()
+
+
+@pytest.fixture(scope="module")
+def arm_pin():
+    """(chain, graph, pinocchio qdd function) of the 3-link planar arm."""
+    from mbs.pinocchio_check import _QMap
+
+    pin = pytest.importorskip("pinocchio")
+    chain, g = _arm()
+    model = chain.to_pinocchio()
+    data = model.createData()
+    qm = _QMap(chain, model)
+    zero = np.zeros(chain.n)
+
+    def qdd(q, qd):
+        return qm.back(pin.aba(model, data, qm.q(q), qm.v(qd), qm.v(zero)).copy())
+
+    return chain, g, qdd
+
+
+def test_three_link_arm_qdd_affine_much_narrower_and_contains_pinocchio(arm_pin):
+    """Box +-0.01 in q about (0.5, -0.3, 0.2), qd = 0: the affine qdd enclosure is at least
+    5x narrower than the interval one (measured 1.1/1.9/2.3 vs 25/35/44) and contains
+    Pinocchio's aba at the corners, the centre and random points."""
+    _, g, qdd = arm_pin
+    x0 = np.concatenate([ARM_Q0, np.zeros(3)])
+    r = np.array([0.01] * 3 + [0.0] * 3)
+    box = Interval(x0 - r, x0 + r)[None]
+    Ca = AffineTaylorODE(g).coefficients(box, 1)[0, 1, 3:]
+    Ci = TaylorODE(g).coefficients(box, 1)[0, 1, 3:]
+    assert (5 * Ca.width() <= Ci.width()).all(), (Ca.width(), Ci.width())
+    pts = sample_initial_points(x0 - r, x0 + r, 40, seed=2)  # 64 corners (qd ones coincide), random, centre
+    acc = np.array([qdd(x[:3], x[3:]) for x in pts])
+    assert_pin_inside(Ca, acc)
+
+
+def assert_pin_inside(C, acc, slack=1e-9):
+    """Pinocchio's float accelerations inside the enclosure (slack: its own rounding)."""
+    ok = (C.lo - slack <= acc) & (acc <= C.hi + slack)
+    if not ok.all():
+        i = np.argwhere(~ok)[0]
+        raise AssertionError(f"pinocchio qdd {acc[tuple(i)]!r} outside [{C.lo[i[-1]]!r}, {C.hi[i[-1]]!r}]")
+
+
+# --------------------------------------------------------------------------- 5. the oracle bites
+
+
+def test_oracle_catches_a_dropped_error_radius(monkeypatch):
+    """forms_to_interval without the error radius e: the containment check must fail.
+    (With fresh symbols the state coefficients carry no e, so the variational setting,
+    fresh_symbols=0, is where e holds the nonlinear terms.)"""
+    g = case_graph("sqr")
+    args = ([0.2], [1.4], 4, [-0.5], [-0.5])
+    check_affine_taylor(g, *args, fresh_symbols=0)
+    check_range(g, [[0.2]], [[1.4]], [-0.5], [-0.5], fresh_symbols=0)
+    real = at.forms_to_interval
+
+    def no_error(F):
+        F = F.copy()
+        F[..., -1] = 0.0
+        return real(F)
+
+    monkeypatch.setattr(at, "forms_to_interval", no_error)
+    with pytest.raises(AssertionError, match="outside"):
+        check_affine_taylor(g, *args, fresh_symbols=0)
+    with pytest.raises(AssertionError, match="outside"):
+        check_range(g, [[0.2]], [[1.4]], [-0.5], [-0.5], fresh_symbols=0)
+
+
+def test_oracle_catches_a_dropped_input_radius(monkeypatch, arm_pin):
+    """box_forms without the symbol coefficients (each box shrunk to its centre), and
+    box_forms without the radius of a component that has no symbol (a parameter in
+    series()): the checks must fail."""
+    g = _dp_graph()
+    from models import double_pendulum as dp
+
+    lo, hi = dp.initial_box()
+    check_affine_taylor(g, lo, hi, 4)
+    _, ga, qdd = arm_pin
+    x0 = np.concatenate([ARM_Q0, np.zeros(3)])
+    r = np.array([0.01] * 3 + [0.0] * 3)
+    pts = sample_initial_points(x0 - r, x0 + r, 10)
+    acc = np.array([qdd(x[:3], x[3:]) for x in pts])
+    assert_pin_inside(AffineTaylorODE(ga).coefficients(Interval(x0 - r, x0 + r)[None], 1)[0, 1, 3:], acc)
+    real = at.box_forms
+
+    def no_symbol(lo, hi, symbols, m):
+        F = real(lo, hi, symbols, m)
+        F[:, :, 1:-1] = 0.0
+        return F
+
+    monkeypatch.setattr(at, "box_forms", no_symbol)
+    with pytest.raises(AssertionError, match="outside"):
+        check_affine_taylor(g, lo, hi, 4)
+    with pytest.raises(AssertionError, match="outside"):
+        assert_pin_inside(AffineTaylorODE(ga).coefficients(Interval(x0 - r, x0 + r)[None], 1)[0, 1, 3:], acc)
+    monkeypatch.undo()
+
+    # components without a symbol carry their radius as the error e: box_forms with
+    # symbols -1 must cover the box (checked directly), and it bites when e is dropped
+    def check_box_forms(box_forms):
+        rng = np.random.default_rng(0)
+        blo = rng.uniform(-2, 0, (4, 3))
+        bhi = blo + rng.uniform(0, 1, (4, 3))
+        F = box_forms(blo, bhi, np.array([-1, 0, -1]), 3)
+        flo, fhi = at.forms_to_interval(F)
+        assert ((flo <= blo.T) & (bhi.T <= fhi)).all(), "box_forms range outside the box"
+
+    check_box_forms(at.box_forms)
+
+    def no_radius(lo, hi, symbols, m):
+        F = real(lo, hi, symbols, m)
+        F[symbols < 0, :, -1] = 0.0
+        return F
+
+    with pytest.raises(AssertionError, match="outside"):
+        check_box_forms(no_radius)
+    # ... and end to end: series() takes its (wide) parameters without symbols
+    g = trace(lambda x, p: [-p[0] * x[0] + p[1] * np.sin(x[1]), x[0]], 2, 2)
+    X = random_forms(2, 2, 3, np.random.default_rng(4), scale=0.3)
+    args = (g, X, 4, [0.8, -0.5], [1.2, 0.5])
+    check_series(*args, n_random=10)
+    monkeypatch.setattr(at, "box_forms", no_radius)
+    with pytest.raises(AssertionError, match="outside"):
+        check_series(*args, n_random=10)
+
+
+# --------------------------------------------------------------------------- 6. solver level
+
+
+def test_solver_affine_three_link_arm_contains_pinocchio_trajectories(arm_pin):
+    """3-link arm, box +-1e-4 in q, order 8, T = 0.3: completes; DOP853 trajectories with
+    Pinocchio's aba as right-hand side lie in every output box and in the tube."""
+    from verified.solver import solve
+
+    chain, g, qdd = arm_pin
+    x0 = np.concatenate([ARM_Q0, np.zeros(3)])
+    r = np.array([1e-4] * 3 + [0.0] * 3)
+    lo, hi = x0 - r, x0 + r
+    sol = solve(g, Interval(lo, hi), (0.0, 0.3), arithmetic="affine", order=8, t_eval=[0.1, 0.2, 0.3])
+    assert sol.success and sol.t_reached == 0.3, sol.reason
+
+    def f(x):
+        return np.concatenate([x[3:], qdd(x[:3], x[3:])])
+
+    pts = np.unique(sample_initial_points(lo, hi, 12), axis=0)
+    sols = trajectories(f, pts, 0.3)
+    assert misses(sol, sols, per_step=2) == []
+    check_hull_and_tube_hull(sol, sols)
+
+
+def check_hull_and_tube_hull(sol, sols, per_step=2):
+    for t, h in zip(sol.t, sol.hull):
+        for s in sols:
+            assert in_union(s(t), h[None]), (t, s(t))
+    for j in range(len(sol.tube)):
+        for t in np.linspace(sol.tube_t[j], sol.tube_t[j + 1], per_step):
+            for s in sols:
+                assert in_union(s(t), sol.tube_hull[j][None]), (t, s(t))
+
+
+def test_solver_affine_double_pendulum_contains_dop853_trajectories():
+    from models import double_pendulum as dp
+    from verified.solver import solve
+
+    lo, hi = dp.initial_box()
+    sol = solve(dp.rhs_graph(), Interval(lo, hi), (0.0, 0.5), arithmetic="affine", order=8,
+                subdivision=[16, 1, 1, 1], t_eval=[0.25, 0.5])
+    assert sol.success, sol.reason
+    sols = trajectories(lambda x: dp.rhs(x), sample_initial_points(lo, hi, 20), 0.5)
+    assert misses(sol, sols, per_step=3) == []
+    check_hull_and_tube_hull(sol, sols)
