@@ -26,7 +26,9 @@ Rules (``R_x = sum |a_i|``, all error sums rounded upward, see :func:`_up`):
   every recurrence): the mean-value form about the centre, ``f(c) + d (x - c) +
   (f'(xi) - d)(x - c)`` with ``d`` a float near ``f'(c)``: the coefficients become
   ``d a_i`` and ``e`` gains ``|d| e_x + |f'(X) - d| (R_x + e_x)``, with ``f'(X)`` an
-  interval enclosure over the range ``X`` of ``x``. Sound for any ``d``.
+  interval enclosure over the range ``X`` of ``x``. Sound for any ``d``. Where the
+  form's error part alone exceeds the plain image ``f(X)`` (wide ranges), the image
+  replaces the form.
 * Higher orders use the same recurrences as :mod:`verified.taylor` built from these
   operations (division by a series through the reciprocal of its order-0 form).
 
@@ -226,8 +228,12 @@ def _value(kind, lo, hi):
 
 
 @njit(cache=True)
-def _unary_into(Z, x, m, kind):
-    """Z = f(x) by the mean-value form about the centre (module docstring)."""
+def _unary_into(Z, x, m, kind, known_lo=-INF):
+    """Z = f(x) by the mean-value form about the centre (module docstring).
+
+    ``known_lo`` is a lower bound of x known from elsewhere (1 for ``1 + u^2``, whose
+    affine form loses the sign of the square and can reach below 0); the range used
+    for ``f'`` is the form's range cut to it, which still holds every value of x."""
     c = x[0]
     r = 0.0
     for i in range(1, m + 1):
@@ -237,8 +243,12 @@ def _unary_into(Z, x, m, kind):
     if not (math.isfinite(c) and math.isfinite(w)):
         _poison(Z, m)
         return
-    xlo = _k.rd(c - w)
+    # the expansion point c must stay inside the range over which f' is enclosed
+    xlo = max(_k.rd(c - w), min(known_lo, c))
     xhi = _k.ru(c + w)
+    if not xlo <= xhi:
+        _poison(Z, m)
+        return
     fl, fh = _value(kind, c, c)
     dl, dh = _deriv(kind, c, c)
     sl, sh = _deriv(kind, xlo, xhi)
@@ -259,6 +269,20 @@ def _unary_into(Z, x, m, kind):
         Z[i] = t
     Z[0] = f0
     Z[m + 1] = _up(_up(frad) + _pm(abs(d), ex) + _pm(_up(slope) + _up(slope) * _U, w) + rnd * _U)
+    # Over a wide range the mean-value form can be far wider than the plain image f(X)
+    # (sin over [0, 10]: [-8.8, 6.9]). When the form's error part alone exceeds the
+    # image, its symbols carry little, and the image as a form without symbols is the
+    # tighter enclosure (both are valid). Comparing the whole form instead dropped the
+    # symbols of narrow arguments, where the two are about equal.
+    gl, gh = _value(kind, xlo, xhi)
+    if gl <= gh and math.isfinite(gl) and math.isfinite(gh):
+        g0 = 0.5 * gl + 0.5 * gh
+        grad = _up(max(gh - g0, g0 - gl))
+        if grad < Z[m + 1]:
+            for i in range(1, m + 1):
+                Z[i] = 0.0
+            Z[0] = g0
+            Z[m + 1] = grad
 
 
 # --------------------------------------------------------------------------
@@ -402,7 +426,7 @@ def _affine_kernel(op, a0, a1, aux, idx, clo, chi, outputs, X, P, order, m0, n_f
                         _clear(V, m)
                         V[0] = 1.0
                         _acc_sqr(V, F[u, 0, b], m, 1.0)
-                        _unary_into(REC[s, b], V, m, 7)
+                        _unary_into(REC[s, b], V, m, 7, 1.0)  # v0 = 1 + u0^2 >= 1
                     else:
                         V = F[vs, k, b]
                         _clear(V, m)
@@ -451,8 +475,8 @@ def box_forms(lo: np.ndarray, hi: np.ndarray, symbols: np.ndarray, m: int) -> np
     """
     nb, d = lo.shape
     F = np.zeros((d, nb, m + 2))
-    mid = 0.5 * lo + 0.5 * hi
     with np.errstate(invalid="ignore", over="ignore"):
+        mid = 0.5 * lo + 0.5 * hi
         rad = np.maximum(hi - mid, mid - lo)
         rad = rad + (np.abs(rad) * _k.EPS + _k.ETA)  # upward
     finite = np.isfinite(lo) & np.isfinite(hi) & np.isfinite(rad)
