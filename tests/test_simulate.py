@@ -46,6 +46,7 @@ def test_pendulum_mode_iii_simplified_is_conservative_and_sound():
     assert not misses(sol, samples, per_step=2)
 
 
+@pytest.mark.slow  # ~27 s on an idle 2-core machine
 def test_damped_urdf_robot_with_an_uncertain_angle():
     """example-robot-data's double pendulum (damping 0.05 on both joints): dH/dt =
     -qd^T D qd enters H_V (mode ii derives it by differentiation, mode iii takes the
