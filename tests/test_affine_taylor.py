@@ -28,7 +28,8 @@ from hypothesis import strategies as st
 import verified.affine_taylor as at
 from sampling import in_union, misses, sample_initial_points, trajectories
 from test_graph import all_ops
-from test_graph_interval import _program, arb_eval, assert_encloses_arb, box_samples, random_boxes, run_program
+from test_graph_interval import (ArbDomain, _program, arb_eval, assert_encloses_arb, box_samples, random_boxes,
+                                 run_program)
 from verified import evaluate as ev
 from verified.affine_taylor import AffineTaylorODE
 from verified.graph import Op, trace
@@ -42,17 +43,9 @@ FRESH = [None, 0]  # the solver uses both: fresh symbols for x, none for the var
 # --------------------------------------------------------------------------- exact oracle
 
 
-class ArbSeriesDomain(ev.Domain):
-    """Graph values as arb power series in t (flint.arb_series) or arb constants."""
-
-    def const(self, lo, hi, value):
-        return arb(value)
-
-    def sqr(self, a):
-        return a * a
-
-    def pow(self, a, k):
-        return a**k
+class ArbSeriesDomain(ArbDomain):
+    """Graph values as arb power series in t (flint.arb_series) or arb constants: the
+    reference domain of test_graph_interval with the functions applied to series."""
 
     def sqrt(self, a):
         return a.sqrt()

@@ -378,15 +378,7 @@ def _affine_kernel(op, a0, a1, aux, idx, clo, chi, outputs, X, P, order, m0, n_f
                         _unary_into(REC[s, b], F[u, 0, b], m, 7)
                     else:
                         # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
-                        _clear(S, m)
-                        for j in range(1, k):
-                            _acc_mul(S, F[s, j, b], F[u, k - j, b], m, float(j))
-                        _div_int_into(T, S, m, fk)
-                        _clear(S, m)
-                        _acc_add(S, F[u, k, b], m, 1.0)
-                        _acc_add(S, T, m, -1.0)
-                        _clear(Z, m)
-                        _acc_mul(Z, S, REC[s, b], m, 1.0)
+                        _quotient_step(Z, F, s, u, u, k, b, m, REC[s, b], T, S)
                 elif o == T_SIN or o == T_COS:
                     ss = s if o == T_SIN else aux[s]
                     cs = aux[s] if o == T_SIN else s
@@ -432,15 +424,7 @@ def _affine_kernel(op, a0, a1, aux, idx, clo, chi, outputs, X, P, order, m0, n_f
                         _clear(V, m)
                         _sqrconv(V, F, u, k, 0, b, m)
                         # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
-                        _clear(S, m)
-                        for j in range(1, k):
-                            _acc_mul(S, F[s, j, b], F[vs, k - j, b], m, float(j))
-                        _div_int_into(T, S, m, fk)
-                        _clear(S, m)
-                        _acc_add(S, F[u, k, b], m, 1.0)
-                        _acc_add(S, T, m, -1.0)
-                        _clear(Z, m)
-                        _acc_mul(Z, S, REC[s, b], m, 1.0)
+                        _quotient_step(Z, F, s, u, vs, k, b, m, REC[s, b], T, S)
         # x_[k+1] = f_[k] / (k + 1)
         for i in range(n):
             o = outputs[i]
@@ -452,6 +436,21 @@ def _affine_kernel(op, a0, a1, aux, idx, clo, chi, outputs, X, P, order, m0, n_f
                     out[i, k + 1, b, 1 + m0 + k * n_fresh + i] = out[i, k + 1, b, m + 1]
                     out[i, k + 1, b, m + 1] = 0.0
     return out, F
+
+
+@njit(cache=True)
+def _quotient_step(Z, F, s, u, v, k, b, m, rec, T, S):
+    """Z = (F[u, k] - (1/k) sum_{j=1}^{k-1} j F[s, j] F[v, k-j]) * rec, the recurrence of
+    log (v = u) and atan (v = 1 + u^2), ``rec`` the form of 1 / v_0; T, S are scratch."""
+    _clear(S, m)
+    for j in range(1, k):
+        _acc_mul(S, F[s, j, b], F[v, k - j, b], m, float(j))
+    _div_int_into(T, S, m, float(k))
+    _clear(S, m)
+    _acc_add(S, F[u, k, b], m, 1.0)
+    _acc_add(S, T, m, -1.0)
+    _clear(Z, m)
+    _acc_mul(Z, S, rec, m, 1.0)
 
 
 @njit(cache=True)
