@@ -126,7 +126,7 @@ def test_planar_chain_recovered_from_its_ode_alone():
     assert all(_zero(sympy.diff(diffP, v)) for v in S.q)
 
 
-@pytest.mark.slow  # 3-link recovery: about 6 min of CPU (17 min wall on a loaded 2-core machine)
+@pytest.mark.slow  # 3-link recovery: about 7 min (17 min on a loaded 2-core machine)
 def test_planar_chain_three_links():
     chain = planar_chain(3, lengths=sympy.Integer(1), masses=sympy.Integer(1),
                          g=sympy.Rational(981, 100))
