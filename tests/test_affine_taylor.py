@@ -592,7 +592,7 @@ def arm_pin():
     """(chain, graph, pinocchio qdd function) of the 3-link planar arm."""
     from mbs.pinocchio_check import _QMap
 
-    pin = pytest.importorskip("pinocchio")
+    import pinocchio as pin
     chain, g = _arm()
     model = chain.to_pinocchio()
     data = model.createData()
