@@ -655,9 +655,10 @@ def _as_interval(x):
 def stack(intervals, axis=0):
     """Stack Intervals (or exact floats) along a new axis, like ``np.stack``."""
     items = [_as_interval(x) for x in intervals]
+    shape = np.broadcast_shapes(*[i.shape for i in items])  # once: per item it was O(N^2)
     return Interval._from_bounds(
-        np.stack([np.broadcast_to(x.lo, np.broadcast_shapes(*[i.shape for i in items])) for x in items], axis),
-        np.stack([np.broadcast_to(x.hi, np.broadcast_shapes(*[i.shape for i in items])) for x in items], axis),
+        np.stack([np.broadcast_to(x.lo, shape) for x in items], axis),
+        np.stack([np.broadcast_to(x.hi, shape) for x in items], axis),
     )
 
 
