@@ -90,6 +90,7 @@ SETTINGS = [
     ("subdivision", dict(subdivision=[4, 4, 4])),
     ("subdivision", dict(subdivision=2.5)),
     ("subdivision", dict(subdivision="4")),
+    ("subdivision", dict(subdivision=[10**4, 10**4])),  # 10^8 boxes: a MemoryError before
     ("error_basis", dict(error_basis="lu")),
     ("split_ratio", dict(split_ratio=0.0)),
     ("split_ratio", dict(split_ratio=NAN)),

@@ -177,8 +177,16 @@ def initial_boxes(x0, n: int, subdivision) -> Interval:
     if not (np.isfinite(boxes.lo).all() and np.isfinite(boxes.hi).all()):
         raise ValueError("x0 must be bounded (finite bounds)")
     if pieces is not None:
+        total = boxes.shape[0] * math.prod(int(k) for k in np.broadcast_to(pieces, (n,)))
+        if total > MAX_INITIAL_BOXES:
+            raise ValueError(f"subdivision {subdivision!r} of {boxes.shape[0]} box(es) makes {total} boxes, more "
+                             f"than the {MAX_INITIAL_BOXES} supported (each set holds two {n}x{n} matrices)")
         boxes = boxes.subdivide(pieces).reshape(-1, n)
     return boxes
+
+
+#: initial boxes at most (after subdivision): [1000] * 4 used to die in a MemoryError
+MAX_INITIAL_BOXES = 2**21
 
 
 def check_params(params, graph: Graph, nb: int, subdivision):
