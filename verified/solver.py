@@ -354,7 +354,7 @@ def solve(
         if ratio > wrap_target:
             h_wrap = h * max(0.2, np.sqrt(wrap_target / ratio))
         elif ratio < 0.25 * wrap_target:
-            h_wrap = 2.0 * h_wrap if np.isfinite(h_wrap) else h_wrap
+            h_wrap = min(2.0 * h_wrap, h_max)  # (unbounded doubling overflowed on long runs)
         if test is not None:
             decision = test.observe(t, sets)
             if decision == "previous" and not landing and len(history) == 2:
