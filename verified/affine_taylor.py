@@ -506,6 +506,35 @@ def forms_to_interval(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+def _wide_symbol_forms(graph, x, params, extra: int):
+    """Input and parameter forms (n, B, m + 2), (p, B, m + 2) over one symbol per input
+    or parameter that is wide in some box, ``m = m0 + extra`` (``extra`` symbols left for
+    the caller); returns ``(X, P, m0)``. Checks the shapes of ``x`` (B, n) and ``params``."""
+    x = _as_interval(x)
+    n = graph.n_inputs
+    if x.ndim != 2 or x.shape[-1] != n:
+        raise ValueError(f"boxes must have shape (B, {n}), got {x.shape}")
+    nb = x.shape[0]
+    if graph.n_params:
+        if params is None:
+            raise ValueError(f"this graph has {graph.n_params} parameters {graph.param_names}; pass params")
+        p = _as_interval(params)
+        if p.shape[-1:] != (graph.n_params,):
+            raise ValueError(f"params must have shape (..., {graph.n_params}), got {p.shape}")
+        p = p.broadcast_to((nb, graph.n_params))
+        plo, phi = p.lo, p.hi
+    else:
+        plo = phi = np.zeros((nb, 0))
+    xwide = (x.hi > x.lo).any(axis=0)
+    pwide = (phi > plo).any(axis=0)
+    m0 = int(xwide.sum() + pwide.sum())
+    m = m0 + int(extra)
+    X = box_forms(x.lo, x.hi, np.where(xwide, np.cumsum(xwide) - 1, -1), m)
+    P = box_forms(np.ascontiguousarray(plo), np.ascontiguousarray(phi),
+                  np.where(pwide, xwide.sum() + np.cumsum(pwide) - 1, -1), m)
+    return X, P, m0
+
+
 def affine_range(graph, x, params=None) -> Interval:
     """Enclosure of a graph's outputs over boxes ``x`` (B, n_inputs) in affine
     arithmetic (one symbol per wide input or parameter): any graph, square or not.
@@ -514,25 +543,9 @@ def affine_range(graph, x, params=None) -> Interval:
     deep expressions (the LDL^T pivots of a 5-link arm's mass matrix over a box of
     radius 1e-3: interval [-0.29, 0.39], affine > 0). Returns (B, n_outputs).
     """
-    x = _as_interval(x)
     n = graph.n_inputs
-    if x.ndim != 2 or x.shape[1] != n:
-        raise ValueError(f"boxes must have shape (B, {n}), got {x.shape}")
-    nb = x.shape[0]
     tape = _Tape(graph)
-    if graph.n_params:
-        if params is None:
-            raise ValueError(f"this graph has {graph.n_params} parameters {graph.param_names}; pass params")
-        p = _as_interval(params).broadcast_to((nb, graph.n_params))
-        plo, phi = p.lo, p.hi
-    else:
-        plo = phi = np.zeros((nb, 0))
-    xwide = (x.hi > x.lo).any(axis=0)
-    pwide = (phi > plo).any(axis=0)
-    m = int(xwide.sum() + pwide.sum())
-    X = box_forms(x.lo, x.hi, np.where(xwide, np.cumsum(xwide) - 1, -1), m)
-    P = box_forms(np.ascontiguousarray(plo), np.ascontiguousarray(phi),
-                  np.where(pwide, xwide.sum() + np.cumsum(pwide) - 1, -1), m)
+    X, P, m = _wide_symbol_forms(graph, x, params, extra=0)
     # one pass at order 0 gives every slot's form; the kernel's "state outputs" are
     # not used here, any valid slots will do
     dummy = np.full(n, tape.outputs[0] if tape.outputs.size else 0, dtype=np.int64)
@@ -569,29 +582,8 @@ class AffineTaylorODE:
         order = int(order)
         if order < 1:
             raise ValueError(f"order must be >= 1, got {order}")
-        x = _as_interval(x)
-        if x.ndim != 2 or x.shape[-1] != self.n:
-            raise ValueError(f"state boxes must have shape (B, {self.n}), got {x.shape}")
-        nb = x.shape[0]
-        if self.n_params:
-            if params is None:
-                raise ValueError(f"this ODE has {self.n_params} parameters {self.graph.param_names}; pass params")
-            p = _as_interval(params)
-            if p.shape[-1:] != (self.n_params,):
-                raise ValueError(f"params must have shape (..., {self.n_params}), got {p.shape}")
-            p = p.broadcast_to((nb, self.n_params))
-            plo, phi = p.lo, p.hi
-        else:
-            plo = phi = np.zeros((nb, 0))
-        xwide = (x.hi > x.lo).any(axis=0)
-        pwide = (phi > plo).any(axis=0)
-        m0 = int(xwide.sum() + pwide.sum())
-        m = m0 + self.n_fresh * order
-        xs = np.where(xwide, np.cumsum(xwide) - 1, -1)
-        ps = np.where(pwide, xwide.sum() + np.cumsum(pwide) - 1, -1)
-        X = box_forms(x.lo, x.hi, xs, m)
-        P = box_forms(np.ascontiguousarray(plo), np.ascontiguousarray(phi), ps, m)
-        return self._run(X, P, order, m0), m
+        X, P, m0 = _wide_symbol_forms(self.graph, x, params, extra=self.n_fresh * order)
+        return self._run(X, P, order, m0), m0 + self.n_fresh * order
 
     def series(self, X, order, params=None):
         """Interval enclosures of ``x_[0..order]`` from given input forms ``X``
