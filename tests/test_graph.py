@@ -134,7 +134,9 @@ def test_all_ops_trace_sympy_numpy_agree():
     for g in (g_sym, g_tr):
         np.testing.assert_allclose(g.eval_float(X, P), want, rtol=1e-12, atol=1e-12)
     used = set(g_tr.op_counts()) | set(g_sym.op_counts())
-    assert used >= {op.name.lower() for op in Op}, f"missing opcodes: {set(o.name.lower() for o in Op) - used}"
+    # mid (a frozen point) is no function of sympy's or numpy's: tests/test_preconditioned.py
+    every = {op.name.lower() for op in Op} - {"mid"}
+    assert used >= every, f"missing opcodes: {every - used}"
 
 
 def test_batch_shapes_and_param_broadcasting():

@@ -82,6 +82,11 @@ class ArbDomain(ev.Domain):
     def atan(self, a):
         return _f["atan"](a)
 
+    def mid(self, a):
+        # exact math: a graph's outputs do not depend on which point mid freezes
+        # (verified.graph.GraphBuilder.mid), so the value itself is a valid choice
+        return a
+
     def point(self, array):
         return _to_arb(np.asarray(array, dtype=float))
 

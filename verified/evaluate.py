@@ -1,7 +1,7 @@
 """Evaluators for :class:`verified.graph.Graph`: one pass over the node list per call.
 
 An evaluator is a :class:`Domain`: an object with one method per opcode
-(``const, add, sub, mul, div, neg, sqr, pow, sqrt, exp, log, sin, cos, tan, atan``)
+(``const, add, sub, mul, div, neg, sqr, pow, sqrt, exp, log, sin, cos, tan, atan, mid``)
 plus ``pack``/``point``/``expand`` helpers. :func:`evaluate` walks the graph once and
 calls the domain method of each node on the values of its arguments; values are
 whole batches (arrays over boxes), so there is one numpy/Interval call per node and
@@ -92,6 +92,10 @@ class Domain:
     def atan(self, a):
         raise NotImplementedError
 
+    def mid(self, a):
+        """A point of ``a`` (see :meth:`verified.graph.GraphBuilder.mid`)."""
+        raise NotImplementedError
+
     # helpers used by DualDomain and the Graph methods
 
     def point(self, array):
@@ -173,6 +177,9 @@ class FloatDomain(Domain):
     tan = staticmethod(np.tan)
     atan = staticmethod(np.arctan)
 
+    def mid(self, a):
+        return a
+
     def point(self, array):
         return np.asarray(array, dtype=np.float64)
 
@@ -235,6 +242,19 @@ class IntervalDomain(Domain):
 
     def atan(self, a):
         return self.iv.atan(a)
+
+    def mid(self, a):
+        # A point interval: the same float wherever this node's value is used, which is
+        # all a preconditioner needs.  An unbounded argument has no point worth taking:
+        # it stays the whole line, and an empty one stays empty, so that nothing turns
+        # 'unknown' into a definite (possibly singular) preconditioner.
+        lo, hi = np.asarray(a.lo, dtype=np.float64), np.asarray(a.hi, dtype=np.float64)
+        with np.errstate(invalid="ignore", over="ignore"):
+            m = 0.5 * lo + 0.5 * hi
+        finite = np.isfinite(lo) & np.isfinite(hi)
+        empty = lo > hi
+        return self.Interval._from_bounds(np.where(finite, m, np.where(empty, lo, -np.inf)),
+                                          np.where(finite, m, np.where(empty, hi, np.inf)))
 
     def point(self, array):
         return self.Interval(np.asarray(array, dtype=np.float64))
@@ -375,6 +395,11 @@ class DualDomain(Domain):
         if a[1] is None:
             return (v, None)
         return (v, B.div(a[1], B.expand(B.add(1.0, B.sqr(a[0])))))
+
+    def mid(self, a):
+        # a frozen point: derivative 0 (exact where mid is used as the graph op
+        # promises, in value-invariant preconditioners)
+        return (self.base.mid(a[0]), None)
 
 
 # --------------------------------------------------------------------------- entry points

@@ -68,12 +68,14 @@ class Op(enum.IntEnum):
     COS = 14
     TAN = 15
     ATAN = 16
+    MID = 17
+
 
 
 LEAF_OPS = frozenset({Op.CONST, Op.INPUT, Op.PARAM})
 BINARY_OPS = frozenset({Op.ADD, Op.SUB, Op.MUL, Op.DIV})
 UNARY_OPS = frozenset(
-    {Op.NEG, Op.SQR, Op.POW, Op.SQRT, Op.EXP, Op.LOG, Op.SIN, Op.COS, Op.TAN, Op.ATAN}
+    {Op.NEG, Op.SQR, Op.POW, Op.SQRT, Op.EXP, Op.LOG, Op.SIN, Op.COS, Op.TAN, Op.ATAN, Op.MID}
 )
 COMMUTATIVE_OPS = frozenset({Op.ADD, Op.MUL})
 _ARITY = {**{op: 0 for op in LEAF_OPS}, **{op: 2 for op in BINARY_OPS}, **{op: 1 for op in UNARY_OPS}}
@@ -682,6 +684,25 @@ class GraphBuilder:
 
     def atan(self, a: int) -> int:
         return self._unary(Op.ATAN, a, (0.0, 0.0))
+
+    def mid(self, a: int) -> int:
+        """A *point* of ``a``'s enclosure, frozen: the identity over floats, the midpoint
+        of an interval, the centre of an affine form, a constant Taylor series (its
+        derivatives are 0).
+
+        Only for expressions whose value does not depend on which point is taken: a
+        preconditioner ``C = mid(M)^-1`` in ``(C M)^-1 (C b) = M^-1 b`` (see
+        :meth:`solve`). Every evaluator then encloses the true function, and forward
+        derivatives (which treat ``C`` as constant) are exact too, because the
+        identity holds for every fixed ``C``
+        (:func:`verified.preconditioned.solve` builds such a solve)."""
+        a = self._check_id(a)
+        node = self._nodes[a]
+        if node.op == Op.MID:
+            return a
+        if node.op == Op.CONST:  # any point of the enclosure will do: its nearest double
+            return self.const_enclosure(node.data[2], node.data[2], node.data[2])
+        return self._add_node(Op.MID, (a,))
 
     # -- finish
 

@@ -133,6 +133,10 @@ def forward_mode(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: S
                 v = b.atan(u)
                 den = b.add(b.const(1), b.sqr(u))
                 d = [None if p is None else b.div(p, den) for p in du]
+            elif op == Op.MID:
+                # a frozen point (a preconditioner): exact derivatives of the
+                # value-invariant expressions it is used in treat it as constant
+                v, d = b.mid(u), [None] * n_dir
             else:  # pragma: no cover
                 raise NotImplementedError(f"no derivative rule for {op.name}")
         val.append(v)

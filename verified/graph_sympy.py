@@ -275,6 +275,8 @@ def graph_to_sympy(graph: Graph, inputs=None, params=None) -> list:
             v = a[0] ** data
         elif op == Op.SQRT:
             v = sympy.sqrt(a[0])
+        elif op == Op.MID:  # exact math: the frozen point may be the value itself
+            v = a[0]
         else:
             v = getattr(sympy, op.name.lower())(a[0])
         vals.append(v)

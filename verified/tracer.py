@@ -132,6 +132,10 @@ class Tracer:
     def sqrt(self):
         return self._new(self.builder.sqrt(self.node))
 
+    def mid(self):
+        """A frozen point of this value (:meth:`verified.graph.GraphBuilder.mid`)."""
+        return self._new(self.builder.mid(self.node))
+
     # -- numpy ufunc protocol
 
     def __array_ufunc__(self, ufunc, method, *inputs, **kwargs):
