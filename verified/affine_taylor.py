@@ -46,7 +46,7 @@ from numba import njit
 
 from . import _kernels as _k
 from .interval import Interval, _as_interval
-from .taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MUL, T_NEG,
+from .taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
                      T_PARAM, T_SIN, T_SQR, T_SQRT, T_SUB, T_TAN, _Tape)
 
 __all__ = ["AffineTaylorODE", "affine_range", "forms_to_interval", "box_forms"]
@@ -164,6 +164,21 @@ def _scale_into(Z, x, m, d):
         rnd += abs(t)
         Z[i] = t
     Z[m + 1] = _up(_pm(abs(d), x[m + 1]) + rnd * _U)
+
+
+@njit(cache=True)
+def _frozen_point_into(Z, x, m):
+    """Z = the graph op ``mid`` of the form x: its centre as an exact point; a form
+    without finite centre and radius stays 'unknown' (all of the real line)."""
+    c = x[0]
+    w = x[m + 1]
+    for i in range(1, m + 1):
+        w += abs(x[i])
+    _clear(Z, m)
+    if math.isfinite(c) and math.isfinite(w):
+        Z[0] = c
+    else:
+        Z[m + 1] = INF
 
 
 @njit(cache=True)
@@ -290,7 +305,7 @@ def _unary_into(Z, x, m, kind, known_lo=-INF):
 # index 0 the centre, 1..m the symbol coefficients, m + 1 the error radius.
 # --------------------------------------------------------------------------
 @njit(cache=True)
-def _affine_kernel(op, a0, a1, aux, idx, clo, chi, outputs, X, P, order, m0, n_fresh):
+def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
 
     Returns the forms of the coefficients, (n, order + 1, B, m + 2), and those of every
@@ -311,8 +326,8 @@ def _affine_kernel(op, a0, a1, aux, idx, clo, chi, outputs, X, P, order, m0, n_f
             o = op[s]
             u = a0[s]
             v = a1[s]
-            if o == T_AUX:
-                continue
+            if o == T_AUX or (k > 0 and cst[s]):
+                continue  # a constant's coefficients >= 1 stay exactly 0
             for b in range(nb):
                 Z = F[s, k, b]
                 if o == T_CONST:
@@ -323,6 +338,9 @@ def _affine_kernel(op, a0, a1, aux, idx, clo, chi, outputs, X, P, order, m0, n_f
                 elif o == T_PARAM:
                     if k == 0:
                         Z[:] = P[idx[s], b]
+                elif o == T_MID:  # the centre of u_[0], frozen as a point: a constant series
+                    if k == 0:
+                        _frozen_point_into(Z, F[u, 0, b], m)
                 elif o == T_INPUT:
                     Z[:] = out[idx[s], k, b]
                 elif o == T_ADD or o == T_SUB:
@@ -335,19 +353,25 @@ def _affine_kernel(op, a0, a1, aux, idx, clo, chi, outputs, X, P, order, m0, n_f
                     Z[m + 1] = F[u, k, b, m + 1]
                 elif o == T_MUL:
                     _clear(Z, m)
-                    for j in range(k + 1):
-                        _acc_mul(Z, F[u, j, b], F[v, k - j, b], m, 1.0)
+                    if cst[u]:  # (c w)_[k] = c_[0] w_[k]: the other terms are exact zeros
+                        _acc_mul(Z, F[u, 0, b], F[v, k, b], m, 1.0)
+                    elif cst[v]:
+                        _acc_mul(Z, F[u, k, b], F[v, 0, b], m, 1.0)
+                    else:
+                        for j in range(k + 1):
+                            _acc_mul(Z, F[u, j, b], F[v, k - j, b], m, 1.0)
                 elif o == T_SQR:
                     _clear(Z, m)
                     _sqrconv(Z, F, u, k, 0, b, m)
                 elif o == T_DIV:
                     if k == 0:
                         _unary_into(REC[s, b], F[v, 0, b], m, 7)
-                    # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
+                    # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0 (the sum is 0 for a constant v)
                     _clear(T, m)
                     _acc_add(T, F[u, k, b], m, 1.0)
-                    for j in range(1, k + 1):
-                        _acc_mul(T, F[v, j, b], F[s, k - j, b], m, -1.0)
+                    if not cst[v]:
+                        for j in range(1, k + 1):
+                            _acc_mul(T, F[v, j, b], F[s, k - j, b], m, -1.0)
                     _clear(Z, m)
                     _acc_mul(Z, T, REC[s, b], m, 1.0)
                 elif o == T_SQRT:
@@ -549,7 +573,7 @@ def affine_range(graph, x, params=None) -> Interval:
     # one pass at order 0 gives every slot's form; the kernel's "state outputs" are
     # not used here, any valid slots will do
     dummy = np.full(n, tape.outputs[0] if tape.outputs.size else 0, dtype=np.int64)
-    _, F = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.clo, tape.chi, dummy, X, P, 1, m, 0)
+    _, F = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo, tape.chi, dummy, X, P, 1, m, 0)
     lo, hi = forms_to_interval(F[tape.outputs, 0].transpose(1, 0, 2))
     return Interval._from_bounds(lo, hi)
 
@@ -608,7 +632,7 @@ class AffineTaylorODE:
 
     def _run(self, X, P, order, m0):
         t = self._tape
-        F, _ = _affine_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.clo, t.chi, t.outputs, X, P, order,
+        F, _ = _affine_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order,
                               m0, self.n_fresh)
         return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
 

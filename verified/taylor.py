@@ -23,6 +23,8 @@ step is an outward-rounded interval operation from :mod:`verified._kernels`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -34,7 +36,7 @@ __all__ = ["TaylorODE"]
 
 # Tape opcodes (independent of Op's numbering).
 T_CONST, T_INPUT, T_PARAM, T_ADD, T_SUB, T_MUL, T_DIV, T_NEG, T_SQR = range(9)
-T_SQRT, T_EXP, T_LOG, T_SIN, T_COS, T_TAN, T_ATAN, T_AUX = range(9, 17)
+T_SQRT, T_EXP, T_LOG, T_SIN, T_COS, T_TAN, T_ATAN, T_AUX, T_MID = range(9, 18)
 
 _SIMPLE = {
     Op.ADD: T_ADD,
@@ -50,10 +52,18 @@ _SIMPLE = {
 
 
 class _Tape:
-    """Flat arrays describing the recurrences of one graph (see :func:`_taylor_kernel`)."""
+    """Flat arrays describing the recurrences of one graph (see :func:`_taylor_kernel`).
+
+    ``cst[s]`` marks slots whose series is constant in time (built from constants,
+    parameters and frozen points ``mid`` only): their coefficients of order >= 1 are
+    exactly 0, so the kernels compute order 0 only, and a product or quotient with
+    such a slot is a scaling (``(c u)_[k] = c_[0] u_[k]``) instead of a convolution.
+    Both give the same numbers as the full recurrences (the skipped terms are exact
+    zeros), in O(1) instead of O(k) per coefficient."""
 
     def __init__(self, graph: Graph):
         op, a0, a1, aux, idx, clo, chi = [], [], [], [], [], [], []
+        cst = []  # per slot: constant series?
 
         def emit(o, x=-1, y=-1, index=-1, lo=0.0, hi=0.0):
             op.append(o)
@@ -63,6 +73,14 @@ class _Tape:
             idx.append(index)
             clo.append(lo)
             chi.append(hi)
+            if o in (T_CONST, T_PARAM, T_MID):
+                cst.append(True)
+            elif o == T_INPUT:
+                cst.append(False)
+            elif o == T_AUX:  # the partner of the slot emitted just before it
+                cst.append(cst[-1])
+            else:
+                cst.append(cst[x] and (y < 0 or cst[y]))
             return len(op) - 1
 
         slot = {}  # graph node -> tape slot
@@ -97,8 +115,11 @@ class _Tape:
                 s = emit(T_TAN if o == Op.TAN else T_ATAN, args[0])
                 aux[s] = emit(T_AUX)
                 slot[i] = s
+            elif o == Op.MID:
+                slot[i] = emit(T_MID, args[0])
             else:  # pragma: no cover - every Op is handled above
                 raise NotImplementedError(f"no Taylor recurrence for {o.name}")
+        self.cst = np.array(cst, dtype=np.bool_)
         self.op = np.array(op, dtype=np.int64)
         self.a0 = np.array(a0, dtype=np.int64)
         self.a1 = np.array(a1, dtype=np.int64)
@@ -125,6 +146,19 @@ class _Tape:
 # --------------------------------------------------------------------------
 # The interpreter. T[s, k, b] holds coefficient k of tape slot s for box b.
 # --------------------------------------------------------------------------
+@njit(cache=True)
+def _frozen_point(lo, hi):
+    """The value of the graph op ``mid`` (:meth:`verified.graph.GraphBuilder.mid`):
+    the midpoint of a bounded interval as a point; an unbounded one stays the whole
+    line and an empty one stays empty (no definite point is made up from nothing)."""
+    if lo > hi:
+        return lo, hi
+    if math.isfinite(lo) and math.isfinite(hi):
+        m = 0.5 * lo + 0.5 * hi
+        return m, m
+    return -math.inf, math.inf
+
+
 @njit(cache=True)
 def _conv(tlo, thi, u, v, k, j0, b):
     """sum_{j=j0}^{k} T[u, j] * T[v, k-j] for box b."""
@@ -164,7 +198,7 @@ def _sqrconv(tlo, thi, u, k, j0, b):
 
 
 @njit(cache=True)
-def _taylor_kernel(op, a0, a1, aux, idx, clo, chi, outputs, xlo, xhi, plo, phi, order):
+def _taylor_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, xlo, xhi, plo, phi, order):
     """Coefficients x_[0..order] for boxes ``x`` (shape (n, B)) and params (p, B).
 
     Returns lo, hi arrays of shape (n, order + 1, B).
@@ -183,13 +217,16 @@ def _taylor_kernel(op, a0, a1, aux, idx, clo, chi, outputs, xlo, xhi, plo, phi, 
             o = op[s]
             u = a0[s]
             v = a1[s]
-            if o == T_AUX:
-                continue
+            if o == T_AUX or (k > 0 and cst[s]):
+                continue  # a constant's coefficients >= 1 stay exactly 0
             for b in range(nb):
                 if o == T_CONST:
                     if k == 0:
                         tlo[s, 0, b] = clo[s]
                         thi[s, 0, b] = chi[s]
+                elif o == T_MID:  # a frozen point of u_[0]: a constant series
+                    if k == 0:
+                        tlo[s, 0, b], thi[s, 0, b] = _frozen_point(tlo[u, 0, b], thi[u, 0, b])
                 elif o == T_PARAM:
                     if k == 0:
                         tlo[s, 0, b] = plo[idx[s], b]
@@ -205,14 +242,22 @@ def _taylor_kernel(op, a0, a1, aux, idx, clo, chi, outputs, xlo, xhi, plo, phi, 
                     tlo[s, k, b] = -thi[u, k, b]
                     thi[s, k, b] = -tlo[u, k, b]
                 elif o == T_MUL:
-                    tlo[s, k, b], thi[s, k, b] = _conv(tlo, thi, u, v, k, 0, b)
+                    if cst[u]:
+                        tlo[s, k, b], thi[s, k, b] = _k.mul(tlo[u, 0, b], thi[u, 0, b], tlo[v, k, b], thi[v, k, b])
+                    elif cst[v]:
+                        tlo[s, k, b], thi[s, k, b] = _k.mul(tlo[u, k, b], thi[u, k, b], tlo[v, 0, b], thi[v, 0, b])
+                    else:
+                        tlo[s, k, b], thi[s, k, b] = _conv(tlo, thi, u, v, k, 0, b)
                 elif o == T_SQR:
                     tlo[s, k, b], thi[s, k, b] = _sqrconv(tlo, thi, u, k, 0, b)
                 elif o == T_DIV:
-                    # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
-                    sl, sh = _conv(tlo, thi, v, s, k, 1, b)
-                    sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
-                    tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[v, 0, b], thi[v, 0, b])
+                    if cst[v]:  # w_k = u_k / v_0
+                        tlo[s, k, b], thi[s, k, b] = _k.div(tlo[u, k, b], thi[u, k, b], tlo[v, 0, b], thi[v, 0, b])
+                    else:
+                        # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
+                        sl, sh = _conv(tlo, thi, v, s, k, 1, b)
+                        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[v, 0, b], thi[v, 0, b])
                 elif o == T_SQRT:
                     if k == 0:
                         tlo[s, 0, b], thi[s, 0, b] = _k.sqrt(tlo[u, 0, b], thi[u, 0, b])
@@ -340,7 +385,7 @@ class TaylorODE:
         plo = np.ascontiguousarray(p.lo.reshape(nb, self.n_params).T)
         phi = np.ascontiguousarray(p.hi.reshape(nb, self.n_params).T)
         t = self._tape
-        lo, hi = _taylor_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.clo, t.chi, t.outputs, xlo, xhi, plo, phi, order)
+        lo, hi = _taylor_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, xlo, xhi, plo, phi, order)
         # (n, order+1, B) -> (..., order+1, n)
         lo = np.moveaxis(lo, 2, 0).transpose(0, 2, 1).reshape(batch + (order + 1, self.n))
         hi = np.moveaxis(hi, 2, 0).transpose(0, 2, 1).reshape(batch + (order + 1, self.n))
