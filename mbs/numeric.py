@@ -19,11 +19,14 @@ Algorithms (Featherstone, "Rigid Body Dynamics Algorithms"; Pinocchio's names):
   (reference: base frame origin, fixed base included; see :mod:`mbs.symbolic`),
 - :meth:`mass_matrix` -- composite rigid body algorithm (crba), M(q) of eq. (4)/(13),
 - :meth:`rnea` / :meth:`bias` / :meth:`gravity_torque` -- recursive Newton-Euler,
-- :meth:`acceleration` -- qdd from M qdd = tau - D qd - bias(q, qd), solved by an LDL^T
-  factorization written over the generic scalar (M is symmetric positive definite, no
-  pivoting, so it traces into a fixed graph).  A pivot that is not (proven) positive --
+- :meth:`acceleration` -- qdd from M qdd = tau - D qd - bias(q, qd).  M is checked by an
+  LDL^T factorization written over the generic scalar (M is symmetric positive definite,
+  no pivoting, so it traces into a fixed graph): a pivot that is not (proven) positive --
   M singular, e.g. masses on a joint axis -- raises :class:`~mbs.errors.SingularMassMatrixError`
-  naming the joints (floats, constants, intervals); never a silent 0.
+  naming the joints (floats, constants, intervals); never a silent 0.  The solve itself
+  is :func:`verified.preconditioned.solve` (``(C M)^-1 C b`` with ``C = mid(M)^-1``) by
+  default, which keeps interval-type evaluations of qdd tight; ``linear_solve = "ldl"``
+  selects plain LDL^T substitution instead.
 
 Vectors are returned as numpy arrays when every input is a float / float array, else as
 Python lists of generic scalars (matrices: list of rows).
@@ -98,10 +101,21 @@ def _plain_out(vals, *inputs):
     return np.array(flat, dtype=float)
 
 
-class NumericModel:
-    """Recursive generic-scalar algorithms for a :class:`mbs.Chain` (constants as floats)."""
+#: how :meth:`NumericModel.acceleration` solves M qdd = rhs: "preconditioned"
+#: (midpoint-inverse preconditioning, :mod:`verified.preconditioned`) or "ldl"
+LINEAR_SOLVES = ("preconditioned", "ldl")
 
-    def __init__(self, chain):
+
+class NumericModel:
+    """Recursive generic-scalar algorithms for a :class:`mbs.Chain` (constants as floats).
+
+    ``linear_solve`` (one of :data:`LINEAR_SOLVES`, default "preconditioned") selects
+    how qdd is solved from M qdd = rhs in :meth:`acceleration` and the graphs."""
+
+    def __init__(self, chain, linear_solve="preconditioned"):
+        if linear_solve not in LINEAR_SOLVES:
+            raise ValueError(f"linear_solve must be one of {LINEAR_SOLVES}, got {linear_solve!r}")
+        self.linear_solve = linear_solve
         if chain.free_symbols:
             raise ModelError(f"chain {chain.name!r} has free symbols {sorted(map(str, chain.free_symbols))}; "
                              "substitute values with chain.subs({...}) before numeric()")
@@ -315,7 +329,7 @@ class NumericModel:
             U, D = ldl_factor(M)
         except SingularMassMatrixError as e:
             raise self._singular_error(e, q) from None
-        qdd = ldl_substitute(U, D, rhs)
+        qdd = solve_mass_matrix(M, U, D, rhs, self.linear_solve)
         return _plain_out(qdd, q, qd, tt)
 
     # ------------------------------------------------------------------ singular M
@@ -541,6 +555,25 @@ def ldl_substitute(U, D, b):
             s = sub(s, mul(U[i][j], x[j]))
         x[i] = div(s, D[i])
     return x
+
+
+def solve_mass_matrix(M, U, D, rhs, method="preconditioned"):
+    """qdd = M^{-1} rhs given M's checked LDL^T factors (U, D): by
+    :func:`verified.preconditioned.solve` (``method="preconditioned"``) or by LDL^T
+    substitution (``"ldl"``).  Floats and sympy expressions always take the
+    substitution: preconditioning only changes enclosures (intervals, traced graphs),
+    and it would bury a symbolic qdd under a symbolic inverse."""
+    if method == "preconditioned" and len(rhs) > 1 and not _all_float(M, rhs) \
+            and not any(is_sympy(v) for row in M for v in row):
+        from verified.preconditioned import solve
+        return solve(M, rhs)
+    return ldl_substitute(U, D, rhs)
+
+
+def _all_float(M, rhs):
+    def plain(v):
+        return isinstance(v, (int, float, np.floating, np.integer, np.ndarray)) and not isinstance(v, bool)
+    return all(plain(v) for v in rhs) and all(plain(v) for row in M for v in row)
 
 
 def ldl_solve(M, b):

@@ -422,7 +422,8 @@ def _ldl_solve_named(self, M, rhs, x):
             raise SingularMassMatrixError(f"{e} (joint {self.chain.joint_names[k]!r})",
                                           joints=[self.chain.joint_names[k]], indices=[k], kind=e.kind) from None
         raise num._singular_error(e, x[:self.n]) from None
-    return ldl_substitute(U, D, rhs)
+    from .numeric import solve_mass_matrix
+    return solve_mass_matrix(M, U, D, rhs, getattr(self, "linear_solve", "preconditioned"))
 
 
 def _sym_energy_graph(self):
