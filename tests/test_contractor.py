@@ -261,6 +261,27 @@ def test_hc4_oracle_bites_one_projection_too_far(monkeypatch):
     assert violations(tree, 1, lo, hi, clo, chi, samples)
 
 
+def test_hc4_regression_real_value_between_floats():
+    """tan((1 + x)^6)^2 at a point x: the value w = (1 + x)^6 is a real strictly inside
+    a float interval; a verified cut at a float c must move the bound to c, not to the
+    float after c (found by the slow hypothesis run)."""
+    case = make_case(2662, 1, 5)
+    assert violations(case[0], 1, *case[1:]) == []
+
+
+def test_hc4_oracle_bites_cut_one_ulp_past_verified_point(monkeypatch):
+    """The bug above, reintroduced as a mutant, is caught."""
+    case = make_case(2662, 1, 5)
+    orig = contractor._mono_cut
+
+    def mutant(a, b, *args):
+        na, nb = orig(a, b, *args)
+        return (np.where(na > a, np.nextafter(na, UP), na), np.where(nb < b, np.nextafter(nb, DOWN), nb))
+
+    monkeypatch.setattr(contractor, "_mono_cut", mutant)
+    assert violations(case[0], 1, *case[1:])
+
+
 # ----------------------------------------------------------------- HC4 tightness
 
 

@@ -29,7 +29,7 @@ soundness, only the forward functions' (the trust model of the whole library).
 """
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -131,8 +131,10 @@ def _mono_cut(a, b, zlo, zhi, fn, inc, inv_zlo, inv_zhi):
     this piece (any value, even NaN, is sound). The lower end moves towards the guess
     for ``zlo`` where ``fn`` increases and for ``zhi`` where it decreases. A guess ``c`` is used only if the interval value ``fn([c, c])`` certainly
     violates the constraint on the side being cut: then every point of ``[a, c]``
-    (resp. ``[c, b]``) violates it too by monotonicity, and the end moves to the float
-    next to ``c``. Guesses are clipped to ``[a, b]`` and tried with outward margins from
+    (resp. ``[c, b]``) violates it too by monotonicity, and the end moves to ``c``
+    (not to the float after ``c``: the variable is real, and a true value, e.g. of an
+    intermediate node, may lie strictly between ``c`` and the next float). Only where
+    the verified ``c`` is the far end of the piece is the whole piece inconsistent. Guesses are clipped to ``[a, b]`` and tried with outward margins from
     tight to loose. Returns ``(lo, hi)``; ``lo > hi`` where the whole piece violates.
     """
     inv_low = np.where(inc, inv_zlo, inv_zhi)
@@ -150,12 +152,12 @@ def _mono_cut(a, b, zlo, zhi, fn, inc, inv_zlo, inv_zhi):
             ca = np.clip(inv_low - ((np.abs(inv_low) + w) * m + (5e-324 if m else 0.0)), a, b)
             fa = fn(_point(np.where(np.isfinite(ca), ca, 0.0)))
             ok = ~done_a & np.isfinite(ca) & np.where(inc, fa.hi < zlo, fa.lo > zhi)
-            new_a = np.where(ok, np.nextafter(ca, _INF), new_a)
+            new_a = np.where(ok, np.where(ca >= b, np.nextafter(b, _INF), ca), new_a)
             done_a |= ok
             cb = np.clip(inv_high + ((np.abs(inv_high) + w) * m + (5e-324 if m else 0.0)), a, b)
             fb = fn(_point(np.where(np.isfinite(cb), cb, 0.0)))
             ok = ~done_b & np.isfinite(cb) & np.where(inc, fb.lo > zhi, fb.hi < zlo)
-            new_b = np.where(ok, np.nextafter(cb, -_INF), new_b)
+            new_b = np.where(ok, np.where(cb <= a, np.nextafter(a, -_INF), cb), new_b)
             done_b |= ok
     return new_a, new_b
 
@@ -253,9 +255,10 @@ def _project_periodic(op, xlo, xhi, zlo, zhi):
         hit = active & fm.overlaps(Z)
         new_lo = np.where(hit, C.lo, new_lo)
         active &= ~hit
-        cur = np.where(active, np.nextafter(mid_hi, _INF), cur)
-        gone = active & (cur > xh)
-        new_lo = np.where(gone, cur, new_lo)
+        # [.., mid_hi] is inconsistent; reals above mid_hi may not be (no nextafter)
+        gone = active & (mid_hi >= xh)
+        new_lo = np.where(gone, np.nextafter(xh, _INF), new_lo)
+        cur = np.where(active, mid_hi, cur)
         active &= ~gone
         new_lo = np.where(active, cur, new_lo)  # everything below cur is inconsistent
         k = k + 1
@@ -285,9 +288,9 @@ def _project_periodic(op, xlo, xhi, zlo, zhi):
         hit = active & fm.overlaps(Z)
         new_hi = np.where(hit, C.hi, new_hi)
         active &= ~hit
-        cur = np.where(active, np.nextafter(mid_lo, -_INF), cur)
-        gone = active & (cur < xl)
-        new_hi = np.where(gone, cur, new_hi)
+        gone = active & (mid_lo <= xl)
+        new_hi = np.where(gone, np.nextafter(xl, -_INF), new_hi)
+        cur = np.where(active, mid_lo, cur)
         active &= ~gone
         new_hi = np.where(active, cur, new_hi)
         k = k - 1
@@ -702,7 +705,10 @@ class EnergyShell:
         nq = self.nq
         B = boxes.shape[0]
         k = max(1, int(np.floor(pieces ** (1.0 / nq) + 1e-9)))
-        Qall = boxes[:, :nq].subdivide(k)  # (B, P, nq)
+        qlo, qhi = boxes.lo[:, :nq], boxes.hi[:, :nq]
+        finite = (np.isfinite(qlo) & np.isfinite(qhi) & (qlo <= qhi)).all(axis=1)
+        # rows with an unbounded (or empty) q get a stand-in box and no bound below
+        Qall = _I(np.where(finite[:, None], qlo, 0.0), np.where(finite[:, None], qhi, 0.0)).subdivide(k)
         P = Qall.shape[1]
         Q = Qall.reshape(B * P, nq)
         BP = B * P
@@ -729,7 +735,8 @@ class EnergyShell:
         bound = np.where(ok, bound, _INF)
         # a piece where V > hmax everywhere holds no state of the shell: it adds nothing
         bound = np.where((s_hi < 0)[:, None], -1.0, bound)
-        return bound.reshape(B, P, nq).max(axis=1)
+        bound = bound.reshape(B, P, nq).max(axis=1)
+        return np.where(finite[:, None], bound, _INF)
 
     def contract(self, boxes, hmax, hmin=None, params=None, *, rounds: int = 2,
                  max_iter: int = 2, tol: float = 1e-3, pieces: int = 256) -> ContractResult:
