@@ -89,7 +89,7 @@ def test_oracle_bites_when_the_error_term_is_dropped(monkeypatch):
 
     def broken_step(self, sets, h, X, E, cE):
         new = real_step(self, sets, h, X, E, cE)
-        new.r = point(np.zeros(new.r.shape))
+        new.sets.r = point(np.zeros(new.sets.r.shape))  # (step returns a StepResult)
         return new
 
     monkeypatch.setattr(lohner.LohnerStepper, "step", broken_step)

@@ -34,14 +34,16 @@ test back over the last step and compares with the forward sets there.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from . import linalg
 from .graph import Graph, GraphBuilder
 from .graph_ops import augment_with_rate, difference, embed, negated, rate_along
+from .hooks import Hook
 from .interval import Interval, concatenate, hull, point
+from .sets import DoubletonSets
 
 __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES"]
 
@@ -113,8 +115,14 @@ class ConsistencyRecord:
     tests: list = field(default_factory=list)
 
 
-class EnergyTest:
+class EnergyTest(Hook):
     """The energy consistency test, optional further constraints, and the backward test.
+
+    A solver hook (:mod:`verified.hooks`; ``solve(..., consistency=test)`` or
+    ``hooks=[test]``): ``before_run`` appends the energy state ``h`` and caps the step
+    at ``max_interval``; ``after_step`` records ``RA(t)`` and, at ``t*``, prunes the sets
+    (rolling the last step back when ``RA`` peaked at the step before);
+    ``after_run`` attaches the record and the statistics to the Solution.
 
     Parameters
     ----------
@@ -184,6 +192,37 @@ class EnergyTest:
         self.backward_depth = int(backward_depth)
         self.max_boxes = int(max_boxes)
 
+    # ------------------------------------------------------------------ solver hook
+    def before_run(self, setup):
+        """Bind to the run (see :meth:`prepare`): the graph with ``h`` appended, the
+        initial sets with ``h(0)``, steps of at most ``max_interval``."""
+        graph = self.prepare(setup.user_graph, setup.graph, setup.n_state, setup.params, t0=setup.t0)
+        # "a test at least every max_interval seconds"
+        return replace(setup, graph=graph, sets=self.initial_sets(setup.sets),
+                       h_max=min(setup.h_max, self.max_interval))
+
+    def after_step(self, step, sets, run):
+        """Record ``RA(t)``; at ``t*`` branch and prune (returns the surviving sets)."""
+        decision = self.observe(step.t, sets)
+        if decision == "previous":
+            back = run.rollback()
+            if back is not None:
+                # RA(t) peaked at the previous step: t* is there, roll back to it
+                step, sets = back
+                self.forget_last()
+                decision = "now"
+        if decision != "now":
+            return None
+        prev = (step.previous, step.h, run.make_stepper) if self.backward_depth else None
+        sets = self.apply(step.t, step.t_enclosure, sets, prev)
+        if sets.n_sets == 0:
+            run.stop("the consistency test removed every set (inconsistent model or constraints?)", "breakdown")
+        return sets
+
+    def after_run(self, solution):
+        solution.consistency = self.finish()
+        solution.stats.update(self.stats)
+
     # ------------------------------------------------------------------ set-up
     def prepare(self, rhs: Graph, integrated: Graph, n_x: int, params: Interval | None, t0: float = 0.0):
         """Bind to one solve: ``rhs`` is the user's ODE over ``(x, p)``; ``integrated``
@@ -244,8 +283,6 @@ class EnergyTest:
         """Append ``h(0) = H(x0)`` to the initial doubleton sets, correlated with ``r0``:
         ``H(x0) ∈ H(c) + DH(X0) (x0 - c)`` (mean value theorem), the midpoint of
         ``DH(X0) C`` entering the linear part and everything else the error part."""
-        from .lohner import DoubletonSets
-
         if self._energy is None:
             return sets
         nb, n = sets.c.shape
@@ -379,8 +416,6 @@ class EnergyTest:
 
         ``previous``: ``(sets, h_step, make_stepper)`` of the step before, for the
         backward test (or None)."""
-        from .lohner import DoubletonSets
-
         w0 = time.perf_counter()
         nb0 = sets.n_sets
         checks = self._checks(sets, t_iv)
@@ -444,8 +479,6 @@ class EnergyTest:
 
     def _worth_refining(self, sets, parts, root):
         """Keep the parts of a set only where they narrow its hull by ``min_gain``."""
-        from .lohner import DoubletonSets
-
         nb0 = sets.n_sets
         ph = parts.hull()
         lo = np.full((nb0, ph.shape[1]), np.inf)
@@ -465,8 +498,6 @@ class EnergyTest:
         """From the pruned tree, the maximal nodes with no pruned descendant (all
         kept leaves with ``refine="always"``). Returns the nodes to keep and the
         index of the set each came from."""
-        from .lohner import DoubletonSets
-
         depth = len(levels) - 1
         roots = [np.flatnonzero(levels[0][2])]
         for l in range(1, depth + 1):
@@ -565,7 +596,7 @@ def _one_step(stepper, sets, h):
     if validated is None:
         return None
     E, cE = validated
-    return stepper.step(sets, h, X, E, cE).hull()
+    return stepper.step(sets, h, X, E, cE).sets.hull()
 
 
 def _meets_any(boxes: Interval, F: Interval) -> np.ndarray:

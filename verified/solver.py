@@ -14,7 +14,16 @@ into a uniform grid (``subdivision``). All boxes advance together with one commo
 size through the batched QR-Lohner step of :mod:`verified.lohner`.
 
 A break-down is a result, not an exception: everything up to the last verified time is
-returned with ``status = "breakdown"`` and the reason.
+returned with ``status = "breakdown"`` and the reason; so is a stop asked for by a hook
+(``"stopped"``) and a ``KeyboardInterrupt`` (``"interrupted"``).
+
+:func:`solve` is the driver loop: per step it takes the hull of the sets, asks the
+step control (:mod:`verified.policies`) for a step size the stepper
+(:class:`verified.lohner.LohnerStepper`, a :class:`verified.stepper.Stepper`) can
+validate, advances the sets (:mod:`verified.sets`) to a
+:class:`~verified.stepper.StepResult`, records it, and calls the hooks
+(:mod:`verified.hooks`: progress, the consistency test, stop rules); adaptive splitting
+and merging follow. See ``docs/architecture.md``.
 """
 
 from __future__ import annotations
@@ -26,9 +35,12 @@ from fractions import Fraction
 import numpy as np
 
 from .graph import Graph
+from .hooks import ProgressHook, RunSetup, check_hooks
 from .interval import Interval, concatenate, hull, stack
-from .lohner import DoubletonSets, LohnerStepper
+from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
+from .policies import REMAINDER_SLACK, MergePolicy, SplitPolicy, StepControl, WrapControl  # noqa: F401
+from .sets import DoubletonSets
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from .taylor import TaylorODE
 from .variational import params_as_states, variational_graph
@@ -82,7 +94,10 @@ class Solution:
     tube_hull : Interval (s, n)
     t_reached : float
         The last time up to which the enclosure is verified.
-    status : "completed" or "breakdown"
+    status : "completed", "breakdown", "stopped" or "interrupted"
+        "stopped": a hook asked to stop (:mod:`verified.hooks`, e.g. a wall-clock cap);
+        "interrupted": ``KeyboardInterrupt`` during the integration. Everything up to
+        ``t_reached`` is verified in every case.
     reason : str
         Why the integration stopped early ("" when completed).
     stats : dict
@@ -143,6 +158,7 @@ def solve(
     error_basis: str = "qr",
     arithmetic: str | None = None,
     consistency=None,
+    hooks=(),
     progress=None,
 ) -> Solution:
     """Verified enclosure of all solutions of ``x' = f(x, p)`` from ``x0``.
@@ -199,6 +215,12 @@ def solve(
         test (paper sec. 4): branch and prune at the first local maximum of the
         reduction area RA(t), at least every ``max_interval`` seconds. Its record
         (RA(t), H_H, H_V, every test) is returned as ``Solution.consistency``.
+    hooks : sequence of hook objects (:mod:`verified.hooks`)
+        Called before the run, after every accepted step (with the step's
+        :class:`~verified.stepper.StepResult` and the sets; a hook may replace the sets
+        by sets enclosing the same true states, roll the step back, or stop the run) and
+        on the Solution, in this order after ``progress`` and ``consistency``. For
+        example :class:`verified.hooks.StopAfterWall` caps the wall-clock time.
     progress : callable(t, t_end) or None
         Called after every accepted step (for progress bars).
     wrap_target : wrapping control: the next step is shortened when a step injected
@@ -208,6 +230,10 @@ def solve(
     Returns
     -------
     Solution
+        Also when the run ends early: ``status="breakdown"`` (the enclosure could not be
+        continued), ``"stopped"`` (a hook asked to stop, e.g. a wall-clock cap) or
+        ``"interrupted"`` (``KeyboardInterrupt`` during the integration), with the
+        reason and everything verified up to ``t_reached``.
 
     Raises
     ------
@@ -224,6 +250,80 @@ def solve(
         t_span=t_span, t_eval=t_eval, order=order, tol=tol, h_max=h_max, h_min=h_min, max_steps=max_steps,
         max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
         wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, progress=progress)
+    hook_list = ([ProgressHook(progress, t1)] if progress is not None else []) \
+        + check_hooks([] if consistency is None else [consistency]) + check_hooks(hooks)
+    setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic)
+    for hook in hook_list:
+        setup = hook.before_run(setup) or setup
+    if setup.graph is not prob.graph:  # a hook appended states (the energy test's h)
+        prob = VerifiedODE(setup.graph, prob.arithmetic)
+    stepper = _stepper(prob, order, setup.params, error_basis)
+    control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
+    wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
+    split = SplitPolicy(split_ratio, max_boxes, tol) if adaptive else None
+    merge = MergePolicy(merge_slack) if adaptive and merge_slack is not None else None
+    def make_stepper(graph):  # a stepper of this run's kind for another graph (backward tests)
+        return _stepper(VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis)
+
+    run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper)
+    # benchmarks/bench_robots.py reads out_t, out_boxes, tube, tube_t, t and steps from this
+    # frame when its progress callback raises (its wall cap); StopAfterWall replaces that
+    out_t, out_boxes, tube, tube_t = run.out_t, run.out_boxes, run.tube, run.tube_t
+    t, steps = t0, 0
+    try:
+        while run.next_out < outs.size:
+            if steps >= max_steps:
+                run.stop(f"maximum number of steps ({max_steps}) reached", "breakdown")
+                break
+            X = run.hull_for_step(param_boxes, setup.n_state, setup.n_steer, max_width)
+            if X is None:
+                break
+            cX = stepper.coefficients(X)
+            run.evaluations += 1
+            if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
+                run.stop("Taylor coefficients are unbounded (division by an interval containing zero)", "breakdown")
+                break
+            gap_lo, gap_hi = run.gap()
+            found = control.validate(stepper, X, cX, control.propose(stepper, cX, wrap.h_limit, gap_lo, gap_hi))
+            run.evaluations += found.evaluations
+            run.rejected += found.rejected
+            if found.enclosure is None:
+                run.stop(f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}", "breakdown")
+                break
+            step = run.advance(stepper, X, found, gap_lo, gap_hi)
+            t, steps = run.t, steps + 1
+            wrap.update(step)
+            run.call_hooks(hook_list, step)
+            t = run.t  # a hook may have rolled the step back
+            if step.landed and run.sets.n_sets:
+                run.record_output()
+            if run.status:
+                break
+            if split is not None:
+                run.sets, n_split, reason = split.apply(step, run.sets)
+                if reason:
+                    run.stop(reason, "breakdown")
+                    break
+                run.splits += n_split
+                run.max_sets = max(run.max_sets, run.sets.n_sets)
+            if merge is not None:
+                run.sets, merged = merge.apply(run.sets)
+                run.merges += merged
+    except KeyboardInterrupt:
+        # Ctrl-C: everything recorded so far is verified; return it
+        run.stop(f"interrupted (KeyboardInterrupt) after t = {run.tube_t[-1]:g}", "interrupted")
+    result = run.solution(setup.n_state, order, boxes.shape[0], steps, tuple(prob.graph.input_names[:setup.n_state]))
+    result.stats["wall_s"] = time.perf_counter() - wall0
+    for hook in hook_list:
+        hook.after_run(result)  # records and statistics of the hooks
+    result.stats["wall_s"] = time.perf_counter() - wall0
+    return result
+
+
+def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic):
+    """The checked problem: ``(RunSetup, VerifiedODE, param_boxes, boxes)``. Uncertain
+    parameters become constant states after the ODE's (``param_boxes`` (p,): their
+    hull over the initial boxes, else None); ``boxes`` (B, N) the initial boxes."""
     graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
     n = graph.n_inputs
     boxes = initial_boxes(x0, n, subdivision)
@@ -235,7 +335,6 @@ def solve(
         prob = ode
     else:
         prob = VerifiedODE(graph, "interval" if arithmetic is None else arithmetic)
-    n_state = n
     param_boxes = None
     if params is not None and (params.width() > 0).any():
         # Uncertain parameters become constant states, so their influence is carried
@@ -245,195 +344,153 @@ def solve(
         boxes = concatenate([boxes, p_boxes], axis=1)
         param_boxes = hull(p_boxes, axis=0)  # (p,): valid for every set, also after splits
         params = None
-    n_solver = prob.n  # states the solver integrates before any energy state
-    test = consistency
-    if test is not None:
-        user_graph = ode.graph if isinstance(ode, VerifiedODE) else ode
-        prob = VerifiedODE(test.prepare(user_graph, prob.graph, n_state, params, t0=t0), prob.arithmetic)
-    stepper = _stepper(prob, order, params, error_basis)
-    sets = DoubletonSets.from_boxes(boxes)
-    if test is not None:
-        sets = test.initial_sets(sets)
-    history = []  # (sets, t_exact, t, h_step) before the last accepted steps
-    max_sets = sets.n_sets
-    if test is not None:
-        h_max = min(h_max, test.max_interval)  # "a test at least every max_interval seconds"
+    setup = RunSetup(user_graph=graph, graph=prob.graph, n_state=n, n_steer=prob.n, params=params, t0=t0,
+                     sets=DoubletonSets.from_boxes(boxes), h_max=h_max)
+    return setup, prob, param_boxes, boxes
 
-    out_t, out_boxes = [t0], [boxes[:, :n_state]]
-    tube_t, tube = [t0], []
-    # Time is kept exactly (a sum of float steps) so that every enclosure belongs to
-    # the time it is reported at; a step landing on an output time uses an interval
-    # step [h] that encloses the exact remaining gap.
-    t_exact = Fraction(t0)
-    t = t0
-    next_out = 1
-    status, reason = "completed", ""
-    steps = rejected = evaluations = splits = merges = pruned = 0
-    h_wrap = np.inf  # step limit from wrapping control (see below)
-    while next_out < outs.size:
-        if steps >= max_steps:
-            status, reason = "breakdown", f"maximum number of steps ({max_steps}) reached"
-            break
-        X = sets.hull()
+
+class _Run:
+    """The state of one integration: the sets, the exact time, what has been recorded,
+    and the counters. It is the :class:`~verified.hooks.RunControl` the hooks get."""
+
+    def __init__(self, setup: RunSetup, initial: Interval, outs: np.ndarray, make_stepper):
+        self.sets = setup.sets
+        self.outs = outs  # (k,) output times, outs[0] = t0
+        self.make_stepper = make_stepper
+        self.next_out = 1
+        # Time is kept exactly (a sum of float steps) so that every enclosure belongs to
+        # the time it is reported at; a step landing on an output time uses an interval
+        # step [h] that encloses the exact remaining gap.
+        self.t_exact = Fraction(setup.t0)
+        self.t = setup.t0
+        self.out_t, self.out_boxes = [setup.t0], [initial]  # initial (B, n_state): the boxes at t0
+        self.tube_t, self.tube = [setup.t0], []
+        self.step = None  # the last accepted step (after a rollback: the one before)
+        self.recent = []  # the last two steps since a hook last replaced the sets (for rollback)
+        self.status, self.reason = "", ""
+        self.evaluations = self.rejected = self.splits = self.merges = self.pruned = 0
+        self.max_sets = self.sets.n_sets
+        self.n_state = setup.n_state
+
+    # ------------------------------------------------------------------ RunControl
+    def stop(self, reason: str, status: str = "stopped") -> None:
+        if not self.status:  # the first reason wins
+            self.status, self.reason = status, reason
+
+    def rollback(self):
+        if self.step is None or self.step.landed or len(self.recent) < 2:
+            return None
+        last = self.recent.pop()
+        self.tube.pop()
+        self.tube_t.pop()
+        self.sets, self.t, self.t_exact = last.previous, last.t_start, last.t_exact_start
+        self.step = self.recent[-1]
+        return self.step, self.sets
+
+    # ------------------------------------------------------------------ one step
+    def hull_for_step(self, param_boxes, n_state: int, n_steer: int, max_width: float):
+        """The hull (B, N) of the sets to take the step's coefficients over, or None
+        (a break-down: not finite or wider than ``max_width``)."""
+        X = self.sets.hull()
         if param_boxes is not None:
             # Parameters never change: their true values stay in the given boxes, so
             # the hull used for the Taylor coefficients and the Jacobian may be cut
             # down to them (wrapping may have smeared error into those components).
-            X[:, n_state:n_solver] = X[:, n_state:n_solver].intersect(param_boxes)
+            X[:, n_state:n_steer] = X[:, n_state:n_steer].intersect(param_boxes)
             # A set (for example one half of a split error box) whose parameter range
             # misses the parameter boxes holds no true solution: drop it.
             feasible = ~X.is_empty().any(axis=1)
             if not feasible.all():
-                sets = sets.take(np.flatnonzero(feasible))
+                self.sets = self.sets.take(np.flatnonzero(feasible))
                 X = X[feasible]
-                pruned += int((~feasible).sum())
+                self.pruned += int((~feasible).sum())
         if not (np.isfinite(X.lo).all() and np.isfinite(X.hi).all()):
-            status, reason = "breakdown", "enclosure is not finite (division by an interval containing zero?)"
-            break
+            self.stop("enclosure is not finite (division by an interval containing zero?)", "breakdown")
+            return None
         if (X.width() > max_width).any():
-            status, reason = "breakdown", f"enclosure too wide (a component exceeds width {max_width:g})"
-            break
-        cX = stepper.coefficients(X)
-        evaluations += 1
-        if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
-            status, reason = "breakdown", "Taylor coefficients are unbounded (division by an interval containing zero)"
-            break
-        gap = Fraction(float(outs[next_out])) - t_exact
-        gap_lo, gap_hi = _round_down(gap), _round_up(gap)
-        # an energy state added by a consistency test does not steer the step size:
-        # its rate is ~0 with wide interval coefficients (unsimplified dH/dt)
-        h = min(stepper.suggest_step(cX, tol, n_solver), h_max, h_wrap, gap_hi)
-        if h >= gap_lo:
-            h = gap_hi  # land on the output time; validate the enclosure up to gap_hi
-        validated = None
-        while True:
-            validated = stepper.apriori(X, cX, h)
-            evaluations += 1
-            if validated is not None:
-                # Remainder control: h was chosen from the order-K coefficient over the
-                # hull X, but the Lagrange remainder takes it over the wider a-priori
-                # enclosure E. Over a deep model graph that can be many orders larger
-                # (measured: 7e-4 instead of 1e-10 on a 3-link arm's first step), and a
-                # remainder far above tol wrecks a narrow set for good.
-                rem = float(np.max(validated[1][:, stepper.order, :n_solver].mag())) * h**stepper.order
-                if not rem > REMAINDER_SLACK * tol or h < h_min:
-                    break
-                validated = None
-                h *= max(0.2, min(0.9, (REMAINDER_SLACK * tol / rem) ** (1.0 / stepper.order)))
-            elif h < h_min:
-                break
-            else:
-                h *= 0.5
-            rejected += 1
-        if validated is None:
-            status, reason = "breakdown", f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}"
-            break
-        E, cE = validated
+            self.stop(f"enclosure too wide (a component exceeds width {max_width:g})", "breakdown")
+            return None
+        return X
+
+    def gap(self):
+        """Floats ``lo <= exact time to the next output <= hi``."""
+        gap = Fraction(float(self.outs[self.next_out])) - self.t_exact
+        return _round_down(gap), _round_up(gap)
+
+    def advance(self, stepper, X, found, gap_lo, gap_hi):
+        """Take the validated step ``found`` (:class:`~verified.policies.Validated`),
+        stamp its times and record its tube; returns the StepResult."""
+        E, cE = found.enclosure
+        h = found.h
         landing = h == gap_hi
-        t_exact_before = t_exact
         if landing:
             h_step = h if gap_lo == gap_hi else Interval(gap_lo, gap_hi)  # encloses the exact gap
-            t_exact = Fraction(float(outs[next_out]))
+            t_exact = Fraction(float(self.outs[self.next_out]))
         else:
             h_step = h
-            t_exact += Fraction(h)
-        history = (history + [(sets, t_exact_before, t, h_step)])[-2:]
-        sets = stepper.step(sets, h_step, X, E, cE)
-        evaluations += 2
-        t = float(outs[next_out]) if landing else float(t_exact)
-        tube.append(E[:, :n_state])
-        tube_t.append(t)
-        steps += 1
-        if progress is not None:
-            progress(t, t1)
-        # Wrapping control: the error a step injects through the spread of the
-        # Jacobian over a wide set grows faster than the step itself, so keep it at
-        # about wrap_target times the set's linear size by adapting the next step.
-        ratio = float(np.max(stepper.last_nonlinear_width[:, :n_solver].max(axis=1)
-                            / (sets.linear_width()[:, :n_solver].max(axis=1) + 1e-300)))
-        if ratio > wrap_target:
-            h_wrap = h * max(0.2, np.sqrt(wrap_target / ratio))
-        elif ratio < 0.25 * wrap_target:
-            h_wrap = min(2.0 * h_wrap, h_max)  # (unbounded doubling overflowed on long runs)
-        if test is not None:
-            decision = test.observe(t, sets)
-            if decision == "previous" and not landing and len(history) == 2:
-                # RA(t) peaked at the previous step: t* is there, roll back to it
-                sets, t_exact, t, _ = history.pop()
-                tube.pop()
-                tube_t.pop()
-                test.forget_last()
-                decision = "now"
-            if decision == "now":
-                t_iv = Interval(_round_down(t_exact), _round_up(t_exact))
-                prev = None
-                if test.backward_depth and history:
-                    prev_sets, _, _, prev_h = history[-1]
-                    prev = (prev_sets, prev_h, lambda g: _stepper(VerifiedODE(g, prob.arithmetic), order, params, error_basis))
-                sets = test.apply(t, t_iv, sets, prev)
-                history = []
-                if sets.n_sets == 0:
-                    status, reason = "breakdown", "the consistency test removed every set (inconsistent model or constraints?)"
-                    break
-            max_sets = max(max_sets, sets.n_sets)
-        if landing:
-            out_t.append(t)
-            out_boxes.append(sets.hull()[:, :n_state])
-            next_out += 1
-        if adaptive:
-            # One linearization per set stops following the curved reachable set when
-            # the error it injects per unit time (the Jacobian's spread over the set
-            # times the set's linear part) is a sizeable fraction of the width of the
-            # whole union, which bounds what that error costs: split such sets.
-            # Halving a set roughly quarters its injection.
-            injected = stepper.last_nonlinear_width / h  # (B, n)
-            union_width = hull(X, axis=0).width()  # (n,)
-            grow = (injected > split_ratio * union_width + 1e3 * tol).any(axis=1)
-            if grow.any():
-                if sets.n_sets + int(grow.sum()) > max_boxes:
-                    status, reason = "breakdown", f"adaptive splitting needs more than max_boxes={max_boxes} boxes"
-                    break
-                sets = sets.split(grow)
-                splits += int(grow.sum())
-                max_sets = max(max_sets, sets.n_sets)
-            if merge_slack is not None and sets.n_sets > 1:
-                sets, merged = sets.merge_overlapping(merge_slack)
-                merges += merged
-    n_tube = len(tube)
-    result = Solution(
-        t=np.array(out_t),
-        boxes=out_boxes,
-        hull=_stack_hulls(out_boxes),
-        tube_t=np.array(tube_t),
-        tube=tube,
-        tube_hull=_stack_hulls(tube) if n_tube else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))),
-        t_reached=t,
-        status=status,
-        reason=reason,
-        stats=dict(
-            steps=steps,
-            rejected_steps=rejected,
-            boxes=nb,
-            final_boxes=sets.n_sets,
-            splits=splits,
-            merges=merges,
-            pruned_sets=pruned,
-            max_boxes=max_sets,
-            taylor_evaluations=evaluations,
-            order=order,
-            wall_s=time.perf_counter() - wall0,
-        ),
-        state_names=tuple(prob.graph.input_names[:n_state]),
-    )
-    if test is not None:
-        result.consistency = test.finish()
-        result.stats.update(test.stats)
-        result.stats["wall_s"] = time.perf_counter() - wall0
-    return result
+            t_exact = self.t_exact + Fraction(h)
+        step = stepper.step(self.sets, h_step, X, E, cE)
+        self.evaluations += 2
+        step.t_start, step.t_exact_start = self.t, self.t_exact
+        step.t = float(self.outs[self.next_out]) if landing else float(t_exact)
+        step.t_exact, step.landed = t_exact, landing
+        self.sets, self.t, self.t_exact, self.step = step.sets, step.t, t_exact, step
+        self.recent = (self.recent + [step])[-2:]
+        self.tube.append(E[:, :self.n_state])
+        self.tube_t.append(step.t)
+        return step
 
+    def call_hooks(self, hooks, step):
+        for hook in hooks:
+            new = hook.after_step(self.step, self.sets, self)
+            if new is not None:
+                self.sets = new
+                self.recent = []  # no rollback past sets a hook replaced
+            if self.status:
+                return
+        if self.sets.n_sets == 0:
+            self.stop("a hook removed every set", "breakdown")
+        self.max_sets = max(self.max_sets, self.sets.n_sets)
 
-#: a step is retried smaller when its remainder exceeds this many times ``tol``
-REMAINDER_SLACK = 10.0
+    def record_output(self):
+        boxes = self.sets.hull()[:, :self.n_state]
+        self.out_t.append(self.t)
+        self.out_boxes.append(boxes)
+        self.next_out += 1
+
+    # ------------------------------------------------------------------ result
+    def solution(self, n: int, order: int, n_boxes: int, steps: int, state_names: tuple) -> "Solution":
+        # consistent lengths also when a KeyboardInterrupt arrived between two appends
+        k = min(len(self.out_t), len(self.out_boxes))
+        status, reason = self.status or "completed", self.reason
+        if status == "stopped" and k == self.outs.size:
+            status, reason = "completed", ""  # a stop asked for after the last output changes nothing
+        n_tube = min(len(self.tube), len(self.tube_t) - 1)
+        out_boxes, tube, tube_t = self.out_boxes[:k], self.tube[:n_tube], self.tube_t[:n_tube + 1]
+        return Solution(
+            t=np.array(self.out_t[:k]),
+            boxes=out_boxes,
+            hull=_stack_hulls(out_boxes),
+            tube_t=np.array(tube_t),
+            tube=tube,
+            tube_hull=_stack_hulls(tube) if n_tube else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))),
+            t_reached=tube_t[-1],
+            status=status,
+            reason=reason,
+            stats=dict(
+                steps=steps,
+                rejected_steps=self.rejected,
+                boxes=n_boxes,
+                final_boxes=self.sets.n_sets,
+                splits=self.splits,
+                merges=self.merges,
+                pruned_sets=self.pruned,
+                max_boxes=self.max_sets,
+                taylor_evaluations=self.evaluations,
+                order=order,
+            ),
+            state_names=state_names,
+        )
 
 
 def _stepper(prob: VerifiedODE, order, params, error_basis) -> LohnerStepper:

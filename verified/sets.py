@@ -1,0 +1,232 @@
+"""Set representations the verified solver carries from step to step.
+
+A *set batch* holds ``B`` sets of the same kind and dimension ``n``; the solver's
+driver (:func:`verified.solver.solve`), its policies (:mod:`verified.policies`) and
+its hooks (:mod:`verified.hooks`) use only the operations of :class:`SetBatch`, so a
+new representation (Taylor models, say) plugs in by implementing them and a stepper
+that advances it (see :class:`verified.stepper.Stepper`).
+
+:class:`DoubletonSets` is the QR-Lohner doubleton ``c + C r0 + Q r`` (CAPD's
+``Rect2``) advanced by :class:`verified.lohner.LohnerStepper`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from . import linalg
+from .interval import Interval, concatenate, point
+
+__all__ = ["SetBatch", "DoubletonSets"]
+
+
+@runtime_checkable
+class SetBatch(Protocol):
+    """What the driver, the policies and the hooks need from a batch of ``B`` sets.
+
+    Every method returns new objects (a batch is not changed in place), and every
+    operation that changes the sets encloses what it was given: ``split`` returns parts
+    whose union covers the set, ``merge_overlapping`` sets that cover the merged ones.
+    """
+
+    @property
+    def n_sets(self) -> int:
+        """``B``, the number of sets."""
+
+    def hull(self) -> Interval:
+        """Interval hull of each set, shape (B, n)."""
+
+    def take(self, index) -> "SetBatch":
+        """The sets selected by an index array or boolean mask over ``B``."""
+
+    def linear_width(self) -> np.ndarray:
+        """Width of each set's part that is carried exactly by the representation
+        (no wrapping), per component, shape (B, n): the wrapping control compares a
+        step's injected error with it."""
+
+    def split(self, mask: np.ndarray) -> "SetBatch":
+        """The sets selected by ``mask`` (B,) cut in two, the others unchanged."""
+
+    def merge_overlapping(self, slack: float) -> tuple["SetBatch", int]:
+        """Neighbouring sets merged where one set covering both is at most ``1 + slack``
+        times as wide as their union's hull; returns the batch and the number of merges."""
+
+
+@dataclass
+class DoubletonSets:
+    """A batch of sets ``c + C r0 + Q r``; every array has the batch as first axis."""
+
+    c: np.ndarray  # (B, n)
+    C: np.ndarray  # (B, n, n)
+    r0: Interval  # (B, n), contains 0
+    Q: np.ndarray  # (B, n, n)
+    r: Interval  # (B, n)
+
+    @classmethod
+    def from_boxes(cls, boxes: Interval) -> "DoubletonSets":
+        nb, n = boxes.shape
+        c = boxes.mid()
+        eye = np.broadcast_to(np.eye(n), (nb, n, n)).copy()
+        return cls(c=c, C=eye, r0=boxes - c, Q=eye.copy(), r=point(np.zeros((nb, n))))
+
+    @property
+    def n_sets(self) -> int:
+        return self.c.shape[0]
+
+    def hull(self) -> Interval:
+        """Interval hull of each set, shape (B, n)."""
+        return (linalg.matvec(self.C, self.r0) + linalg.matvec(self.Q, self.r)) + self.c
+
+    def affine_forms(self, extra: int = 0) -> np.ndarray:
+        """Affine forms of the sets over their own ``2n`` parameters, shape
+        (n + extra, B, 2n + 2) (the ``extra`` rows are zero, for inputs the caller fills).
+
+        ``x = c + C a + Q b`` with ``a = mid(r0') + rad(r0') eps_a`` and likewise ``b``,
+        where ``r0' = hull(r0, 0)`` and ``r' = hull(r, 0)``: the forms cover the set and
+        its centre ``c`` (a mean-value form needs every segment from ``c`` into the set).
+        Column 0 is the centre, ``1..n`` the ``eps_a``, ``n+1..2n`` the ``eps_b``
+        coefficients, the last an error radius holding every rounding.
+        """
+        nb, n = self.c.shape
+        r0 = self.r0.hull(0.0)
+        r = self.r.hull(0.0)
+        ma, ra = r0.mid(), r0.rad()
+        mb, rb = r.mid(), r.rad()
+        centre = point(self.c) + linalg.matvec(self.C, point(ma)) + linalg.matvec(self.Q, point(mb))
+        cols_a = Interval(self.C) * ra[:, None, :]
+        cols_b = Interval(self.Q) * rb[:, None, :]
+        F = np.zeros((n + extra, nb, 2 * n + 2))
+        F[:n, :, 0] = centre.mid().T
+        F[:n, :, 1 : n + 1] = cols_a.mid().transpose(1, 0, 2)
+        F[:n, :, n + 1 : 2 * n + 1] = cols_b.mid().transpose(1, 0, 2)
+        err = centre.rad() + cols_a.rad().sum(axis=-1) + cols_b.rad().sum(axis=-1)
+        F[:n, :, 2 * n + 1] = (err * (1.0 + 2.0**-40) + 1e-300).T
+        return F
+
+    def take(self, index) -> "DoubletonSets":
+        return DoubletonSets(self.c[index], self.C[index], self.r0[index], self.Q[index], self.r[index])
+
+    def linear_width(self) -> np.ndarray:
+        """Width of the linear part ``C r0`` per box and component, shape (B, n)."""
+        return linalg.matvec(self.C, self.r0).width()
+
+    def split(self, mask: np.ndarray) -> "DoubletonSets":
+        """Split the sets selected by ``mask`` in two along their widest direction.
+
+        A set is ``{c + C a + Q b : a in r0, b in r}``; the direction is the component of
+        ``a`` or of ``b`` contributing most to the set's width (``|C_j| w(r0_j)`` or
+        ``|Q_j| w(r_j)``), so accumulated error can be split as well as the initial box.
+        Each half is recentred: its piece is shifted to be centred and the shift moves
+        into the centre ``c``; the rounding of that float centre is enclosed and folded
+        into the error vector (``r += Q^-1 d``). The union of the halves covers the set.
+        """
+        idx = np.flatnonzero(mask)
+        if idx.size == 0:
+            return self
+        part = self.take(idx)
+        halves = part.subdivide_along(np.argmax(part.direction_widths(), axis=1), 2)
+        keep = self.take(np.flatnonzero(~mask))
+        return DoubletonSets.concatenate([keep, halves])
+
+    def direction_widths(self) -> np.ndarray:
+        """Per set, the width each parameter direction gives the set, shape (B, 2n):
+        ``sum_i |C_ij| w(r0_j)`` for the ``r0`` directions, then ``|Q_ij| w(r_j)``."""
+        return np.concatenate(
+            [np.abs(self.C).sum(axis=1) * self.r0.width(), np.abs(self.Q).sum(axis=1) * self.r.width()], axis=1
+        )
+
+    def direction_columns(self) -> np.ndarray:
+        """The columns of ``[C | Q]``, shape (B, n, 2n): direction ``j`` moves the set
+        along column ``j`` per unit of its parameter (``r0_j`` or ``r_{j-n}``)."""
+        return np.concatenate([self.C, self.Q], axis=2)
+
+    def subdivide_along(self, which: np.ndarray, pieces: int) -> "DoubletonSets":
+        """Cut every set into ``pieces`` equal parts along one parameter direction.
+
+        ``which[b]`` in ``[0, 2n)`` picks ``r0_j`` (``j < n``) or ``r_{j-n}`` of set ``b``.
+        Returns ``B * pieces`` sets, set-major (the parts of set ``b`` are rows
+        ``b * pieces .. (b + 1) * pieces - 1``). Each part is recentred: its shift
+        moves into the float centre ``c`` and the rounding of that centre is enclosed
+        and folded into the error vector (``r += Q^-1 d``). Consecutive parts share
+        their float breakpoints, so the union of the parts covers the set exactly.
+        """
+        nb, n = self.c.shape
+        which = np.asarray(which, dtype=np.int64).reshape(nb)
+        pieces = int(pieces)
+        if pieces < 1:
+            raise ValueError(f"pieces must be >= 1, got {pieces}")
+        if pieces == 1 or nb == 0:
+            return self
+        rows = np.arange(nb)
+        in_r0 = which < n
+        j = np.where(in_r0, which, which - n)
+        lo = np.where(in_r0, self.r0.lo[rows, j], self.r.lo[rows, j])
+        hi = np.where(in_r0, self.r0.hi[rows, j], self.r.hi[rows, j])
+        frac = np.arange(pieces + 1) / pieces
+        cuts = lo[:, None] + (hi - lo)[:, None] * frac[None, :]
+        cuts[:, 0], cuts[:, -1] = lo, hi
+        cuts = np.maximum.accumulate(np.minimum(cuts, hi[:, None]), axis=1)  # monotone despite rounding
+        column = np.where(in_r0[:, None], self.C[rows, :, j], self.Q[rows, :, j])
+        parts = []
+        for p in range(pieces):
+            a, b = cuts[:, p], cuts[:, p + 1]
+            sh = 0.5 * a + 0.5 * b
+            piece = Interval._from_bounds(a, b) - sh  # outward rounded: contains the centred part
+            r0 = self.r0.copy()
+            r = self.r.copy()
+            for vec, sel in ((r0, in_r0), (r, ~in_r0)):
+                rr = rows[sel]
+                vec.lo[rr, j[sel]] = piece.lo[sel]
+                vec.hi[rr, j[sel]] = piece.hi[sel]
+            exact_c = self.c + Interval._from_bounds(column, column) * sh[:, None]
+            c_new = exact_c.mid()
+            d = exact_c - c_new  # the float centre's rounding, enclosed
+            r = r + linalg.solve(self.Q, d)
+            parts.append(DoubletonSets(c_new, self.C.copy(), r0, self.Q.copy(), r))
+        order = np.arange(nb * pieces).reshape(pieces, nb).T.ravel()  # set-major
+        return DoubletonSets.concatenate(parts).take(order)
+
+    def merge_overlapping(self, slack: float = 0.05) -> tuple["DoubletonSets", int]:
+        """Merge neighbouring sets whose union is covered by one of them, nearly.
+
+        Sets are ordered along the direction in which their centres spread most, and
+        each pair of neighbours ``(A, B)`` (disjoint pairs, greedily) is tested: A's
+        error box is widened to ``r' = hull(r_A, Q_A^-1 (hull(B) - c_A))``, which covers
+        B (take ``a = 0`` in ``r0_A``, which contains 0). The pair becomes that one set
+        when its hull is at most ``1 + slack`` times as wide (in every component) as
+        the hull of ``A ∪ B``: heavily overlapping sets cost one set instead of two.
+
+        Returns the merged batch and the number of merges.
+        """
+        nb, n = self.c.shape
+        if nb < 2:
+            return self, 0
+        spread = self.c.max(axis=0) - self.c.min(axis=0)
+        order = np.argsort(self.c[:, int(np.argmax(spread))], kind="stable")
+        a_idx, b_idx = order[0:-1:2], order[1::2]
+        A, B = self.take(a_idx), self.take(b_idx)
+        XA, XB = A.hull(), B.hull()
+        cover = linalg.solve(A.Q, XB - A.c, on_failure="entire")
+        r_new = A.r.hull(cover)
+        merged = DoubletonSets(A.c, A.C, A.r0, A.Q, r_new)
+        ok = (merged.hull().width() <= (1.0 + slack) * XA.hull(XB).width() + 1e-300).all(axis=1)
+        ok &= np.isfinite(r_new.lo).all(axis=1) & np.isfinite(r_new.hi).all(axis=1)
+        if not ok.any():
+            return self, 0
+        keep = np.ones(nb, dtype=bool)
+        keep[b_idx[ok]] = False
+        keep[a_idx[ok]] = False
+        return DoubletonSets.concatenate([self.take(np.flatnonzero(keep)), merged.take(np.flatnonzero(ok))]), int(ok.sum())
+
+    @staticmethod
+    def concatenate(parts) -> "DoubletonSets":
+        return DoubletonSets(
+            c=np.concatenate([p.c for p in parts]),
+            C=np.concatenate([p.C for p in parts]),
+            r0=concatenate([p.r0 for p in parts], axis=0),
+            Q=np.concatenate([p.Q for p in parts]),
+            r=concatenate([p.r for p in parts], axis=0),
+        )

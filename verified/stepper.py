@@ -1,0 +1,111 @@
+"""What one verified step produces (:class:`StepResult`) and what the driver asks of a
+stepper (:class:`Stepper`).
+
+The driver (:func:`verified.solver.solve`) owns time and bookkeeping; a stepper owns
+the arithmetic of one step for one set representation (:mod:`verified.sets`).
+:class:`verified.lohner.LohnerStepper` is the stepper for
+:class:`~verified.sets.DoubletonSets`; a Taylor-model stepper would implement the same
+four methods for its own sets.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Protocol
+
+import numpy as np
+
+from .interval import Interval
+
+__all__ = ["StepResult", "Stepper"]
+
+
+@dataclass
+class StepResult:
+    """One accepted step of every set of a batch, from ``t_start`` to ``t``.
+
+    The stepper fills the first six fields; the driver stamps the times.
+
+    Attributes
+    ----------
+    sets : SetBatch (B sets)
+        The sets at the end of the step: every solution starting in ``previous`` at
+        ``t_start`` lies in their union at ``t``.
+    previous : SetBatch (B sets)
+        The sets at the start of the step (a backward test integrates back to them).
+    h : float or Interval
+        The step taken (s): a float, or, when the step lands on an output time that
+        is not a float distance away, an interval enclosing the exact distance.
+    hull : Interval (B, N)
+        The hull of each set of ``previous`` the step's Taylor coefficients were
+        taken over (``N`` = states integrated, including parameters carried as
+        states and states appended by hooks).
+    tube : Interval (B, N)
+        The validated a-priori enclosure: every solution from ``hull`` stays in it
+        over ``[t_start, t]``.
+    nonlinear_width : ndarray (B, N)
+        Width of the error the step's linearization injected into each set (the
+        spread of the Jacobian over the set times the set's linear part), in state
+        units: drives the wrapping control and adaptive splitting.
+    t_start, t : float
+        Start and end time (s); ``t`` is the output time itself when ``landed``.
+    t_exact_start, t_exact : Fraction
+        The exact times (a sum of float steps; every enclosure belongs to them).
+    landed : bool
+        The step ended on a requested output time.
+    """
+
+    sets: object
+    previous: object
+    h: float | Interval
+    hull: Interval
+    tube: Interval
+    nonlinear_width: np.ndarray
+    t_start: float = math.nan
+    t: float = math.nan
+    t_exact_start: Fraction | None = None
+    t_exact: Fraction | None = None
+    landed: bool = False
+
+    @property
+    def length(self) -> float:
+        """The float step size the a-priori enclosure was validated for (s): ``h``, or
+        its upper end when ``h`` is an interval."""
+        return float(self.h.hi) if isinstance(self.h, Interval) else self.h
+
+    @property
+    def t_enclosure(self) -> Interval:
+        """A scalar interval of floats enclosing the exact time ``t_exact``."""
+        f = float(self.t_exact)
+        lo = f if Fraction(f) <= self.t_exact else float(np.nextafter(f, -np.inf))
+        hi = f if Fraction(f) >= self.t_exact else float(np.nextafter(f, np.inf))
+        return Interval(lo, hi)
+
+
+class Stepper(Protocol):
+    """One verified step for one set representation, batched over the sets.
+
+    The driver calls, per step: ``coefficients(X)`` on the hull ``X`` (B, N) of the
+    sets, ``suggest_step`` for a step size, ``apriori`` until an enclosure is
+    validated (shrinking ``h`` on failure), then ``step``.
+    """
+
+    order: int
+
+    def coefficients(self, X: Interval) -> Interval:
+        """Taylor coefficients of the solutions from the boxes ``X`` (B, N): shape
+        (B, order + 1, N)."""
+
+    def suggest_step(self, cX: Interval, tol: float, components: int | None = None) -> float:
+        """A step size (s) that makes the order-K term about ``tol`` on the first
+        ``components`` states."""
+
+    def apriori(self, X: Interval, cX: Interval, h: float):
+        """``(E, cE)``: an enclosure (B, N) of every solution from ``X`` over ``[0, h]``
+        and its Taylor coefficients, or None when it cannot be validated."""
+
+    def step(self, sets, h, X: Interval, E: Interval, cE: Interval) -> StepResult:
+        """Advance every set by ``h`` (float or Interval, s) given the hull ``X`` and
+        its a-priori enclosure ``E``; the times of the result are left to the driver."""
