@@ -343,19 +343,25 @@ class NumericModel:
         return _plain_out(D, q)
 
     def pivot_graph(self):
-        """Expression graph q -> (D_1, ..., D_n), the LDL^T pivots of M(q) (used by
-        :mod:`mbs.simulate` to prove M positive definite on the boxes of a verified
-        run).  Raises :class:`~mbs.errors.SingularMassMatrixError` when a pivot is the
-        constant 0 (M singular for every q)."""
+        """Expression graph q -> (D_1, ..., D_n): pivots whose positivity proves M(q)
+        positive definite (used by :mod:`mbs.simulate` on the boxes of a verified run).
+        With ``linear_solve="preconditioned"`` they are the LDL^T pivots of the
+        congruence K M K^T, K = L^-1 of mid(M) frozen
+        (:func:`verified.preconditioned.congruence_pivots`: same inertia, tight over
+        boxes), else the LDL^T pivots of M.  Raises
+        :class:`~mbs.errors.SingularMassMatrixError` when a pivot of M is the constant 0
+        (M singular for every q)."""
         if getattr(self, "_pivot_graph", None) is None:
             from verified.graph import trace
+            from verified.preconditioned import congruence_pivots
             def fn(x, p):
                 x = list(x)
+                M = self._crba(self.joint_transforms(x))
                 try:
-                    _, D = ldl_factor(self._crba(self.joint_transforms(x)))
+                    _, D = ldl_factor(M)
                 except SingularMassMatrixError as e:
                     raise self._singular_error(e, x) from None
-                return D
+                return congruence_pivots(M) if self.linear_solve == "preconditioned" else D
             self._pivot_graph = trace(fn, self.n, 0, input_names=self._names()[:self.n],
                                       output_names=[f"D{i + 1}" for i in range(self.n)])
         return self._pivot_graph

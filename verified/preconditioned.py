@@ -33,7 +33,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["frozen_point", "solve", "inverse_spd"]
+__all__ = ["frozen_point", "solve", "inverse_spd", "congruence_pivots"]
 
 
 def _is_zero(x) -> bool:
@@ -79,14 +79,13 @@ def _sub(a, b):
     return a - b
 
 
-def inverse_spd(A: Sequence[Sequence]) -> list[list]:
-    """Inverse of a symmetric positive definite matrix (list of rows) over the generic
-    scalar, by LDL^T without pivoting (``A = L D L^T``): columns of ``L^-T D^-1 L^-1``.
-    Used on the frozen point ``mid(M)``, where every operation is exact up to rounding."""
+def _ldl(A):
+    """Unit lower triangular L and pivots D with A = L diag(D) L^T (no pivoting, no checks)."""
     n = len(A)
     L = [[0] * n for _ in range(n)]
     D = [0] * n
     for j in range(n):
+        L[j][j] = 1
         s = A[j][j]
         for k in range(j):
             s = _sub(s, _mul(_mul(L[j][k], L[j][k]), D[k]))
@@ -96,6 +95,60 @@ def inverse_spd(A: Sequence[Sequence]) -> list[list]:
             for k in range(j):
                 t = _sub(t, _mul(_mul(L[i][k], L[j][k]), D[k]))
             L[i][j] = 0 if _is_zero(t) else t / D[j]
+    return L, D
+
+
+def congruence_pivots(M: Sequence[Sequence]) -> list:
+    """LDL^T pivots of ``P = K M K^T`` with ``K = L^-1`` frozen, ``mid(M) = L D L^T``: a
+    certificate that a symmetric ``M`` is positive definite.
+
+    By Sylvester's law of inertia ``P`` and ``M`` have the same inertia for every
+    invertible ``K``, so ``M`` is positive definite iff every pivot of ``P`` is > 0
+    (over intervals: iff every lower bound is > 0 proves it for every matrix in ``M``).
+    ``P`` is close to ``diag(D)``, so its pivots stay tight where the pivots of ``M``
+    itself spread through the elimination (a 5-link arm over q +- 1e-3: interval
+    pivots of ``M`` reach below 0 at t = 0). ``K`` is unit lower triangular, hence
+    invertible whatever ``mid`` picks (a singular ``mid(M)`` gives a zero or unbounded
+    pivot, so an unbounded ``K`` and no proof -- never a false one)."""
+    n = len(M)
+    if any(len(row) != n for row in M):
+        raise ValueError(f"congruence_pivots needs a square matrix, got {n} rows of lengths {[len(r) for r in M]}")
+    Mp = [[M[i][j] if _is_zero(M[i][j]) else frozen_point(M[i][j]) for j in range(n)] for i in range(n)]
+    L, _ = _ldl(Mp)
+    # K = L^-1 (unit lower triangular), by forward substitution on the identity
+    K = [[0] * n for _ in range(n)]
+    for c in range(n):
+        K[c][c] = 1
+        for i in range(c + 1, n):
+            s = 0
+            for k in range(c, i):
+                s = _sub(s, _mul(L[i][k], K[k][c]))
+            K[i][c] = s
+    K = [[v if _is_zero(v) else frozen_point(v) for v in row] for row in K]  # exact points
+    KM = [[0] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(n):
+            s = 0
+            for k in range(i + 1):  # K is lower triangular
+                s = _add(s, _mul(K[i][k], M[k][j]))
+            KM[i][j] = s
+    P = [[0] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i, n):  # P is symmetric: build the upper triangle, mirror it
+            s = 0
+            for k in range(j + 1):
+                s = _add(s, _mul(KM[i][k], K[j][k]))
+            P[i][j] = P[j][i] = s
+    _, D = _ldl(P)
+    return D
+
+
+def inverse_spd(A: Sequence[Sequence]) -> list[list]:
+    """Inverse of a symmetric positive definite matrix (list of rows) over the generic
+    scalar, by LDL^T without pivoting (``A = L D L^T``): columns of ``L^-T D^-1 L^-1``.
+    Used on the frozen point ``mid(M)``, where every operation is exact up to rounding."""
+    n = len(A)
+    L, D = _ldl(A)
     inv = [[0] * n for _ in range(n)]
     for c in range(n):
         # L y = e_c, then D z = y, then L^T x = z
