@@ -314,3 +314,19 @@ def test_a_stop_after_the_last_output_is_a_completed_run(ode, box, reference):
     sol = solve(ode, box, (0.0, 0.6), t_eval=T_EVAL, subdivision=[2, 2], hooks=[StopAt(reference.stats["steps"])])
     assert sol.status == "completed" and sol.reason == ""
     _assert_prefix(sol, reference, reference.stats["steps"])
+
+
+def test_adaptive_splitting_after_a_pruning_hook_is_sound():
+    """Adaptive splitting with the energy test: the split mask comes from the step's
+    widths, which describe the sets before the test replaced them by its parts. Applied
+    to the parts it dropped every part beyond the mask's length (sampled states
+    outside the enclosure); now nothing is split after a step whose sets a hook replaced."""
+    rhs = trace(pd.rhs, 2, input_names=NAMES)
+    H = trace(lambda x, p: [pd.hamiltonian(x)], 2, input_names=NAMES)
+    lo, hi = pd.initial_box()
+    test = EnergyTest(H, "derive", max_interval=0.1, splits=16, min_gain=0.0)
+    sol = solve(rhs, Interval(lo, hi), (0.0, 0.3), t_eval=[0.1, 0.2, 0.3], adaptive=True, split_ratio=0.001,
+                consistency=test)
+    assert sol.success and sol.stats["splits"] > 0 and sol.stats["pruned_boxes"] > 0
+    sols = trajectories(lambda x: pd.rhs(x), sample_initial_points(lo, hi, 20), 0.3)
+    assert misses(sol, sols, per_step=2) == []

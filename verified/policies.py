@@ -216,7 +216,14 @@ class SplitPolicy:
 
     def apply(self, step, sets):
         """``(sets, n_split, reason)``: ``sets`` with the selected ones split, or
-        ``reason`` (a break-down) when that would exceed ``max_boxes``."""
+        ``reason`` (a break-down) when that would exceed ``max_boxes``.
+
+        The step's widths describe ``step.sets`` only: when a hook replaced them (a
+        consistency test pruned or refined), nothing is split after this step. (Applying
+        the mask to the replaced batch dropped every set beyond the mask's length:
+        unsound.)"""
+        if sets is not step.sets:
+            return sets, 0, ""
         grow = self.select(step)
         if not grow.any():
             return sets, 0, ""
