@@ -222,10 +222,18 @@ def test_stop_after_wall_zero_stops_after_the_first_step_and_huge_never(ode, box
     assert sol.status == "completed"
 
 
-def test_bad_hooks_are_refused_in_one_line(ode, box):
+def test_bad_hooks_are_refused_in_one_line_before_any_work(box, monkeypatch):
+    import verified.solver as solver_mod
+
+    def no_work(*a, **k):
+        raise AssertionError("work started before the hooks were checked")
+
+    monkeypatch.setattr(solver_mod, "TaylorODE", no_work)
+    monkeypatch.setattr(solver_mod, "_stepper", no_work)
+    g = trace(pd.rhs, 2, input_names=NAMES)
     for bad in (object(), "hook", 3):
         with pytest.raises(ValueError) as info:
-            solve(ode, box, (0.0, 0.6), hooks=[bad] if bad != 3 else bad)
+            solve(g, box, (0.0, 0.6), hooks=[bad] if bad != 3 else bad)
         assert "\n" not in str(info.value) and "hook" in str(info.value)
     with pytest.raises(ValueError, match="seconds"):
         StopAfterWall(-1.0)
