@@ -16,7 +16,8 @@ Layout (keys exactly as issue 7 asks)::
          "hull":  [[lo, hi], ...]},                  # their hull, per state
         ...
       ],
-      "stats": {"wall_s": ..., "steps": ..., "max_boxes": ..., "pruned_boxes": ..., ...}
+      "stats": {"wall_s": ..., "steps": ..., "max_boxes": ..., "pruned_boxes": ..., ...},
+      "parameters": {"payload.mass": [lo, hi], ...}   # uncertain parameters (only if any)
     }
 
 Bounds are JSON numbers written with Python's ``repr`` (17 significant digits at
@@ -106,7 +107,7 @@ def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=
     stats.setdefault("pruned_boxes", 0)
     if extra_stats:
         stats.update(extra_stats)
-    return {
+    out = {
         "scene": str(scene),
         "mode": mode if mode is not None else getattr(sol, "mode", ""),
         "state_names": names,
@@ -117,6 +118,11 @@ def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=
         "outputs": outputs,
         "stats": _jsonable(stats),
     }
+    params = getattr(sol, "params", None)
+    if params:
+        out["parameters"] = {str(k): [bound_to_json(float(lo)), bound_to_json(float(hi))]
+                             for k, (lo, hi) in params.items()}
+    return out
 
 
 def write_result(path, sol=None, *, data: dict | None = None, **kwargs) -> Path:

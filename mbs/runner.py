@@ -10,39 +10,92 @@ import numpy as np
 from .errors import ModelError
 from .scene import Scene, SceneError, output_times
 
-__all__ = ["run_scene", "reference_system", "check_samples"]
+__all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "sample_states", "final_widths"]
 
 
-def reference_system(model, mode="ii", energy_rate="unsimplified"):
+def reference_system(model, mode="ii", energy_rate="unsimplified", params=None):
     """The :class:`mbs.system.System` of a model (a name or a Chain) in ``mode``: the
-    float right-hand side for sampling and the energy graph for Fig. 3.
+    float right-hand side for sampling and the energy graph for Fig. 3 (with the
+    uncertain ``params`` as graph parameters, see :func:`mbs.simulate.simulate`).
+    Uses :func:`mbs.simulate.system_for` (the system the simulation integrates)."""
+    from .simulate import system_for
+    return system_for(model, "ii" if mode == "i" else mode, energy_rate=energy_rate, params=params)
 
-    Uses :func:`mbs.simulate.system_for` (the system the simulation integrates);
-    falls back to the numeric model / the paper's hand-written equations.
-    """
-    try:
-        from .simulate import system_for
-    except ImportError:
-        system_for = None
-    if system_for is not None:
-        return system_for(model, "ii" if mode == "i" else mode, energy_rate=energy_rate)
-    from .system import System
-    if isinstance(model, System):
-        return model
-    if isinstance(model, str):
-        if model == "double_pendulum_paper":
-            from models import double_pendulum as dp
-            return System("double_pendulum_paper", dp.rhs_graph(), dp.energy_graph())
-        if model == "pendulum_paper":
-            from models import pendulum
-            from verified.graph import trace
-            rhs = trace(pendulum.rhs, 2, input_names=["q", "qd"], output_names=["dq", "dqd"])
-            H = trace(lambda x, p: [pendulum.hamiltonian(x)], 2, input_names=["q", "qd"], output_names=["H"])
-            return System("pendulum_paper", rhs, H)
-        from models.registry import get
-        model = get(model)
-    num = model.numeric()
-    return System(model.name, num.rhs_graph(), num.energy_graph(), num.energy_rate_graph())
+
+def sample_points(lo, hi, count: int, seed: int = 0) -> np.ndarray:
+    """Exactly ``count`` points (count, d) of the box [lo, hi]: its centre, then corners
+    (all of them if ``count`` allows, in a fixed pseudo-random order otherwise), then
+    uniform random points."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    if count <= 0:
+        return np.zeros((0, lo.size))
+    rng = np.random.default_rng(seed)
+    pts = [(lo + hi) / 2]
+    free = np.flatnonzero(hi > lo)
+    n_corners = 2 ** free.size if free.size < 62 else None
+    want = count - 1
+    if n_corners is not None and n_corners <= want:
+        codes = np.arange(n_corners)
+    else:
+        codes = rng.choice(n_corners, size=want, replace=False) if n_corners is not None and n_corners < 2**20 \
+            else rng.integers(0, 2, size=(want, free.size))
+    for c in codes[:want]:
+        p = lo.copy()
+        bits = c if isinstance(c, np.ndarray) else np.array([(int(c) >> k) & 1 for k in range(free.size)])
+        p[free] = np.where(bits.astype(bool), hi[free], lo[free])
+        pts.append(p)
+    rest = count - len(pts)
+    if rest > 0:
+        pts.extend(lo + rng.uniform(0, 1, (rest, lo.size)) * (hi - lo))
+    return np.array(pts[:count])
+
+
+def sample_states(system, x0_lo, x0_hi, count: int, times, params=None, seed: int = 0):
+    """(states (S, len(times), n), initial points (S, n + p)): DOP853 trajectories of
+    ``system.rhs`` (rtol = atol = 1e-12) from ``count`` points of the initial box times
+    the parameter box ``params`` ({name: (lo, hi)}, the graph's parameters; each
+    sample has its own parameter values, held constant)."""
+    from .figures import sample_trajectories
+    g = system.rhs
+    n, p = g.n_inputs, g.n_params
+    lo, hi = np.asarray(x0_lo, float), np.asarray(x0_hi, float)
+    if p:
+        plo = np.array([float(params[k][0]) for k in g.param_names])
+        phi = np.array([float(params[k][1]) for k in g.param_names])
+        lo, hi = np.concatenate([lo, plo]), np.concatenate([hi, phi])
+    pts = sample_points(lo, hi, count, seed)
+    if not p:
+        return sample_trajectories(g, pts, times), pts
+
+    def f(y):  # (n + p, S): the parameters are constant states
+        x, pv = y[:n], y[n:]
+        return np.vstack([g.eval_float(x.T, pv.T).T, np.zeros_like(pv)])
+    return sample_trajectories(f, pts, times)[:, :, :n], pts
+
+
+def final_widths(sol):
+    """(when, widths (n,)) of the last verified enclosure: at ``t_reached`` when that is
+    an output time, else (a break-down between output times) the enclosure over the
+    last verified step ``[t_s-1, t_reached]`` (contains the sets at ``t_reached``);
+    ``(None, None)`` for a run without any output."""
+    t = np.asarray(sol.t, float)
+    if len(t) and t[-1] >= sol.t_reached:
+        return f"t = {t[-1]:g} s", np.asarray(sol.hull.width()[-1], float)
+    if len(sol.tube):
+        a, b = float(sol.tube_t[-2]), float(sol.tube_t[-1])
+        return f"over the last step [{a:g}, {b:g}] s", np.asarray(sol.tube_hull.width()[-1], float)
+    if len(t):
+        return f"t = {t[-1]:g} s", np.asarray(sol.hull.width()[-1], float)
+    return None, None
+
+
+def _fmt_width(v: float) -> str:
+    """A width for a report: 0 for the widths of point values (subnormal: the one-ulp
+    outward rounding of [x, x] - x at 0 prints as 4.941e-324)."""
+    v = float(v)
+    if v < np.finfo(float).tiny:
+        return "0"
+    return f"{v:.4g}"
 
 
 def check_samples(sol, samples, slack=1e-9):
@@ -62,11 +115,16 @@ def check_samples(sol, samples, slack=1e-9):
 
 
 def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, samples=None,
-              figures=True, log=None, progress=True) -> dict:
+              figures=True, log=None, progress=True, max_wall=None) -> dict:
     """Simulate ``scene`` and write ``out``/result.json (+ figures). Returns a report
-    dict: solution, paths, sample check (``escaped``: sampled states outside)."""
-    from .figures import (fig_consistency_plane, fig_enclosures, fig_reduction_area,
-                          sample_initial_points, sample_trajectories)
+    dict: solution, paths, sample check (``escaped``: sampled states outside).
+
+    ``samples``: exactly this many sampled trajectories (default 64; 0: none).
+    ``max_wall``: stop the integration after this many seconds (status "stopped").
+    Ctrl-C during the integration ends it with status "interrupted"; during the
+    sampling it skips the rest of the sampling and the figures. Either way
+    result.json is written with everything verified so far."""
+    from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
     from .progress import Progress
     from .results import write_result
     from .simulate import simulate
@@ -80,8 +138,11 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
 
     t0 = time.perf_counter()
     model = scene.build_model()
+    names = None
+    kw = scene.simulate_kwargs()
     try:
-        system = reference_system(model, mode, scene.consistency.get("energy_rate", "unsimplified"))
+        system = reference_system(model, mode, scene.consistency.get("energy_rate", "unsimplified"),
+                                  params=kw.get("params"))
     except Exception as e:  # noqa: BLE001 - a model that cannot be built is a scene problem
         raise SceneError(f"{scene.source}: cannot build the model: {type(e).__name__}: {e}") from None
     names = system.state_names
@@ -90,9 +151,12 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     kw["mode"] = mode
     t_model = time.perf_counter() - t0
     log(f"{scene.name}: mode {mode}, {len(names)} states ({', '.join(names)}), t_end = {t_end:g} s")
+    if system.rhs.n_params:
+        log("uncertain parameters: " + ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in
+                                                 ((k, system.params[k]) for k in system.rhs.param_names)))
     bar = Progress(t_end, f"mode {mode}", enabled=None if progress else False)
     try:
-        sol = simulate(model, x0, t_end, output_dt=dt, progress=bar, **kw)
+        sol = simulate(model, x0, t_end, output_dt=dt, progress=bar, max_wall=max_wall, **kw)
     except (ValueError, TypeError, ModelError) as e:  # settings the solver refuses
         raise SceneError(f"{scene.source}: cannot simulate: {e}") from None
     finally:
@@ -103,21 +167,24 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
 
     # sampled true trajectories: soundness check and figure overlay
     traj = traj_t = None
-    if samples > 0 and len(sol.t) > 1:
-        pts = sample_initial_points(np.asarray(x0.lo, float), np.asarray(x0.hi, float), samples)
-        pvals = None
-        if system.rhs.n_params:
-            pvals = np.array([0.5 * (lo + hi) for lo, hi in (kw.get("params") or {}).values()])
-        dense = np.linspace(0.0, float(sol.t[-1]), 201)
-        traj_t = np.unique(np.concatenate([np.asarray(sol.t, float), dense]))
-        traj = sample_trajectories(system.rhs, pts, traj_t, pvals)
-        at_out = traj[:, np.searchsorted(traj_t, np.asarray(sol.t, float)), :]
-        bad = check_samples(sol, at_out)
-        report["escaped"] = len(bad)
-        report["checked"] = int(pts.shape[0])
-        if bad:
-            log(f"WARNING: {len(bad)} sampled states lie outside the enclosure (first: sample {bad[0][0]} "
-                f"at t = {sol.t[bad[0][1]]:g}); this is a bug, please report it")
+    interrupted = sol.status == "interrupted"
+    if samples > 0 and len(sol.t) > 1 and not interrupted:
+        try:
+            dense = np.linspace(0.0, float(sol.t[-1]), 201)
+            traj_t = np.unique(np.concatenate([np.asarray(sol.t, float), dense]))
+            traj, pts = sample_states(system, x0.lo, x0.hi, samples, traj_t, system.params)
+        except KeyboardInterrupt:
+            interrupted, traj = True, None
+            log("interrupted: sampled trajectories skipped")
+        else:
+            at_out = traj[:, np.searchsorted(traj_t, np.asarray(sol.t, float)), :]
+            bad = check_samples(sol, at_out)
+            report["escaped"] = len(bad)
+            report["checked"] = int(pts.shape[0])
+            if bad:
+                log(f"WARNING: {len(bad)} sampled states lie outside the enclosure (first: sample {bad[0][0]} "
+                    f"at t = {sol.t[bad[0][1]]:g}); this is a bug, please report it")
+    report["interrupted"] = interrupted
 
     extra = {"wall_total_s": wall, "model_s": t_model, "samples_checked": report["checked"],
              "samples_escaped": report["escaped"], "output_times_requested": len(want) + 1}
@@ -125,7 +192,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
                         state_names=list(getattr(sol, "state_names", None) or names), t_end=t_end,
                         extra_stats=extra)
     report["paths"]["result"] = path
-    if figures:
+    if figures and not interrupted:
         report["paths"]["enclosures"] = fig_enclosures(
             {mode: sol}, out / "enclosures.png", samples=traj, sample_times=traj_t,
             title=f"{scene.name}: enclosures, mode {mode}")
@@ -136,11 +203,13 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
             report["paths"]["consistency_plane"] = fig_consistency_plane(
                 sol, system.energy, out / "consistency_plane.png")
     st = sol.stats
-    w = sol.hull.width()[-1] if len(sol.t) else []
     log(f"{sol.status} at t = {sol.t_reached:g} s{(' (' + sol.reason + ')') if sol.reason else ''}; "
         f"{st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")
-    if len(sol.t):
-        log("final widths: " + ", ".join(f"{n} {float(v):.4g}" for n, v in zip(names, w)))
+    t_w, w = final_widths(sol)
+    if w is not None:
+        what = {"completed": "final widths", "breakdown": "widths at the break-down"}.get(
+            sol.status, f"widths when {sol.status}")
+        log(f"{what} ({t_w}): " + ", ".join(f"{n} {_fmt_width(v)}" for n, v in zip(names, w)))
     if report["checked"]:
         log(f"{report['checked']} sampled trajectories: "
             f"{'all inside' if not report['escaped'] else str(report['escaped']) + ' states OUTSIDE'}")

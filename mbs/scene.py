@@ -9,7 +9,8 @@
 
     [model]                 # exactly one of name / urdf / dh
     name = "double_pendulum_paper"       # a ready model (models.registry.NAMES, plus
-                                         # "pendulum_paper", "double_pendulum_paper")
+                                         # "pendulum_paper", "double_pendulum_paper",
+                                         # and the aliases of mbs.robots.ALIASES: "panda")
     # urdf = "robots/arm.urdf"           # a URDF file, relative to the scene file, or
     # urdf = "example-robot-data:ur5"    # a robot shipped with example-robot-data
     # dh = [ {joint = "R", a = "l1", mass = "m1"}, {joint = "R", a = 1.0, mass = 1.0} ]
@@ -19,8 +20,20 @@
 
     [parameters]            # optional; numbers, expressions or [lo, hi] intervals
     m1 = 1.0                # DH entries may name a parameter ("l1"); numbers are
-    l1 = [0.99, 1.01]       # substituted, intervals are passed on as uncertain
-                            # parameters (simulate(params=...))
+    l1 = [0.99, 1.01]       # substituted, intervals become uncertain parameters (PARAMs
+                            # of the graphs, simulate(params=...)). The paper's models
+                            # take m1, m2, l1, l2, g (pendulum_paper: m, l, g).
+    mass_scale = [0.95, 1.05]             # every moving body's inertia times one factor
+    damping = [0.04, 0.06]                # every joint's damping [N m s/rad], each its own
+    # damping = { elbow_joint = [0.0, 0.1] }       # or per joint
+    # mass = { forearm_link = [2.1, 2.4] }         # body masses [kg]
+    # mass_scale = { upper_arm_link = [0.9, 1.1] } # per body
+    [parameters.payload]    # a point mass fixed to a link (also [[parameters.payload]])
+    link = "tool0"
+    mass = [0.9, 1.1]       # [kg]
+    com = [0, 0, [0.04, 0.06]]            # [m] in the link's frame (default 0)
+    # (see mbs.uncertain for the meanings; URDF and ready chain models take only these
+    # physical keys)
 
     [initial]               # the initial box, required: one entry per state, named
                             # by the model's state names (chains: q1..qn, qd1..qdn)
@@ -249,6 +262,7 @@ class Scene:
     mode: str
     solver: dict = field(default_factory=dict)
     consistency: dict = field(default_factory=dict)
+    physical: dict = field(default_factory=dict)   # payload / mass_scale / mass / damping (mbs.uncertain)
     _model: object = field(default=None, repr=False)
 
     # ---------------------------------------------------------------- model
@@ -325,6 +339,7 @@ class Scene:
         # models all parameters go to simulate, intervals always do.
         params = dict(self.point_params()) if "name" in self.model_spec else {}
         params.update(self.interval_params())
+        params.update(self.physical)
         if params:
             kw["params"] = params
         kw["mode"] = self.mode
@@ -441,7 +456,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     spec = dict(model)
     if "name" in model:
         from models.registry import NAMES
-        known = tuple(NAMES) + PAPER_MODELS
+        from .robots import ALIASES
+        known = tuple(NAMES) + PAPER_MODELS + tuple(sorted(set(ALIASES) - set(NAMES)))
         if model["name"] not in known:
             raise SceneError(f"{where} name: unknown model {model['name']!r}; choose one of "
                              f"{', '.join(known)}")
@@ -469,9 +485,7 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         spec["gravity"] = [_number(v, f"{where} gravity[{i}]") for i, v in enumerate(g)]
 
     # [parameters]
-    params = {}
-    for k, v in _table(data, "parameters", source).items():
-        params[k] = _interval(v, f"{source}: [parameters] {k}")
+    params, physical = _parameters(_table(data, "parameters", source), spec, f"{source}: [parameters]")
 
     # [initial]
     where = f"{source}: [initial]"
@@ -535,13 +549,89 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
                          f"{', '.join(_ENERGY_RATES)}")
 
     scene = Scene(source=source, name=name, description=description, model_spec=spec,
-                  parameters=params, initial=initial, t_end=t_end, output_dt=output_dt,
+                  parameters=params, physical=physical, initial=initial, t_end=t_end, output_dt=output_dt,
                   mode=mode, solver=solver, consistency=cons)
     if isinstance(initial, list) and isinstance(solver.get("subdivision"), list) \
             and len(solver["subdivision"]) != len(initial):
         raise SceneError(f"{source}: [solver] subdivision has {len(solver['subdivision'])} entries, "
                          f"the initial box {len(initial)}")
     return scene
+
+
+def _table_of_intervals(value, where: str, what: str) -> dict:
+    if not isinstance(value, dict) or not value:
+        raise SceneError(f"{where}: expected a table {what} = [lo, hi], got {value!r}")
+    return {k: _interval(v, f"{where}.{k}") for k, v in value.items()}
+
+
+def _payload(item, where: str) -> dict:
+    from .uncertain import _PAYLOAD_KEYS
+    if not isinstance(item, dict):
+        raise SceneError(f"{where}: expected a table with link, mass and com, got {item!r}")
+    allowed = tuple(k for k in _PAYLOAD_KEYS if k != "inertia")
+    _unknown(item, allowed, where)
+    for req in ("link", "mass"):
+        if req not in item:
+            raise SceneError(f"{where}: missing {req!r}")
+    if not isinstance(item["link"], str):
+        raise SceneError(f"{where} link: expected a link name, got {item['link']!r}")
+    out = {"link": item["link"], "mass": _interval(item["mass"], f"{where} mass")}
+    if out["mass"][0] < 0:
+        raise SceneError(f"{where} mass: must be >= 0, got {item['mass']!r}")
+    if "com" in item:
+        com = item["com"]
+        if not isinstance(com, list) or len(com) != 3:
+            raise SceneError(f"{where} com: expected [x, y, z] (m, in the link's frame), got {com!r}")
+        out["com"] = [_interval(v, f"{where} com[{i}]") for i, v in enumerate(com)]
+    return out
+
+
+def _parameters(table: dict, spec: dict, where: str):
+    """[parameters]: (named parameters {name: (lo, hi)}, physical parameters in the
+    form of :mod:`mbs.uncertain`, every number enclosed)."""
+    from .uncertain import PHYSICAL_KEYS
+    params, physical = {}, {}
+    for k, v in table.items():
+        w = f"{where} {k}"
+        if k == "payload":
+            items = v if isinstance(v, list) else [v]
+            if not items:
+                raise SceneError(f"{w}: an empty list")
+            pl = [_payload(item, w if len(items) == 1 else f"{w}[{i}]") for i, item in enumerate(items)]
+            physical[k] = pl[0] if len(pl) == 1 else pl
+        elif k in ("mass_scale", "damping"):
+            physical[k] = _table_of_intervals(v, w, "body" if k == "mass_scale" else "joint") \
+                if isinstance(v, dict) else _interval(v, w)
+            vals = physical[k].values() if isinstance(physical[k], dict) else [physical[k]]
+            for lo, _ in vals:
+                if lo < 0 or (k == "mass_scale" and lo == 0):
+                    raise SceneError(f"{w}: must be {'>' if k == 'mass_scale' else '>='} 0, got {v!r}")
+        elif k == "mass":
+            physical[k] = _table_of_intervals(v, w, "body")
+            if any(lo < 0 for lo, _ in physical[k].values()):
+                raise SceneError(f"{w}: masses must be >= 0, got {v!r}")
+        else:
+            if isinstance(v, dict):
+                raise SceneError(f"{w}: expected a number or [lo, hi] (tables only for "
+                                 f"{', '.join(PHYSICAL_KEYS)})")
+            params[k] = _interval(v, w)
+    if params:
+        allowed = None
+        if "urdf" in spec:
+            allowed = ()
+        elif spec.get("name") in PAPER_MODELS:
+            from .simulate import _paper_param_names
+            from models import double_pendulum, pendulum
+            allowed = tuple(_paper_param_names(pendulum if spec["name"] == "pendulum_paper" else double_pendulum))
+        elif "name" in spec:
+            allowed = ()
+        if allowed is not None:
+            bad = [k for k in params if k not in allowed]
+            if bad:
+                names = ", ".join(PHYSICAL_KEYS + allowed)
+                raise SceneError(f"{where}: unknown parameter {bad[0]!r} for the model "
+                                 f"{spec.get('name') or 'from ' + str(spec.get('urdf'))!r}; it takes {names}")
+    return params, physical
 
 
 def _typed(v, typ, where: str, positive: bool):

@@ -36,7 +36,7 @@ from .numeric import PIVOT_TOL
 from .system import System
 
 __all__ = ["MODES", "PAPER_MODELS", "simulate", "compare_modes", "system_for", "width_deviations",
-           "output_times"]
+           "WidthDeviations", "output_times"]
 
 MODES = ("i", "ii", "iii")
 PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
@@ -46,16 +46,39 @@ PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
 TEST_DEFAULTS = {"ii": dict(test_interval=0.1, test_splits=10), "iii": dict(test_interval=0.01, test_splits=50)}
 
 
-def _paper_system(name: str, mode: str, energy_rate: str) -> System:
+def _paper_param_names(mod) -> list:
+    """The parameters of a paper model's hand-written functions (m1, m2, l1, l2, g / m, l, g)."""
+    import inspect
+    return [k for k in inspect.signature(mod.rhs).parameters if k not in ("x", "p")]
+
+
+def _paper_chain(name: str, params: dict | None):
+    """The chain of a paper model (DH); the paper's parameters named in ``params``
+    become sympy symbols (PARAMs of the graphs, see :mod:`mbs.uncertain`)."""
+    from models import double_pendulum as dp
+    from models import pendulum as pd
+    mod = pd if name == "pendulum_paper" else dp
+    if not params:
+        return mod.chain() if mod is pd else mod.dh_chain()
+    import sympy
+    kw = {k: sympy.Symbol(k, positive=True) for k in _paper_param_names(mod) if k in params}
+    return mod.chain(**kw) if mod is pd else mod.dh_chain(**kw)
+
+
+def _paper_system(name: str, mode: str, energy_rate: str, cparams=None) -> System:
     from verified.graph import from_sympy, trace
 
     from models import double_pendulum as dp
     from models import pendulum as pd
 
     if mode != "iii":
+        if cparams is not None:
+            return _chain_system(cparams.chain, mode, energy_rate, name=name, cparams=cparams)
         chain = pd.chain() if name == "pendulum_paper" else dp.dh_chain()
         return _chain_system(chain, mode, energy_rate, name=name)
     mod = pd if name == "pendulum_paper" else dp
+    if cparams is not None:
+        return _paper_system_with_params(mod, name, energy_rate, cparams)
     xs, f, H = mod.sympy_model()
     names = [str(s) for s in xs]
     rhs = trace(mod.rhs, len(xs), input_names=names, output_names=[f"d{s}" for s in names])
@@ -68,6 +91,38 @@ def _paper_system(name: str, mode: str, energy_rate: str) -> System:
                       description="paper's symbolic model, dH/dt simplified to 0")
     return System(name=name, rhs=rhs, energy=energy, energy_rate=from_sympy([rate_expr], xs, output_names=["dHdt"]),
                   description="paper's symbolic model, dH/dt unsimplified (grad H . f)")
+
+
+def _paper_system_with_params(mod, name: str, energy_rate: str, cparams) -> System:
+    """Mode iii of a paper model with some of its parameters uncertain: the hand-written
+    eqs. (18)/(19) or (22)/(24) traced with those parameters as PARAMs."""
+    import sympy
+    from verified.graph import from_sympy, trace
+
+    pnames = list(cparams.names)
+    extra = [k for k in pnames if k not in _paper_param_names(mod)]
+    if extra:
+        raise ValueError(f"{name}: mode iii takes only the paper's parameters "
+                         f"({', '.join(_paper_param_names(mod))}) as params, not {', '.join(extra)}; "
+                         "use mode i or ii for payloads, mass scales and damping")
+    xs = list(sympy.sympify(mod.sympy_model()[0]))
+    names = [str(s) for s in xs]
+    n = len(xs)
+    rhs = trace(lambda x, p: mod.rhs(list(x), **dict(zip(pnames, p))), n, len(pnames), input_names=names,
+                param_names=pnames, output_names=[f"d{s}" for s in names])
+    energy = trace(lambda x, p: [mod.hamiltonian(list(x), **dict(zip(pnames, p)))], n, len(pnames),
+                   input_names=names, param_names=pnames, output_names=["H"])
+    if energy_rate == "simplified":
+        _prove_conservative(mod, n)
+        return System(name=name, rhs=rhs, energy=energy, conservative=True, params=cparams.as_dict(),
+                      description="paper's symbolic model with parameters, dH/dt simplified to 0")
+    syms = [sympy.Symbol(k, positive=True) for k in pnames]
+    kw = dict(zip(pnames, syms))
+    f, H = mod.rhs(xs, **kw), mod.hamiltonian(xs, **kw)
+    rate_expr = sum(sympy.diff(H, x) * fx for x, fx in zip(xs, f))
+    rate = from_sympy([rate_expr], xs, syms, output_names=["dHdt"])
+    return System(name=name, rhs=rhs, energy=energy, energy_rate=rate, params=cparams.as_dict(),
+                  description="paper's symbolic model with parameters, dH/dt unsimplified (grad H . f)")
 
 
 def _prove_conservative(mod, n: int):
@@ -86,8 +141,18 @@ def _prove_conservative(mod, n: int):
         raise ModelError(f"{mod.__name__}: dH/dt does not simplify to 0 ({rate})")
 
 
-def _chain_system(chain, mode: str, energy_rate: str, name: str | None = None) -> System:
+def _chain_system(chain, mode: str, energy_rate: str, name: str | None = None, cparams=None) -> System:
     name = name or getattr(chain, "name", "chain")
+    if cparams is not None:
+        if mode == "iii":
+            raise ValueError(f"{name}: uncertain parameters of a chain ({', '.join(cparams.names)}) are "
+                             "supported in modes i and ii (the symbolic model of mode iii takes none)")
+        rhs = cparams.rhs_graph()
+        if mode == "i":
+            return System(name=name, rhs=rhs, params=cparams.as_dict(),
+                          description="numeric model (crba/rnea) with parameters, no test")
+        return System(name=name, rhs=rhs, energy=cparams.energy_graph(), energy_rate=None, params=cparams.as_dict(),
+                      description="numeric model with parameters; dH/dt by forward-mode AD of H along the ODE")
     if mode in ("i", "ii"):
         num = chain.numeric()
         rhs = num.rhs_graph()
@@ -103,37 +168,100 @@ def _chain_system(chain, mode: str, energy_rate: str, name: str | None = None) -
                   description=f"symbolic model (sympy); dH/dt {energy_rate}")
 
 
-def system_for(model, mode: str = "ii", *, energy_rate: str = "unsimplified") -> System:
-    """The :class:`System` that ``mode`` integrates for ``model`` (see module docstring)."""
-    return _system_and_chain(model, mode, energy_rate)[0]
+class _MassMatrix:
+    """What the M(q) > 0 checks of a chain need: a float model (centre checks, messages),
+    the pivot graph (inputs q, then the parameters if any) and the parameter box."""
+
+    def __init__(self, chain, cparams=None):
+        self.chain = chain
+        if cparams is None:
+            self.num = chain.numeric()
+            self.graph = self.num.pivot_graph()
+            self.pbox = None
+        else:
+            self.num = cparams.float_model()
+            self.graph = cparams.pivot_graph()
+            self.pbox = (cparams.lo, cparams.hi) if cparams.n else None
+        self.n = chain.n
 
 
-def _system_and_chain(model, mode: str, energy_rate: str):
-    """(System, the Chain behind it or None) -- the chain for the mass-matrix checks."""
+def system_for(model, mode: str = "ii", *, energy_rate: str = "unsimplified", params=None) -> System:
+    """The :class:`System` that ``mode`` integrates for ``model`` (see module docstring);
+    ``params`` as for :func:`simulate`."""
+    return _system_and_chain(model, mode, energy_rate, params)[0]
+
+
+def _system_and_chain(model, mode: str, energy_rate: str, params=None):
+    """(System, _MassMatrix of the chain behind it or None) -- the chain for the
+    mass-matrix checks."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if energy_rate not in ("unsimplified", "simplified"):
         raise ValueError(f"energy_rate must be 'unsimplified' or 'simplified', got {energy_rate!r}")
     if isinstance(model, System):
         if mode == "i":
-            return System(name=model.name, rhs=model.rhs, params=model.params, description=model.description), None
-        if not model.has_energy:
+            model = System(name=model.name, rhs=model.rhs, params=model.params, description=model.description)
+        elif not model.has_energy:
             raise ModelError(f"{model.name}: mode {mode} needs an energy graph (System.energy)")
         return model, None
+    from .chain import Chain
+    from .uncertain import ChainParameters
     if isinstance(model, str):
         if model in PAPER_MODELS:
-            from models import double_pendulum as dp
-            from models import pendulum as pd
             # the paper's models are these chains (mode iii: the same M, hand-written)
-            chain = pd.chain() if model == "pendulum_paper" else dp.dh_chain()
-            return _paper_system(model, mode, energy_rate), chain
-        from models.registry import get
-        chain = get(model)
-        return _chain_system(chain, mode, energy_rate, name=model), chain
-    from .chain import Chain
-    if isinstance(model, Chain):
-        return _chain_system(model, mode, energy_rate), model
-    raise TypeError(f"model must be a model name, an mbs.Chain or an mbs.system.System, got {type(model).__name__}")
+            if params:
+                _require_dict(params, model)
+                chain = _paper_chain(model, params)
+                cp = ChainParameters(chain, params, model_name=model)
+                return _paper_system(model, mode, energy_rate, cp), _MassMatrix(chain, cp)
+            chain = _paper_chain(model, None)
+            return _paper_system(model, mode, energy_rate), _MassMatrix(chain)
+        from .robots import load_model
+        chain = load_model(model)  # registry names, aliases (panda), example-robot-data:NAME, URDF paths
+        name = model
+    elif isinstance(model, Chain):
+        chain = model
+        name = None
+    else:
+        raise TypeError(f"model must be a model name, an mbs.Chain or an mbs.system.System, "
+                        f"got {type(model).__name__}")
+    if params is not None or chain.free_symbols:
+        _require_dict(params if params is not None else {}, name or chain.name)
+        cp = ChainParameters(chain, params or {}, model_name=name)
+        return _chain_system(chain, mode, energy_rate, name=name, cparams=cp), _MassMatrix(chain, cp)
+    return _chain_system(chain, mode, energy_rate, name=name), _MassMatrix(chain)
+
+
+def _require_dict(params, name):
+    if not isinstance(params, dict):
+        raise ValueError(f"params for the chain model {name!r} must be a dict such as "
+                         "{'payload': {'link': ..., 'mass': [lo, hi]}, 'mass_scale': [lo, hi], "
+                         f"'damping': {{joint: [lo, hi]}}}} (see mbs.uncertain), got {type(params).__name__}")
+
+
+def _system_params(system: System, params):
+    """The ODE parameters for solve: ``params`` (a dict by name, or a sequence in the
+    order of ``system.rhs.param_names``), default ``system.params``."""
+    from .uncertain import parse_value
+    names = system.rhs.param_names
+    if params is None:
+        if not names:
+            return None
+        params = system.params
+        if not params:
+            raise ValueError(f"{system.name}: the ODE has parameters {', '.join(names)}: pass params")
+    if isinstance(params, dict):
+        unknown = [k for k in params if k not in names]
+        if unknown:
+            raise ValueError(f"params: unknown parameter(s) {', '.join(map(repr, unknown))} for {system.name!r}"
+                             + (f"; its parameters: {', '.join(names)}" if names else "; it has no parameters"))
+        missing = [k for k in names if k not in params]
+        if missing:
+            raise ValueError(f"params: missing value for {', '.join(map(repr, missing))} ({system.name!r} "
+                             f"has parameters {', '.join(names)})")
+        pairs = [parse_value(params[k], f"params {k}") for k in names]
+        return Interval(np.array([a for a, _ in pairs]), np.array([b for _, b in pairs]))
+    return params
 
 
 def output_times(t0: float, t_end: float, output_dt: float | None) -> np.ndarray:
@@ -169,7 +297,7 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
              energy_rate: str = "unsimplified", test_interval: float | None = None, test_splits: int | None = None,
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
              backward_depth: int = 0,
-             constraints=(), progress=None, **solver_kwargs) -> Solution:
+             constraints=(), progress=None, max_wall: float | None = None, **solver_kwargs) -> Solution:
     """Verified enclosure of ``model`` from the initial box ``x0`` in simulation ``mode``.
 
     Parameters
@@ -182,7 +310,17 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     mode : "i", "ii" or "iii"
     output_dt : float or None
         Output every ``output_dt`` seconds (at exactly ``k * output_dt``); default: ``t_end`` only.
-    params : ODE parameters (for Systems with parameters)
+    params : dict or None
+        Uncertain parameters, each a number or ``[lo, hi]``. For a chain (a model name,
+        a URDF/DH :class:`mbs.Chain`): the physical parameters of :mod:`mbs.uncertain`
+        (``{"payload": {"link": "tool0", "mass": [0.9, 1.1], "com": [0, 0, 0.05]},
+        "mass_scale": [0.95, 1.05], "mass": {body: [lo, hi]}, "damping": {joint: [lo, hi]}}``,
+        kg, m, N m s/rad) and the chain's sympy symbols (DH tables, e.g. ``"l1"``); for
+        the paper's models their parameters (``m1, m2, l1, l2, g`` / ``m, l, g``); for a
+        :class:`System` its graph's parameters by name (or a sequence in their order).
+        They enter the graphs as parameters (never constants); the verified solver
+        carries those with width as constant states (and then uses
+        ``error_basis="auto"`` unless told otherwise). ``sol.params`` lists them.
     order, tol, subdivision : solver settings (see :func:`verified.solver.solve`)
     energy_rate : "unsimplified" or "simplified" (mode iii)
     test_interval, test_splits : longest time between energy tests (s) and parts per
@@ -192,21 +330,32 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
         narrows its hull by ``min_gain``, default 0.1) or "always"
     backward_depth : backward consistency test depth (0 = off)
     constraints : further :class:`verified.consistency.Constraint` objects (modes ii, iii)
-    progress : callable(t, t_end) after every step
-    solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, ...)
+    progress : None, bool or callable(t, t_end)
+        Called after every step. ``None`` (default): a tqdm progress bar over simulated
+        time in an interactive terminal or notebook (after 2 s), nothing otherwise;
+        ``False``: none; ``True``: always.
+    max_wall : float or None
+        Stop the integration after this many seconds of wall-clock time
+        (:class:`verified.hooks.StopAfterWall`): ``status="stopped"`` with everything
+        verified so far. Ctrl-C (``KeyboardInterrupt``) during the integration likewise
+        returns the partial solution with ``status="interrupted"``.
+    solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
+        an unknown keyword raises ``TypeError`` naming ``simulate()``
 
     Returns
     -------
-    verified.solver.Solution with ``mode`` and ``state_names`` set, and
-    ``consistency`` (RA(t), H_H, H_V, tests) in modes ii and iii.
+    verified.solver.Solution with ``mode``, ``state_names`` and ``params`` ({name: (lo, hi)})
+    set, and ``consistency`` (RA(t), H_H, H_V, tests) in modes ii and iii. ``status``:
+    "completed", "breakdown", "stopped" (``max_wall``) or "interrupted" (Ctrl-C).
     """
-    system, chain = _system_and_chain(model, mode, energy_rate)
+    _check_solver_kwargs(solver_kwargs)
+    system, masses = _system_and_chain(model, mode, energy_rate, params)
     t0, t_end = float(t0), float(t_end)
     if not (np.isfinite(t_end) and t_end > t0):
         raise ValueError(f"t_end must be a finite time after t0 = {t0}, got {t_end!r}")
     box = _initial_box(x0, system.n, system.name)
-    if chain is not None:
-        _check_initial_mass_matrix(chain, box)
+    if masses is not None:
+        _check_initial_mass_matrix(masses, box)
     if split_strategy not in STRATEGIES:
         raise ValueError(f"split_strategy must be one of {STRATEGIES}, got {split_strategy!r}")
     test = None
@@ -220,17 +369,59 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
                           max_boxes=solver_kwargs.get("max_boxes", 4096))
     elif constraints:
         raise ValueError("mode i runs without consistency tests; use mode ii or iii for constraints")
-    ode_params = params
-    if ode_params is None and system.rhs.n_params:
-        ode_params = [system.params[name] for name in system.rhs.param_names]
-    sol = solve(system.rhs, box, (t0, t_end), t_eval=output_times(t0, t_end, output_dt), params=ode_params,
-                order=order, tol=tol, subdivision=subdivision, consistency=test, progress=progress,
-                **solver_kwargs)
-    if chain is not None:
-        _prove_mass_matrix(chain, sol)
+    ode_params = _system_params(system, None if (masses is not None and system.params) else params)
+    if "error_basis" not in solver_kwargs and ode_params is not None and _has_width(ode_params):
+        # measured (tests/test_uncertain_params.py): with interval parameters the "qr"
+        # error basis breaks down early (paper URDF double pendulum, payload mass
+        # [0.2, 0.3]: 0.27 s against completed to 0.3 s with "auto", 3.7x narrower q1)
+        solver_kwargs["error_basis"] = "auto"
+    if max_wall is not None:
+        from verified.hooks import StopAfterWall
+        if isinstance(max_wall, bool) or not isinstance(max_wall, (int, float)) or not max_wall > 0 \
+                or not np.isfinite(max_wall):
+            raise ValueError(f"max_wall must be a positive number of seconds, got {max_wall!r}")
+        solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [StopAfterWall(max_wall)]
+    bar = None
+    if progress is None or isinstance(progress, bool):
+        from .progress import Progress
+        bar = Progress(t_end, f"mode {mode}", enabled=None if progress is None else progress)
+        progress = bar if bar.enabled else None
+    try:
+        sol = solve(system.rhs, box, (t0, t_end), t_eval=output_times(t0, t_end, output_dt), params=ode_params,
+                    order=order, tol=tol, subdivision=subdivision, consistency=test, progress=progress,
+                    **solver_kwargs)
+    finally:
+        if bar is not None:
+            bar.close()
+    if masses is not None:
+        _prove_mass_matrix(masses, sol)
     sol.mode = mode
     sol.state_names = system.state_names
+    sol.params = dict(system.params) if system.rhs.n_params else {}
     return sol
+
+
+def _has_width(params) -> bool:
+    try:
+        p = _as_interval(params)
+    except (TypeError, ValueError):
+        return False  # solve() reports it
+    return bool((np.asarray(p.hi) > np.asarray(p.lo)).any())
+
+
+def _check_solver_kwargs(kwargs: dict):
+    """Unknown keyword arguments name :func:`simulate` (not the solver it calls)."""
+    import inspect
+    ours = set(inspect.signature(simulate).parameters) - {"solver_kwargs"}
+    theirs = set(inspect.signature(solve).parameters) - {"ode", "x0", "t_span", "t_eval", "params", "order", "tol",
+                                                         "subdivision", "consistency", "progress"}
+    for k in kwargs:
+        if k not in theirs:
+            import difflib
+            close = difflib.get_close_matches(k, sorted(ours | theirs), n=1)
+            raise TypeError(f"simulate() got an unexpected keyword argument {k!r}"
+                            + (f" (did you mean {close[0]!r}?)" if close else "")
+                            + f"; solver settings it passes on: {', '.join(sorted(theirs))}")
 
 
 # ---------------------------------------------------------------------- M(q) > 0
@@ -247,11 +438,13 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
 #    on it; where the proof fails the run is cut back to that time and reported as a
 #    break-down naming the joint.
 
-def _check_initial_mass_matrix(chain, box: Interval):
+def _check_initial_mass_matrix(masses, box: Interval):
     """Raise SingularMassMatrixError (naming the joints) if M is singular for every q
-    (a constant zero pivot, found while tracing) or at the centre of an initial box."""
-    num = chain.numeric()
-    num.pivot_graph()
+    (a constant zero pivot, found while tracing) or at the centre of an initial box
+    (with uncertain parameters: at their midpoints)."""
+    if not isinstance(masses, _MassMatrix):  # a Chain
+        masses = _MassMatrix(masses)
+    num = masses.num
     n = num.n
     mids = np.atleast_2d(box.mid())[:, :n]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -301,11 +494,16 @@ def _proven(graph, lo: np.ndarray, hi: np.ndarray, depth: int = _BISECTIONS) -> 
     return ok
 
 
-def _first_unproven(graph, pieces, n):
+def _first_unproven(graph, pieces, n, pbox=None):
     """(index, q-box lo, q-box hi) of the first of ``pieces`` (Interval (B, >= n) each,
-    in time order) with a box on which M is not proven positive definite, or None."""
+    in time order) with a box on which M is not proven positive definite, or None.
+    ``pbox``: (lo, hi) of the parameters, appended to every q-box (the graph's inputs
+    are q, then the parameters); the returned boxes include them."""
     los = [p.lo.reshape(-1, p.shape[-1])[:, :n] for p in pieces]
     his = [p.hi.reshape(-1, p.shape[-1])[:, :n] for p in pieces]
+    if pbox is not None:
+        los = [np.concatenate([a, np.broadcast_to(pbox[0], (a.shape[0], len(pbox[0])))], axis=1) for a in los]
+        his = [np.concatenate([a, np.broadcast_to(pbox[1], (a.shape[0], len(pbox[1])))], axis=1) for a in his]
     start = 0
     while start < len(pieces):
         stop, rows = start + 1, los[start].shape[0]
@@ -322,12 +520,13 @@ def _first_unproven(graph, pieces, n):
     return None
 
 
-def _prove_mass_matrix(chain, sol: Solution):
-    """Prove M(q) positive definite on every box of ``sol``; where that fails, cut the
-    solution back to that time and make it a break-down that names the joint."""
-    num = chain.numeric()
-    n = num.n
-    graph = num.pivot_graph()
+def _prove_mass_matrix(masses, sol: Solution):
+    """Prove M(q) positive definite on every box of ``sol`` (and every parameter value
+    in the parameter box); where that fails, cut the solution back to that time and
+    make it a break-down that names the joint."""
+    if not isinstance(masses, _MassMatrix):  # a Chain
+        masses = _MassMatrix(masses)
+    num, n, graph, chain = masses.num, masses.n, masses.graph, masses.chain
     # (time, boxes, the time in words): the initial sets, then each step's tube boxes
     # (a-priori enclosure over [t_j, t_j+1], which contains the sets the step started
     # from), and after a break-down at an output time the sets the failed step had
@@ -336,7 +535,7 @@ def _prove_mass_matrix(chain, sol: Solution):
                for j in range(len(sol.tube))]
     if sol.status != "completed" and len(sol.t) > 1 and sol.t[-1] >= sol.t_reached:
         pieces.append((float(sol.t[-1]), sol.boxes[-1], f"t = {float(sol.t[-1]):.6g}"))
-    found = _first_unproven(graph, [p[1] for p in pieces], n)
+    found = _first_unproven(graph, [p[1] for p in pieces], n, masses.pbox)
     if found is None:
         return
     piece, lo, hi = found
@@ -345,10 +544,12 @@ def _prove_mass_matrix(chain, sol: Solution):
     D = graph.eval_interval(Interval(lo, hi))
     k = int(np.flatnonzero(~(D.lo > 0))[0])
     box = ", ".join(f"{names[i]} in [{lo[i]:.6g}, {hi[i]:.6g}]" for i in range(n))
+    if masses.pbox is not None:
+        box += " and the parameter box"
     reason = (f"mass matrix M(q) not proven positive definite on the enclosure for {span}: the LDL^T "
               f"pivot of joint {names[k]!r} encloses [{float(D.lo[k]):.3g}, {float(D.hi[k]):.3g}] for {box}")
     try:
-        num.check_mass_matrix(0.5 * (lo + hi), where="at the centre of that box")
+        num.check_mass_matrix(0.5 * (lo[:n] + hi[:n]), where="at the centre of that box")
     except ModelError as e:
         reason += f"; {e}"
     else:
@@ -383,15 +584,61 @@ def _truncate(sol: Solution, T: float):
         rec.tests = [r for r in rec.tests if r.t <= T]
 
 
-def compare_modes(model, x0, t_end: float, modes=MODES, **kwargs) -> dict:
-    """Run ``model`` in each of ``modes`` with the same settings: ``{mode: Solution}``."""
-    return {m: simulate(model, x0, t_end, mode=m, **kwargs) for m in modes}
+def compare_modes(model, x0, t_end: float, modes=MODES, *, output_dt: float | None = None, **kwargs) -> dict:
+    """Run ``model`` in each of ``modes`` with the same settings: ``{mode: Solution}``.
+
+    ``output_dt`` defaults to ``(t_end - t0) / 50``, so that :func:`width_deviations`
+    compares the modes at 50 output times, not only at ``t_end``."""
+    if output_dt is None:
+        output_dt = (float(t_end) - float(kwargs.get("t0", 0.0))) / 50
+    return {m: simulate(model, x0, t_end, mode=m, output_dt=output_dt, **kwargs) for m in modes}
 
 
-def width_deviations(a: Solution, b: Solution) -> np.ndarray:
-    """Largest ``|diam a(t) - diam b(t)|`` per state over the output times both reach
-    (the paper's comparison of modes (ii) and (iii): 0.0018, 0.0072, 0.0066, 0.0444)."""
-    k = min(len(a.t), len(b.t))
-    if k == 0 or not np.allclose(a.t[:k], b.t[:k]):
-        raise ValueError("the solutions do not share output times")
-    return np.max(np.abs(a.hull[:k].width() - b.hull[:k].width()), axis=0)
+class WidthDeviations(np.ndarray):
+    """Largest ``|diam a(t) - diam b(t)|`` per state (an ndarray (n,)) that also says
+    where it was taken: ``times`` (the output times compared, every one both solutions
+    reached), ``argmax_t`` (n,) (the output time of each maximum), ``only_one`` (output
+    times only one solution reached: the other broke down or stopped earlier)."""
+
+    times: np.ndarray
+    argmax_t: np.ndarray
+    only_one: np.ndarray
+    state_names: tuple
+
+    def __array_finalize__(self, obj):
+        for k in ("times", "argmax_t", "only_one"):
+            setattr(self, k, getattr(obj, k, np.zeros(0)))
+        self.state_names = getattr(obj, "state_names", ())
+
+    def describe(self) -> str:
+        """One line: the deviations, where they occur and what was compared."""
+        names = self.state_names or tuple(f"x{i + 1}" for i in range(self.size))
+        parts = ", ".join(f"{n} {float(v):.4g} (t = {float(t):g})"
+                          for n, v, t in zip(names, np.asarray(self), self.argmax_t))
+        ts = self.times
+        head = (f"largest width differences over {ts.size} output times t = {ts[0]:g} .. {ts[-1]:g}: "
+                if ts.size else "no common output times: ")
+        tail = ""
+        if self.only_one.size:
+            tail = (f"; {self.only_one.size} later output time(s) up to t = {self.only_one[-1]:g} reached by one "
+                    "solution only (not compared)")
+        return head + parts + tail
+
+
+def width_deviations(a: Solution, b: Solution) -> WidthDeviations:
+    """Largest ``|diam a(t) - diam b(t)|`` per state over every output time both
+    solutions reach (the paper's comparison of modes (ii) and (iii): 0.0018, 0.0072,
+    0.0066, 0.0444). Returns a :class:`WidthDeviations` (an ndarray (n,)) that says
+    which times were compared and where each maximum is (``.describe()``)."""
+    ta, tb = np.asarray(a.t, float), np.asarray(b.t, float)
+    k = min(ta.size, tb.size)
+    if k == 0 or not np.allclose(ta[:k], tb[:k], rtol=1e-12, atol=0):
+        raise ValueError("the solutions do not share output times (run them with the same t0, t_end, output_dt)")
+    wa, wb = a.hull[:k].width(), b.hull[:k].width()
+    dev = np.abs(np.asarray(wa, float) - np.asarray(wb, float))  # (k, n)
+    out = np.max(dev, axis=0).view(WidthDeviations)
+    out.times = ta[:k]
+    out.argmax_t = ta[np.argmax(dev, axis=0)]
+    out.only_one = (ta if ta.size > tb.size else tb)[k:]
+    out.state_names = tuple(getattr(a, "state_names", ()) or ())
+    return out
