@@ -1,17 +1,25 @@
 """Command line::
 
     python -m mbs simulate SCENE --out DIR [--mode i|ii|iii] [--t-end T] [--output-dt DT]
-                                 [--samples N] [--no-figures]
+                                 [--samples N] [--no-figures] [--max-wall SECONDS]
     python -m mbs demo           # the paper's double pendulum in modes i, ii, iii
-    python -m mbs check MODEL    # our models against Pinocchio
+    python -m mbs check MODEL    # our models against Pinocchio (ur5, panda, example-robot-data:NAME,
+                                 # a URDF path)
     python -m mbs bench [--quick] [--out DIR]
 
 ``simulate`` writes DIR/result.json (see :mod:`mbs.results`) and the figures
 (:mod:`mbs.figures`): enclosures.png (Fig. 5), and in modes ii/iii
 reduction_area.png (Fig. 2) and consistency_plane.png (Fig. 3). SCENE is a TOML file
 (:mod:`mbs.scene`) or the name of a shipped scene (``double_pendulum_paper``).
-Exit codes: 0 done (also for a break-down, which is a result), 1 a sampled
-trajectory escaped the enclosure (a bug: please report), 2 bad input.
+The console script ``mbs`` is the same command (``mbs simulate SCENE --out DIR``).
+
+Exit codes of ``simulate``: 0 completed (every enclosure verified up to t_end, every
+sampled trajectory inside), 1 a sampled trajectory escaped the enclosure (a bug:
+please report), 2 bad input (scene, options, model), 3 the integration broke down
+before t_end (result.json holds everything verified up to the break-down; the
+printed widths are those at the break-down, not at t = 0), 4 stopped by
+``--max-wall SECONDS``, 130 interrupted by Ctrl-C. In the last two cases too,
+result.json holds everything verified so far (status "stopped" / "interrupted").
 """
 
 from __future__ import annotations
@@ -20,6 +28,10 @@ import argparse
 import sys
 import time
 from pathlib import Path
+
+
+#: exit codes of ``simulate`` (see the module docstring)
+EXIT_ESCAPED, EXIT_BAD_INPUT, EXIT_BREAKDOWN, EXIT_STOPPED, EXIT_INTERRUPTED = 1, 2, 3, 4, 130
 
 
 class _Parser(argparse.ArgumentParser):
@@ -45,25 +57,44 @@ def cmd_simulate(args) -> int:
                 raise SceneError(f"{flag} must be a positive finite number, got {v}")
         if args.samples is not None and args.samples < 0:
             raise SceneError(f"--samples must be >= 0, got {args.samples}")
+        if args.max_wall is not None and not (args.max_wall > 0 and args.max_wall < float("inf")):
+            raise SceneError(f"--max-wall must be a positive number of seconds, got {args.max_wall}")
         report = runner.run_scene(scene, args.out, mode=args.mode, t_end=args.t_end,
                                   output_dt=args.output_dt, samples=args.samples,
-                                  figures=not args.no_figures, log=print)
+                                  figures=not args.no_figures, log=print, max_wall=args.max_wall)
     except SceneError as e:
         return _fail(str(e))
-    return 1 if report.get("escaped") else 0
+    except KeyboardInterrupt:  # before the integration started: nothing verified yet
+        print("interrupted before the integration started; nothing written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    status = report["solution"].status
+    if report.get("escaped"):
+        return EXIT_ESCAPED
+    if status == "interrupted" or report.get("interrupted"):
+        return EXIT_INTERRUPTED
+    if status == "stopped":
+        return EXIT_STOPPED
+    if status != "completed":
+        return EXIT_BREAKDOWN
+    return 0
 
 
 def cmd_check(args) -> int:
     from . import ModelError
     from .check import compare_with_pinocchio, format_report, max_error
-    from models.registry import get
+    from .robots import load_model
 
     try:
-        chain = get(args.model)
+        chain = load_model(args.model)
     except ModelError as e:
         return _fail(str(e))
+    except Exception as e:  # noqa: BLE001 - unreadable URDF and the like: bad input
+        return _fail(f"cannot load {args.model!r}: {type(e).__name__}: {e}")
     t0 = time.perf_counter()
-    rep = compare_with_pinocchio(chain, symbolic=not args.numeric_only)
+    try:
+        rep = compare_with_pinocchio(chain, symbolic=not args.numeric_only)
+    except ModelError as e:  # e.g. Pinocchio's stricter URDF parser refuses the file
+        return _fail(str(e))
     print(format_report({args.model: rep}))
     err = max_error(rep)
     ok = err <= args.tol
@@ -73,7 +104,10 @@ def cmd_check(args) -> int:
 
 
 def main(argv=None):
-    parser = _Parser(prog="python -m mbs", description="Guaranteed simulation of multibody systems.")
+    prog = "mbs" if Path(sys.argv[0]).name == "mbs" else "python -m mbs"
+    parser = _Parser(prog=prog, description="Guaranteed simulation of multibody systems.",
+                     epilog="simulate exits with 0 (completed), 1 (a sampled trajectory escaped: a bug), "
+                            "2 (bad input) or 3 (break-down before t_end)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     p = sub.add_parser("simulate", help="run a scene file; write result.json and figures")
     p.add_argument("scene", help="TOML scene file (or the name of a shipped scene)")
@@ -82,13 +116,17 @@ def main(argv=None):
     p.add_argument("--t-end", type=float, help="horizon [s] (overrides the scene)")
     p.add_argument("--output-dt", type=float, help="output step [s] (overrides the scene)")
     p.add_argument("--samples", type=int, default=None,
-                   help="check against N sampled true trajectories and overlay them on the figure "
-                        "(default 64; 0: none)")
+                   help="check against exactly N sampled true trajectories (initial states and "
+                        "uncertain parameters) and overlay them on the figure (default 64; 0: none)")
     p.add_argument("--no-figures", action="store_true", help="write result.json only")
+    p.add_argument("--max-wall", type=float, default=None, metavar="SECONDS",
+                   help="stop the integration after SECONDS of wall-clock time and write what is verified "
+                        "(exit 4; Ctrl-C does the same with exit 130)")
     p = sub.add_parser("demo", help="the paper's double pendulum in modes i, ii, iii (about a minute)")
     p.add_argument("--out", default="out/demo", help="where the figures go (default out/demo)")
     p = sub.add_parser("check", help="compare a ready model with Pinocchio")
-    p.add_argument("model", help="a name from models.registry.NAMES (e.g. ur5, puma560)")
+    p.add_argument("model", help="a model name (ur5, panda, puma560, ...), example-robot-data:NAME "
+                                 "or a URDF file path (what a scene's [model] accepts)")
     p.add_argument("--tol", type=float, default=1e-9)
     p.add_argument("--numeric-only", action="store_true", help="skip the symbolic model")
     p = sub.add_parser("bench", help="work-precision table and stress tests (docs/benchmarks.md)")

@@ -1,9 +1,11 @@
-"""A progress bar for long simulations (tqdm), silent when stderr is not a terminal.
+"""A progress bar for long simulations (tqdm), silent when not interactive.
 
-``with Progress(t_end, "mode ii") as cb: simulate(..., progress=cb)`` -- the callback
-takes ``(t_now, t_end)``. The bar appears only after ``delay`` seconds (runs shorter
-than that print nothing) and only when stderr is a terminal (never in logs, pipes or
-tests) unless ``enabled=True`` is forced.
+``simulate(...)`` shows one by default; ``with Progress(t_end, "mode ii") as cb:
+simulate(..., progress=cb)`` drives one explicitly -- the callback takes
+``(t_now, t_end)``. The bar appears only after ``delay`` seconds (runs shorter than
+that print nothing) and only in an interactive session: stderr a terminal, or a
+Jupyter notebook (``tqdm.auto`` then draws a widget); never in logs, pipes or tests,
+unless ``enabled=True`` is forced.
 """
 from __future__ import annotations
 
@@ -11,6 +13,24 @@ import sys
 import time
 
 __all__ = ["Progress"]
+
+
+def interactive(file=None) -> bool:
+    """True when ``file`` (default stderr) is a terminal or we run in a Jupyter kernel."""
+    file = sys.stderr if file is None else file
+    try:
+        if file.isatty():
+            return True
+    except (AttributeError, ValueError):
+        pass
+    ip = sys.modules.get("IPython")
+    if ip is not None:
+        try:
+            shell = ip.get_ipython()
+        except Exception:  # noqa: BLE001 - no shell
+            return False
+        return shell is not None and type(shell).__name__ == "ZMQInteractiveShell"
+    return False
 
 
 class Progress:
@@ -23,7 +43,7 @@ class Progress:
         self.delay = delay
         self.file = file if file is not None else sys.stderr
         if enabled is None:
-            enabled = bool(getattr(self.file, "isatty", lambda: False)())
+            enabled = interactive(self.file)
         self.enabled = enabled
         self.bar = None
         self.calls = 0
@@ -38,7 +58,7 @@ class Progress:
         if self.bar is None:
             if time.perf_counter() - self._t0 < self.delay:
                 return
-            from tqdm import tqdm
+            from tqdm.auto import tqdm
             total = float(t_end) if t_end is not None else self.t_end
             self.bar = tqdm(total=total, desc=self.desc, unit="s", file=self.file, leave=False,
                             bar_format="{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:g} s "

@@ -75,3 +75,45 @@ def load(name: str, **kwargs):
     if name == "panda" and "lock" not in kwargs:
         kwargs["lock"] = {j: 0.0 for j in PANDA_FINGERS}
     return Chain.from_urdf(urdf_path(name), **kwargs)
+
+
+#: names users type for the ready models (also the example-robot-data short names)
+ALIASES = {"panda": "panda_arm", "franka": "panda_arm", "ur5_robot": "ur5",
+           "double_pendulum": "double_pendulum_urdf"}
+ERD_PREFIX = "example-robot-data:"
+
+
+def model_names() -> list:
+    """Every model name :func:`load_model` accepts besides paths and
+    ``example-robot-data:NAME``: the registry's names and the aliases."""
+    from models.registry import NAMES
+    return list(NAMES) + sorted(set(ALIASES) - set(NAMES))
+
+
+def load_model(spec: str):
+    """A :class:`mbs.Chain` from what a user types (the same as a scene's ``[model]``):
+
+    - a ready model, ``models.registry.NAMES`` (``ur5``, ``panda_arm``, ``puma560``, ...),
+      or an alias from :data:`ALIASES` (``panda``);
+    - ``example-robot-data:NAME`` (a short name of :data:`KNOWN`, a path under
+      ``robots/`` or a file stem; panda's fingers are locked);
+    - a path to a URDF file.
+
+    Raises :class:`ModelError` (one line) naming what was tried."""
+    from models.registry import NAMES, get
+    from .chain import Chain
+    if not isinstance(spec, str) or not spec:
+        raise ModelError(f"expected a model name, example-robot-data:NAME or a URDF path, got {spec!r}")
+    if spec in NAMES:
+        return get(spec)
+    if spec in ALIASES:
+        return get(ALIASES[spec])
+    if spec.startswith(ERD_PREFIX):
+        return load(spec[len(ERD_PREFIX):])
+    p = Path(spec)
+    if p.suffix.lower() in (".urdf", ".xml") or p.is_file():
+        if not p.is_file():
+            raise ModelError(f"URDF file {spec!r} not found")
+        return Chain.from_urdf(p)
+    raise ModelError(f"unknown model {spec!r}; give a name ({', '.join(model_names())}), "
+                     "example-robot-data:NAME or a URDF file path")

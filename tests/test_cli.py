@@ -98,3 +98,106 @@ def test_check_command(capsys):
     assert main(["check", "planar2", "--numeric-only"]) == 0
     out = capsys.readouterr().out
     assert "planar2" in out and "max relative error" in out
+
+
+# --------------------------------------------------------------------------- issue 14, item 5
+@pytest.mark.parametrize("spec", ["panda", "example-robot-data:double_pendulum", "URDF_PATH"])
+def test_check_accepts_what_scenes_accept(spec, capsys):
+    """check takes robot names users type (panda, not only panda_arm), example-robot-data:NAME
+    and URDF paths (it used to accept only models.registry names)."""
+    from mbs.robots import urdf_path
+    if spec == "URDF_PATH":
+        spec = str(urdf_path("double_pendulum"))
+    assert main(["check", spec, "--numeric-only"]) == 0
+    assert "max relative error" in capsys.readouterr().out
+
+
+def test_check_unknown_model_is_one_line(capsys):
+    assert main(["check", "pandas"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "unknown model 'pandas'" in err and "panda" in err and "\n" not in err
+    assert main(["check", "no/such/robot.urdf"]) == 2
+    assert "not found" in capsys.readouterr().err
+
+
+def test_console_script_mbs_is_declared_and_runs_main():
+    """pyproject's [project.scripts] mbs = mbs.__main__:main, installed as an entry point."""
+    import importlib.metadata as md
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert data["project"]["scripts"]["mbs"] == "mbs.__main__:main"
+    eps = [e for e in md.entry_points(group="console_scripts") if e.name == "mbs"]
+    assert eps and eps[0].load() is main
+
+
+def test_samples_n_takes_exactly_n(tmp_path):
+    scene = tmp_path / "p.toml"
+    scene.write_text(SMALL.format(mode="i"))
+    for n in (1, 5, 16):  # 16 gave 81 (all corners, 16 random and the centre)
+        assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--samples", str(n), "--no-figures"]) == 0
+        assert read_result(tmp_path / "o" / "result.json")["stats"]["samples_checked"] == n
+
+
+BREAKS = """
+[model]
+name = "pendulum_paper"
+[initial]
+box = [[0.5, 0.6], 0.0]
+[simulation]
+t_end = 1.0
+output_dt = 0.5
+mode = "i"
+[solver]
+max_steps = 3
+"""
+
+
+def test_breakdown_exits_3_and_prints_the_widths_at_the_breakdown(tmp_path, capsys):
+    """A break-down is exit code 3; the widths printed are those of the last verified
+    step, not of t = 0 (where the point qd(0) = 0 printed as 4.941e-324)."""
+    scene = tmp_path / "b.toml"
+    scene.write_text(BREAKS)
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--no-figures", "--samples", "4"]) == 3
+    out = capsys.readouterr().out
+    data = read_result(tmp_path / "o" / "result.json")
+    assert data["status"] == "breakdown" and 0 < data["t_reached"] < 0.5
+    line = next(s for s in out.splitlines() if "widths" in s)
+    assert "widths at the break-down" in line and "last step" in line and "e-3" not in line
+    assert f"{data['t_reached']:g}" in line
+    qd_width = float(line.rsplit("qd1 ", 1)[1].split()[0].rstrip(","))
+    assert qd_width > 1e-6  # qd has moved away from its point value
+
+
+def test_max_wall_stops_cleanly_and_writes_result(tmp_path, capsys):
+    scene = tmp_path / "p.toml"
+    scene.write_text(SMALL.format(mode="ii"))
+    out = tmp_path / "o"
+    # a limit every run exceeds after its first step (no wall-clock assertion)
+    assert main(["simulate", str(scene), "--out", str(out), "--max-wall", "1e-9", "--samples", "3"]) == 4
+    data = read_result(out / "result.json")
+    assert data["status"] == "stopped" and "wall-clock limit" in data["reason"]
+    assert 0 < data["t_reached"] < 0.3 and data["outputs"][0]["t"] == 0.0
+    assert "widths when stopped" in capsys.readouterr().out
+    assert main(["simulate", str(scene), "--out", str(out), "--max-wall", "0"]) == 2
+
+
+def test_ctrl_c_stops_cleanly_and_writes_result(tmp_path, monkeypatch, capsys):
+    """KeyboardInterrupt during the integration (raised here from the progress
+    callback at t >= 0.15) ends with exit 130 and result.json up to then."""
+    from mbs import progress
+
+    def interrupting(self, t_now, t_end=None):
+        if t_now >= 0.15:
+            raise KeyboardInterrupt
+    monkeypatch.setattr(progress.Progress, "__call__", interrupting)
+    scene = tmp_path / "p.toml"
+    scene.write_text(SMALL.format(mode="i"))
+    out = tmp_path / "o"
+    assert main(["simulate", str(scene), "--out", str(out)]) == 130
+    data = read_result(out / "result.json")
+    assert data["status"] == "interrupted" and 0.15 <= data["t_reached"] < 0.3
+    assert [o["t"] for o in data["outputs"]][:2] == [0.0, 0.1]
+    assert np.isfinite(result_boxes(data, 1).lo).all()

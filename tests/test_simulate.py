@@ -81,3 +81,64 @@ def test_clear_errors():
         simulate("double_pendulum_paper", Interval(lo, hi), 1.0, split_strategy="random")
     with pytest.raises(ValueError, match="mode i"):
         simulate("double_pendulum_paper", Interval(lo, hi), 1.0, mode="i", constraints=[object()])
+
+
+# --------------------------------------------------------------------------- issue 14, item 5
+def test_wrong_keyword_names_simulate():
+    lo, hi = pd.initial_box()
+    with pytest.raises(TypeError, match=r"simulate\(\) got an unexpected keyword argument 'h_maxx'.*'h_max'"):
+        simulate("pendulum_paper", Interval(lo, hi), 0.1, h_maxx=0.01)
+    with pytest.raises(TypeError, match=r"^simulate\(\)"):
+        simulate("pendulum_paper", Interval(lo, hi), 0.1, foo=1)
+
+
+def test_progress_bar_by_default_only_when_interactive(monkeypatch):
+    import io
+    from mbs import progress
+    made = []
+
+    class Recorder(progress.Progress):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            made.append(self)
+    monkeypatch.setattr(progress, "Progress", Recorder)
+    lo, hi = pd.initial_box()
+    simulate("pendulum_paper", Interval(lo, hi), 0.1, mode="i")
+    assert len(made) == 1 and made[0].calls == 0  # stderr is not a terminal here: no bar, no calls
+    assert not progress.Progress(1.0, file=io.StringIO()).enabled
+    made.clear()
+    monkeypatch.setattr(progress, "interactive", lambda file=None: True)
+    simulate("pendulum_paper", Interval(lo, hi), 0.1, mode="i")
+    assert made[0].enabled and made[0].calls >= 1 and made[0].last_t == 0.1
+    simulate("pendulum_paper", Interval(lo, hi), 0.1, mode="i", progress=False)
+    assert not made[1].enabled and made[1].calls == 0
+
+
+def test_interactive_detects_terminals():
+    import io
+    from mbs.progress import interactive
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+    assert interactive(Tty()) and not interactive(io.StringIO())
+
+
+def test_width_deviations_compare_every_output_time_and_say_which():
+    lo, hi = pd.initial_box()
+    sols = compare_modes("pendulum_paper", Interval(lo, hi), 0.2, modes=("i", "iii"), subdivision=[2, 2])
+    a, b = sols["i"], sols["iii"]
+    assert len(a.t) == 51  # compare_modes outputs 50 times by default, not only t_end
+    dev = width_deviations(a, b)
+    every = np.max(np.abs(a.hull.width() - b.hull.width()), axis=0)
+    assert np.array_equal(np.asarray(dev), every) and dev.times.size == 51
+    k = np.argmax(np.abs(a.hull.width() - b.hull.width()), axis=0)
+    assert np.array_equal(dev.argmax_t, a.t[k]) and dev.only_one.size == 0
+    assert "over 51 output times" in dev.describe()
+    # one solution stopped earlier: compared where both are, the rest named
+    short = simulate("pendulum_paper", Interval(lo, hi), 0.2, mode="i", subdivision=[2, 2], output_dt=0.004,
+                     max_steps=3)
+    assert short.status == "breakdown"
+    dev = width_deviations(short, b)
+    assert dev.times.size == len(short.t) and dev.only_one.size == 51 - len(short.t)
+    assert "reached by one solution only" in dev.describe()
