@@ -200,8 +200,14 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
         if cons is not None and len(getattr(cons, "ra_t", ())) > 1:
             report["paths"]["reduction_area"] = fig_reduction_area(sol, out / "reduction_area.png")
         if cons is not None and getattr(cons, "tests", None) and system.energy is not None:
+            pbox = None
+            if system.energy.n_params:  # H over every cell and every parameter value
+                from verified.interval import Interval
+                pn = system.energy.param_names
+                pbox = Interval(np.array([system.params[k][0] for k in pn], float),
+                                np.array([system.params[k][1] for k in pn], float))
             report["paths"]["consistency_plane"] = fig_consistency_plane(
-                sol, system.energy, out / "consistency_plane.png")
+                sol, system.energy, out / "consistency_plane.png", params=pbox)
     st = sol.stats
     log(f"{sol.status} at t = {sol.t_reached:g} s{(' (' + sol.reason + ')') if sol.reason else ''}; "
         f"{st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")

@@ -342,3 +342,38 @@ t_end = 0.1
     assert main(["simulate", str(p), "--out", str(tmp_path / "o"), "--no-figures"]) == 2
     err = capsys.readouterr().err.strip()
     assert "unknown link 'tool0'" in err and "\n" not in err
+
+
+def test_system_parameters_by_name():
+    """A System's graph parameters by name (a dict used to reach solve() and fail)."""
+    from mbs.system import System
+    from verified.graph import trace
+    g = trace(lambda x, p: [x[1], -p[0] * np.sin(x[0])], 2, 1, input_names=["q", "qd"], param_names=["k"])
+    system = System("pendulum_k", g)
+    box = Interval([0.5, 0.0], [0.51, 0.0])
+    sol = simulate(system, box, 0.3, mode="i", output_dt=0.1, params={"k": [9.0, 10.0]})
+    assert sol.status == "completed", sol.reason
+    trajs = [solve_ivp(lambda t, x, k=k: [x[1], -k * np.sin(x[0])], (0, 0.3), x0, method="DOP853", rtol=1e-12,
+                       atol=1e-12, dense_output=True).sol for k in (9.0, 9.5, 10.0) for x0 in ([0.5, 0], [0.51, 0])]
+    assert not misses(sol, trajs)
+    with pytest.raises(ValueError, match=r"unknown parameter\(s\) 'g' for 'pendulum_k'; its parameters: k"):
+        simulate(system, box, 0.1, mode="i", params={"g": 9.81})
+    with pytest.raises(ValueError, match=r"params k: inverted interval"):
+        simulate(system, box, 0.1, mode="i", params={"k": [10.0, 9.0]})
+    with pytest.raises(ValueError, match="pass params"):
+        simulate(system, box, 0.1, mode="i")
+
+
+def test_shipped_payload_scene_runs_from_the_cli(tmp_path, capsys):
+    """models/scenes/double_pendulum_payload.toml (to 0.1 s here; its full 0.5 s run is
+    in the slow test of every shipped scene): parameters sampled, figures with them."""
+    from mbs.__main__ import main
+    from mbs.results import read_result
+    assert main(["simulate", "double_pendulum_payload", "--out", str(tmp_path), "--t-end", "0.1",
+                 "--samples", "8"]) == 0
+    data = read_result(tmp_path / "result.json")
+    assert data["status"] == "completed" and data["stats"]["samples_checked"] == 8
+    assert set(data["parameters"]) == {"mass_scale", "damping.joint1", "damping.joint2", "payload.mass",
+                                       "payload.com_z"}
+    assert (tmp_path / "consistency_plane.png").is_file()
+    assert "uncertain parameters: mass_scale in [0.97, 1.03]" in capsys.readouterr().out
