@@ -813,11 +813,17 @@ def test_mass_matrix_proof_uses_affine_pivots_for_a_five_link_arm():
 
     from models.planar import planar_chain
 
+    from mbs.numeric import NumericModel
+
     chain = planar_chain(5)
-    g = chain.numeric().pivot_graph()
+    g = NumericModel(chain, "ldl").pivot_graph()  # the plain LDL^T pivots of M
     q0, e = np.array([0.5, -0.3, 0.2, -0.3, 0.2]), 1e-3
     lo, hi = (q0 - e)[None, :], (q0 + e)[None, :]
     assert not (g.eval_interval(Interval(lo, hi)).lo > 0).all()
     D = _check_affine_range(g, lo, hi, np.random.default_rng(5))
     assert (D.lo > 0).all()
     assert _proven(g, lo, hi, depth=0).all()
+    # the default proof (congruence pivots, tests/test_preconditioned.py) needs no affine
+    gc = chain.numeric().pivot_graph()
+    assert (gc.eval_interval(Interval(lo, hi)).lo > 0).all()
+    _check_affine_range(gc, lo, hi, np.random.default_rng(6))
