@@ -41,11 +41,37 @@ import numpy as np
 from . import linalg
 from .graph import Graph, GraphBuilder
 from .graph_ops import augment_with_rate, difference, embed, negated, rate_along
+from .energy_contraction import EnergyContraction
 from .hooks import Hook
 from .interval import Interval, concatenate, hull, point
 from .sets import DoubletonSets
 
-__all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES"]
+__all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES", "EnergyClaimError",
+           "prove_energy_rate"]
+
+
+class EnergyClaimError(ValueError):
+    """A declared energy rate (``conservative=True``, ``energy_rate="zero"`` or an
+    ``energy_rate`` graph) is refuted: ``grad H . f - rate`` excludes 0 somewhere.
+    Pruning or contracting with it would remove true states."""
+
+
+def prove_energy_rate(rhs: Graph, energy: Graph, rate: Graph | None) -> bool:
+    """Symbolic proof (sympy) that ``grad H . f - rate`` is identically 0 (``rate``
+    None: the claim ``dH/dt = 0``). True when proven; False when sympy cannot
+    simplify it to 0 (no refutation: use the interval check)."""
+    import sympy
+
+    from .graph_sympy import graph_to_sympy
+    xs = sympy.symbols(f"x0:{rhs.n_inputs}", real=True)
+    ps = sympy.symbols(f"p0:{rhs.n_params}", real=True) if rhs.n_params else ()
+    f = graph_to_sympy(rhs, xs, ps)
+    (H,) = graph_to_sympy(energy, xs, ps)
+    expr = sum(sympy.diff(H, x) * fx for x, fx in zip(xs, f))
+    if rate is not None:
+        expr = expr - graph_to_sympy(rate, xs, ps)[0]
+    return sympy.simplify(expr) == 0
+
 
 #: ways to split a set at ``t*`` (compared in benchmarks/bench_consistency.py)
 STRATEGIES = ("gradient", "widest", "grid")
@@ -113,6 +139,9 @@ class ConsistencyRecord:
     h_h: Interval
     h_v: Interval
     tests: list = field(default_factory=list)
+    #: ``H_H`` and ``H_V`` of the set with the largest ``RA`` at each step (``ra`` is its RA)
+    h_h_set: Interval | None = None
+    h_v_set: Interval | None = None
 
 
 class EnergyTest(Hook):
@@ -162,7 +191,8 @@ class EnergyTest(Hook):
     def __init__(self, energy: Graph | None = None, energy_rate="derive", constraints=(), *,
                  max_interval: float = 0.1, splits: int = 10, strategy: str = "gradient",
                  refine: str = "pruned", min_gain: float = 0.1, backward_depth: int = 0,
-                 max_boxes: int = 4096):
+                 max_boxes: int = 4096, contract: str = "step", prune: bool = True, align=None,
+                 check_claim: bool = True):
         if energy is None and not constraints:
             raise ValueError("EnergyTest needs an energy graph or at least one constraint")
         if energy is not None and (not isinstance(energy, Graph) or energy.n_outputs != 1):
@@ -171,6 +201,8 @@ class EnergyTest(Hook):
             raise ValueError(f"energy_rate must be a Graph, 'derive' or 'zero', got {energy_rate!r}")
         if strategy not in STRATEGIES:
             raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
+        if contract not in ("step", "test", "off"):
+            raise ValueError(f"contract must be 'step', 'test' or 'off', got {contract!r}")
         if refine not in ("pruned", "always"):
             raise ValueError(f"refine must be 'pruned' or 'always', got {refine!r}")
         if not (np.isfinite(max_interval) and max_interval > 0):
@@ -191,33 +223,113 @@ class EnergyTest(Hook):
         self.min_gain = float(min_gain)
         self.backward_depth = int(backward_depth)
         self.max_boxes = int(max_boxes)
+        self.contract = contract
+        self.prune = bool(prune)
+        if align is not None and not callable(getattr(align, "set_direction", None)):
+            raise ValueError("align must be an error-basis policy with set_direction "
+                             "(verified.policies.EnergyAlignedBasis) or None")
+        self.align = align
+        self.check_claim = bool(check_claim)
 
     # ------------------------------------------------------------------ solver hook
     def before_run(self, setup):
         """Bind to the run (see :meth:`prepare`): the graph with ``h`` appended, the
         initial sets with ``h(0)``, steps of at most ``max_interval``."""
         graph = self.prepare(setup.user_graph, setup.graph, setup.n_state, setup.params, t0=setup.t0)
+        self._refute_claim(setup.sets.hull(), setup.sets.c, setup.t0)
         # "a test at least every max_interval seconds"
         return replace(setup, graph=graph, sets=self.initial_sets(setup.sets),
                        h_max=min(setup.h_max, self.max_interval))
 
     def after_step(self, step, sets, run):
-        """Record ``RA(t)``; at ``t*`` branch and prune (returns the surviving sets)."""
+        out = self._after_step(step, sets, run)
+        if self.align is not None and self._energy is not None:
+            final = sets if out is None else out
+            g = None
+            if final.n_sets:
+                with np.errstate(all="ignore"):
+                    g = self._jac(self._residual, point(final.c))[:, 0, :].mid()
+            self.align.set_direction(g)
+        return out
+
+    def _refute_claim(self, boxes: Interval, points: np.ndarray, t: float):
+        """Raise :class:`EnergyClaimError` when ``grad H . f - rate`` excludes 0 over one
+        of ``boxes`` (B, >= n_s) or at one of ``points`` (B, >= n_s): the declared
+        rate is then wrong there (every true state of those boxes is a counterexample
+        or the point is), and pruning with it would be unsound."""
+        if self._claim is None:
+            return
+        n_s = self._n_s
+        for what, X in (("at the point", point(np.asarray(points)[:, :n_s])), ("over the box", boxes[:, :n_s])):
+            with np.errstate(all="ignore"):
+                d = self._eval(self._claim, X)[:, 0]
+            bad = (d.lo > 0) | (d.hi < 0)
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                decl = "conservative=True (dH/dt = 0)" if self.energy_rate == "zero" else "the energy_rate graph"
+                names = self._graph.input_names[:self._n_x]
+                where = ", ".join(f"{nm}={v}" for nm, v in zip(names, (X[k].mid() if what == "over the box" else X[k].lo)))
+                raise EnergyClaimError(
+                    f"the declared energy rate is wrong: grad H . f - dH/dt is in [{d.lo[k]:.6g}, {d.hi[k]:.6g}] "
+                    f"(excludes 0) {what} {where} (t = {t:g}); {decl} does not hold for this ODE, so the "
+                    "energy test cannot use it (pass energy_rate='derive', or fix the model)")
+
+    def _after_step(self, step, sets, run):
+        """Contract the sets with ``H(x) - h = 0`` (``contract="step"``), record
+        ``RA(t)``; at ``t*`` branch and prune (returns the surviving sets)."""
+        changed = False
+        if self._claim is not None:
+            # the claim over every state the step's tube encloses, and at the new centres
+            self._refute_claim(step.tube, sets.c, step.t)
+        if self.contract == "step" and self._contraction is not None:
+            sets, changed = self._contract(sets)
+            if sets.n_sets == 0:
+                run.stop("the energy contraction removed every set (inconsistent model or energy rate?)",
+                         "breakdown")
+                return sets
         decision = self.observe(step.t, sets)
+        only = None
         if decision == "previous":
-            back = run.rollback()
+            only = self.peaked  # the sets whose RA peaked (same order before and after the step)
+            back = run.rollback() if not changed else None
             if back is not None:
                 # RA(t) peaked at the previous step: t* is there, roll back to it
                 step, sets = back
                 self.forget_last()
-                decision = "now"
-        if decision != "now":
-            return None
-        prev = (step.previous, step.h, run.make_stepper) if self.backward_depth else None
-        sets = self.apply(step.t, step.t_enclosure, sets, prev)
+            # else (the sets were replaced since: no rollback) test now, one step after the peak
+            decision = "now"
+        if decision != "now" or not (self.prune or self.contract == "test"):
+            if decision == "now":
+                self._last_test_t = step.t
+            return sets if changed else None
+        if self.contract == "test" and self._contraction is not None:
+            sets, _ = self._contract(sets)
+        if self.prune:
+            prev = (step.previous, step.h, run.make_stepper) if self.backward_depth else None
+            if only is not None and only.shape == (sets.n_sets,) and not only.all():
+                # test only the sets whose RA peaked; the others continue unchanged
+                tested = self.apply(step.t, step.t_enclosure, sets.take(np.flatnonzero(only)), prev)
+                sets = DoubletonSets.concatenate([sets.take(np.flatnonzero(~only)), tested])
+            else:
+                sets = self.apply(step.t, step.t_enclosure, sets, prev)
+        else:
+            self._last_test_t = step.t
         if sets.n_sets == 0:
             run.stop("the consistency test removed every set (inconsistent model or constraints?)", "breakdown")
         return sets
+
+    def _contract(self, sets):
+        """``(sets, changed)``: the sets contracted with ``H(x) - h = 0``
+        (:mod:`verified.energy_contraction`); empty sets dropped."""
+        w0 = time.perf_counter()
+        res = self._contraction.contract(sets, self._p(sets.n_sets) if self._residual.n_params else None)
+        self.stats["contractions"] += 1
+        self.stats["contracted_empty"] += int(res.empty.sum())
+        if res.ratio.size:
+            self.stats["contraction_ratio_min"] = min(self.stats["contraction_ratio_min"], float(res.ratio.min()))
+        self.stats["contraction_s"] += time.perf_counter() - w0
+        changed = bool(res.empty.any() or (res.ratio < 1).any())
+        return (res.sets if changed else sets), changed
 
     def after_run(self, solution):
         solution.consistency = self.finish()
@@ -244,6 +356,8 @@ class EnergyTest(Hook):
             return b.build(embed(b, g, xs[:n_x], xs[n_x:n_x + g.n_params]), g.output_names)
 
         self._energy = None
+        self._contraction = None
+        self._claim = None
         graph = integrated
         if self.energy is not None:
             if self.energy.n_inputs != n_x or self.energy.n_params != rhs.n_params:
@@ -257,9 +371,20 @@ class EnergyTest(Hook):
                 rate = rate_along(self.energy, rhs)
             else:
                 rate = None
+            self._claim = None
+            if self.check_claim and self.energy_rate != "derive":
+                # grad H . f - rate: identically 0 if the declared rate is right
+                b = GraphBuilder(n_x, rhs.n_params, input_names=rhs.input_names, param_names=rhs.param_names)
+                xs_ = [b.input(i) for i in range(n_x)]
+                ps_ = [b.param(i) for i in range(rhs.n_params)]
+                (d,) = embed(b, rate_along(self.energy, rhs), xs_, ps_)
+                if rate is not None:
+                    d = b.sub(d, embed(b, rate, xs_, ps_)[0])
+                self._claim = lift(b.build([d], ["dHdt claim residual"]))
             self._energy = lift(self.energy)
             graph = augment_with_rate(integrated, None if rate is None else lift(rate), name="h")
             self._residual = difference(self._energy, n_s + 1, n_s, name="H-h")  # 0 on true trajectories
+            self._contraction = EnergyContraction(self._residual) if self.contract != "off" else None
         self._n_aug = graph.n_inputs
         self._constraints = []
         for c in self.constraints:
@@ -274,9 +399,12 @@ class EnergyTest(Hook):
         self._graph = graph
         self.record = ConsistencyRecord(np.zeros(0), np.zeros(0), Interval(np.zeros(0)), Interval(np.zeros(0)))
         self._ra_t, self._ra, self._hh, self._hv = [], [], [], []
+        self._hh_set, self._hv_set, self._ra_sets, self._ra_sets_t = [], [], [], []
+        self.peaked = None
         self._last_test_t = float(t0)  # the interval to the first test starts at t0
         self.stats = dict(tests=0, pruned_boxes=0, test_s=0.0, backward_s=0.0, backward_runs=0,
-                          backward_deleted=0, refinements_skipped=0)
+                          backward_deleted=0, refinements_skipped=0, contractions=0, contracted_empty=0,
+                          contraction_s=0.0, contraction_ratio_min=1.0)
         return graph
 
     def initial_sets(self, sets):
@@ -360,34 +488,57 @@ class EnergyTest(Hook):
     # ------------------------------------------------------------------ RA(t)
     def observe(self, t: float, sets) -> str | None:
         """Record ``RA(t)`` (eq. (16)) for the sets after a step and say whether to test:
-        "previous" (the first local maximum was at the previous step), "now" (the
-        longest interval has passed), or None."""
+        "previous" (some set's ``RA`` had its first local maximum at the previous step),
+        "now" (the longest interval has passed), or None.
+
+        ``RA`` is evaluated per set, ``diam H_H(S) - diam(H_H(S) ∩ H_V(S))`` with both
+        enclosures of the same set ``S`` (eq. (16) for that set; a sum over sets would
+        compare the energy spread *between* sets, which is no overestimation). The
+        record (Fig. 2) keeps the largest per-set value, ``H_H`` and ``H_V`` of that
+        set, and the hulls over all sets. The sets whose ``RA`` peaked are the ones
+        tested (:attr:`peaked`)."""
+        self.peaked = None
         if self._energy is not None:
             X = sets.hull()
             hh = self._eval(self._energy, X[:, : self._n_s])[:, 0]
             hv = X[:, self._n_s]
             inter = hh.intersect(hv)
             wi = np.where(inter.is_empty(), 0.0, inter.width())
-            ra = float(np.sum(hh.width() - wi))
+            ra_b = np.nan_to_num(hh.width() - wi, nan=0.0, posinf=np.finfo(float).max)
+            k = int(np.argmax(ra_b)) if ra_b.size else 0
+            ra = float(ra_b[k]) if ra_b.size else 0.0
             self._hh.append(hull(hh, axis=0))
             self._hv.append(hull(hv, axis=0))
+            self._hh_set.append(hh[k] if ra_b.size else Interval(np.nan))
+            self._hv_set.append(hv[k] if ra_b.size else Interval(np.nan))
         else:
+            ra_b = np.zeros(sets.n_sets)
             ra = 0.0
         self._ra_t.append(t)
         self._ra.append(ra)
         since = t - self._last_test_t
-        # RA(t0) = 0 (H_V(0) is H_H(0)), so the first step can be a local maximum too
-        before = self._ra[-3] if len(self._ra) >= 3 and self._ra_t[-3] > self._last_test_t else 0.0
-        if len(self._ra) >= 2 and self._ra_t[-2] > self._last_test_t and self._ra[-2] > self._ra[-1] \
-                and self._ra[-2] >= before and self._ra[-2] > 0:
-            return "previous"
+        hist = self._ra_sets
+        if hist and hist[-1].shape != ra_b.shape:
+            hist.clear()  # the batch changed (pruned, split): start the per-set history again
+        hist.append(ra_b)
+        del hist[:-3]
+        self._ra_sets_t.append(t)
+        del self._ra_sets_t[:-3]
+        if len(hist) >= 2 and self._ra_sets_t[-2] > self._last_test_t:
+            # RA(t0) = 0 (H_V(0) is H_H(0)), so the first step can be a local maximum too
+            before = hist[-3] if len(hist) >= 3 and self._ra_sets_t[-3] > self._last_test_t else 0.0
+            peak = (hist[-2] > hist[-1]) & (hist[-2] >= before) & (hist[-2] > 0)
+            if peak.any():
+                self.peaked = peak
+                return "previous"
         if since >= self.max_interval * (1 - 1e-12):
             return "now"
         return None
 
     def forget_last(self):
         """The solver rolled the last step back (the test runs at the step before)."""
-        for lst in (self._ra_t, self._ra, self._hh, self._hv):
+        for lst in (self._ra_t, self._ra, self._hh, self._hv, self._hh_set, self._hv_set, self._ra_sets,
+                    self._ra_sets_t):
             if lst:
                 lst.pop()
 
@@ -571,6 +722,8 @@ class EnergyTest(Hook):
         empty = Interval._from_bounds(np.zeros(0), np.zeros(0))
         self.record.h_h = concatenate([h.reshape((1,)) for h in self._hh], axis=0) if self._hh else empty
         self.record.h_v = concatenate([h.reshape((1,)) for h in self._hv], axis=0) if self._hv else empty
+        self.record.h_h_set = concatenate([h.reshape((1,)) for h in self._hh_set], axis=0) if self._hh_set else empty
+        self.record.h_v_set = concatenate([h.reshape((1,)) for h in self._hv_set], axis=0) if self._hv_set else empty
         return self.record
 
 

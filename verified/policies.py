@@ -23,7 +23,7 @@ import numpy as np
 from . import linalg
 from .interval import Interval, hull, point
 
-__all__ = ["QRBasis", "AutoBasis", "error_basis_policy", "StepControl", "Validated", "WrapControl",
+__all__ = ["QRBasis", "AutoBasis", "EnergyAlignedBasis", "error_basis_policy", "StepControl", "Validated", "WrapControl",
            "SplitPolicy", "MergePolicy", "REMAINDER_SLACK"]
 
 #: a step is retried smaller when its remainder exceeds this many times ``tol``
@@ -89,6 +89,58 @@ class AutoBasis(QRBasis):
             np.where(use_box[:, None], r_box.lo, r_qr.lo), np.where(use_box[:, None], r_box.hi, r_qr.hi)
         )
         return Q_out, r_new
+
+
+class EnergyAlignedBasis(QRBasis):
+    """Lohner's QR basis with its first column along a given direction per set, e.g.
+    the gradient of the energy residual ``G = H(x) - h`` (set by
+    :class:`verified.consistency.EnergyTest` after every step through
+    :meth:`set_direction`). The linear row of the energy contraction
+    (:mod:`verified.energy_contraction`) then has one dominant coefficient, on the
+    error component along the gradient, and narrows it instead of sharing the
+    constraint among all components.
+
+    Any orthonormal ``Q'`` is sound (``Q'^-1`` is enclosed rigorously), so the
+    direction is only a heuristic: when it is missing, not finite, or its batch size
+    differs from the step's (sets split, merged or pruned since it was set), the plain
+    QR basis is used for that step. The direction is used once.
+    """
+
+    name = "energy"
+
+    def __init__(self):
+        self.direction = None
+        self.used = 0
+
+    def set_direction(self, direction) -> None:
+        """``direction``: float (B, N) per set (any length; zero rows fall back to QR), or None."""
+        self.direction = None if direction is None else np.asarray(direction, float)
+
+    def update(self, Q, r, JQ, incoming):
+        g, self.direction = self.direction, None
+        nb, n = r.shape
+        if g is None or g.shape != (nb, n):
+            return super().update(Q, r, JQ, incoming)
+        norm = np.linalg.norm(g, axis=1)
+        ok = np.isfinite(norm) & (norm > 0) & np.isfinite(g).all(axis=1)
+        if not ok.any():
+            return super().update(Q, r, JQ, incoming)
+        r_w = r.width()
+        arriving = np.einsum("bij,bi->bj", np.abs(Q), incoming.width())
+        carried = np.where((r_w.sum(axis=1) > 0)[:, None], r_w, arriving) + 1e-300
+        A = JQ.mid()
+        size = np.linalg.norm(A, axis=1) * carried
+        order = np.argsort(-size, axis=1, kind="stable")
+        A_sorted = np.take_along_axis(A, order[:, None, :], axis=2)
+        lead = np.where(ok[:, None], g / np.where(ok, norm, 1.0)[:, None], A_sorted[:, :, 0])
+        A2 = np.concatenate([lead[:, :, None], A_sorted[:, :, : n - 1]], axis=2)
+        A2 = np.where(ok[:, None, None], A2, A_sorted)
+        Q_new, _ = np.linalg.qr(A2)
+        Q_inv = linalg.solve(Q_new[:, None, :, :], point(np.broadcast_to(np.eye(n), (nb, n, n))))
+        Q_inv = Q_inv.swapaxes(-1, -2)
+        r_new = linalg.matvec(linalg.matmul(Q_inv, JQ), r) + linalg.matvec(Q_inv, incoming)
+        self.used += int(ok.sum())
+        return Q_new, r_new
 
 
 _BASES = {"qr": QRBasis, "auto": AutoBasis}
