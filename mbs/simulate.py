@@ -337,8 +337,9 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     max_wall : float or None
         Stop the integration after this many seconds of wall-clock time
         (:class:`verified.hooks.StopAfterWall`): ``status="stopped"`` with everything
-        verified so far. Ctrl-C (``KeyboardInterrupt``) during the integration likewise
-        returns the partial solution with ``status="interrupted"``.
+        verified so far. Ctrl-C during the integration likewise returns the partial
+        solution with ``status="interrupted"`` (after the step in progress; a second
+        Ctrl-C aborts at once).
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
         an unknown keyword raises ``TypeError`` naming ``simulate()``
 
@@ -381,15 +382,18 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
                 or not np.isfinite(max_wall):
             raise ValueError(f"max_wall must be a positive number of seconds, got {max_wall!r}")
         solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [StopAfterWall(max_wall)]
+    ctrl_c = _CtrlC()
+    solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [ctrl_c]
     bar = None
     if progress is None or isinstance(progress, bool):
         from .progress import Progress
         bar = Progress(t_end, f"mode {mode}", enabled=None if progress is None else progress)
         progress = bar if bar.enabled else None
     try:
-        sol = solve(system.rhs, box, (t0, t_end), t_eval=output_times(t0, t_end, output_dt), params=ode_params,
-                    order=order, tol=tol, subdivision=subdivision, consistency=test, progress=progress,
-                    **solver_kwargs)
+        with ctrl_c:
+            sol = solve(system.rhs, box, (t0, t_end), t_eval=output_times(t0, t_end, output_dt), params=ode_params,
+                        order=order, tol=tol, subdivision=subdivision, consistency=test, progress=progress,
+                        **solver_kwargs)
     finally:
         if bar is not None:
             bar.close()
@@ -399,6 +403,55 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     sol.state_names = system.state_names
     sol.params = dict(system.params) if system.rhs.n_params else {}
     return sol
+
+
+class _CtrlC:
+    """A solver hook that turns Ctrl-C into a clean stop after the current step.
+
+    While :func:`simulate` integrates (in the main thread, with Python's default SIGINT
+    handler in place) the first Ctrl-C only sets a flag; the hook then stops the run
+    after the step in progress (``status="interrupted"``, everything verified so far
+    kept). A ``KeyboardInterrupt`` raised inside a compiled kernel would surface as a
+    numba ``SystemError`` and lose the run. A second Ctrl-C raises ``KeyboardInterrupt``
+    at once (the solver still returns what it recorded when it can)."""
+
+    def __init__(self):
+        self.requested = False
+        self._previous = None
+
+    def __enter__(self):
+        import signal
+        import threading
+        if threading.current_thread() is threading.main_thread() \
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        if self._previous is not None:
+            import signal
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
+        return False
+
+    def _handle(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        import sys
+        print("\nCtrl-C: stopping after the current step (press again to abort at once)", file=sys.stderr)
+
+    # the hook protocol of verified.hooks
+    def before_run(self, setup):
+        return None
+
+    def after_step(self, step, sets, run):
+        if self.requested:
+            run.stop(f"interrupted (Ctrl-C) at t = {float(step.t):g}", "interrupted")
+        return None
+
+    def after_run(self, solution):
+        return None
 
 
 def _has_width(params) -> bool:

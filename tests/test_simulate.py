@@ -142,3 +142,25 @@ def test_width_deviations_compare_every_output_time_and_say_which():
     dev = width_deviations(short, b)
     assert dev.times.size == len(short.t) and dev.only_one.size == 51 - len(short.t)
     assert "reached by one solution only" in dev.describe()
+
+
+def test_ctrl_c_signal_stops_after_the_step_without_an_exception(capsys):
+    """A real SIGINT during the integration (sent here from the progress callback at
+    t >= 0.1; in a compiled kernel it used to surface as a numba SystemError) stops
+    the run after that step: status "interrupted", everything verified so far kept."""
+    import os
+    import signal
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    sent = []
+
+    def progress(t, t_end):
+        if t >= 0.1 and not sent:
+            sent.append(t)
+            os.kill(os.getpid(), signal.SIGINT)
+    lo, hi = pd.initial_box()
+    sol = simulate("pendulum_paper", Interval(lo, hi), 0.3, mode="i", output_dt=0.1, progress=progress)
+    assert sol.status == "interrupted" and sol.reason.startswith("interrupted (Ctrl-C)")
+    assert sol.t_reached == sent[0] and 0.1 <= sol.t_reached < 0.3
+    assert np.allclose(sol.t, [0.0, 0.1])
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+    assert "Ctrl-C: stopping after the current step" in capsys.readouterr().err
