@@ -435,14 +435,21 @@ class ChainParameters:
                      input_names=names, param_names=self.names, output_names=["H"])
 
     def pivot_graph(self):
-        """(q, p) -> (D_1, ..., D_n), the LDL^T pivots of M(q; p), with the parameters as
-        *inputs* after q (for proving M positive definite over q-boxes x the parameter box)."""
+        """(q, p) -> (D_1, ..., D_n), pivots whose positivity proves M(q; p) positive
+        definite (as :meth:`NumericModel.pivot_graph`), with the parameters as *inputs*
+        after q (for proving M positive definite over q-boxes x the parameter box)."""
         from verified.graph import trace
         n = self.chain.n
         qn = self._state_names()[:n]
         def fn(x, _):
             x = list(x)
-            return self.bind(x[n:]).mass_matrix_pivots(x[:n])
+            m = self.bind(x[n:])
+            if getattr(m, "linear_solve", None) == "preconditioned":
+                # as NumericModel.pivot_graph: the pivots of K M K^T, K = L^-1 of mid(M)
+                # frozen (same inertia, tight over boxes)
+                from verified.preconditioned import congruence_pivots
+                return congruence_pivots(m._crba(m.joint_transforms(x[:n])))
+            return m.mass_matrix_pivots(x[:n])
         return trace(fn, n + self.n, 0, input_names=list(qn) + list(self.names),
                      output_names=[f"D{i + 1}" for i in range(n)])
 
