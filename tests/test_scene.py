@@ -170,3 +170,14 @@ t_end = 0.5
     # interval parameters are handed to simulate
     s = loads_scene(dh.replace("m1 = 2.0", "m1 = [1.9, 2.1]"))
     assert s.simulate_kwargs()["params"] == {"m1": (1.9, 2.1)}
+
+
+def test_scene_model_names_users_type():
+    """[model] name accepts the aliases of mbs.robots (panda -> panda_arm), like check."""
+    from mbs.robots import load_model
+    from mbs.scene import loads_scene
+    scene = loads_scene('[model]\nname = "panda"\n[initial]\nbox = ' + str([0.0] * 14) + '\n[simulation]\nt_end = 0.1\n')
+    assert scene.build_model() == "panda"
+    assert load_model("panda").n == 7 and load_model("panda").joint_names == load_model("panda_arm").joint_names
+    with pytest.raises(SceneError, match="unknown model 'pandas'"):
+        loads_scene('[model]\nname = "pandas"\n[initial]\nbox = [0.0]\n[simulation]\nt_end = 0.1\n')
