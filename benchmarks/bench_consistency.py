@@ -10,7 +10,10 @@ Tables:
 3. split strategies compared (same settings, mode iii);
 4. mode (iii) with dH/dt unsimplified vs simplified to 0;
 5. the pendulum of sec. 5.1: RA(t), t*, and the parts kept at t*;
-6. the damped URDF double pendulum (example-robot-data) with an uncertain angle.
+6. the damped URDF double pendulum (example-robot-data) with an uncertain angle;
+7. work-precision (issue 13): the same solver without the test, with the energy
+   contraction, with contraction + pruning, with pruning only, over piece counts
+   (docs/work_precision.png, docs/work_precision.json).
 Ratios are measured side by side in one run (the machine is shared and noisy).
 """
 from __future__ import annotations
@@ -158,10 +161,98 @@ def urdf_robot(T):
         print(_row(mode, s, true_w), flush=True)
 
 
+def _test_for(system, **kw):
+    from verified.consistency import EnergyTest
+    rate = "zero" if system.conservative else ("derive" if system.energy_rate is None else system.energy_rate)
+    return EnergyTest(system.energy, rate, **kw)
+
+
+def work_precision(out_json="docs/work_precision.json", plot="docs/work_precision.png", quick=False):
+    """Worst ratio (widest state / sampled true hull) against wall time over piece
+    counts, the same solver with and without the test: mode (iii)'s graphs (eq. 22 / 18)
+    without a test, with the energy contraction every step only, and with contraction +
+    branch and prune at the per-set RA maxima (modes ii/iii's default)."""
+    import json
+    from mbs.simulate import system_for
+    from verified.solver import solve
+    cases = [("double pendulum T=1", "double_pendulum_paper", 1.0, [16, 64, 256], "auto"),
+             ("double pendulum T=2", "double_pendulum_paper", 2.0, [64, 256], "qr"),
+             ("pendulum T=3", "pendulum_paper", 3.0, [4, 8, 16], "qr")]
+    if quick:
+        cases = [("double pendulum T=0.5", "double_pendulum_paper", 0.5, [4, 16], "auto")]
+    variants = [("no test", None), ("contraction", dict(contract="step", prune=False)),
+                ("contraction + prune", dict(contract="step")), ("prune only", dict(contract="off"))]
+    results = []
+    print("\n## 7. Work-precision: the same solver (mode iii graphs) with and without the test")
+    print(f"{'case':<22} {'pieces':>6} {'variant':<22} {'status':<10} {'t':>6} {'ratio':>8} {'wall_s':>7}")
+    for label, model, T, piece_list, basis in cases:
+        mod = pd if model == "pendulum_paper" else dp
+        lo, hi = mod.initial_box()
+        f = (lambda x: pd.rhs(x)) if mod is pd else (lambda x: dp.rhs(x))
+        n = lo.size
+        true_w = sampled_hull(f, lo, hi, np.array([T]), n=201 if not quick else 51)[-1] if n == 4 else \
+            _grid_hull(f, lo, hi, T)
+        system = system_for(model, "iii")
+        for pieces in piece_list:
+            sub = [pieces, 1, 1, 1] if n == 4 else [pieces, pieces]
+            for vname, kw in variants:
+                test = None if kw is None else _test_for(system, **kw)
+                s = solve(system.rhs, Interval(lo, hi), (0, T), t_eval=[T], subdivision=sub, consistency=test,
+                          error_basis=basis)
+                ratio = float(np.max(s.hull[-1].width() / true_w)) if s.success else float("nan")
+                results.append(dict(case=label, pieces=pieces, variant=vname, status=s.status,
+                                    t_reached=s.t_reached, ratio=ratio, wall_s=s.stats["wall_s"]))
+                print(f"{label:<22} {pieces:>6} {vname:<22} {s.status:<10} {s.t_reached:6.3f} {ratio:8.4f} "
+                      f"{s.stats['wall_s']:7.2f}", flush=True)
+    if out_json:
+        with open(out_json, "w") as fh:
+            json.dump(results, fh, indent=1)
+    if plot:
+        _plot_work_precision(results, plot)
+    return results
+
+
+def _grid_hull(f, lo, hi, T, k=41):
+    from scipy.integrate import solve_ivp
+    g = np.array(np.meshgrid(*[np.linspace(a, b, k) for a, b in zip(lo, hi)])).reshape(lo.size, -1).T
+    ends = np.array([solve_ivp(lambda t, x: np.asarray(f(x), float), (0, T), x0, method="DOP853", rtol=1e-12,
+                               atol=1e-12).y[:, -1] for x0 in g])
+    return ends.max(axis=0) - ends.min(axis=0)
+
+
+def _plot_work_precision(results, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    cases = list(dict.fromkeys(r["case"] for r in results))
+    fig, axes = plt.subplots(1, len(cases), figsize=(5 * len(cases), 4), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        for variant, mk in (("no test", "o-"), ("contraction", "s-"), ("contraction + prune", "^-"),
+                            ("prune only", "v--")):
+            pts = [(r["wall_s"], r["ratio"], r["pieces"]) for r in results
+                   if r["case"] == case and r["variant"] == variant and np.isfinite(r["ratio"])]
+            if not pts:
+                continue
+            w, q, p = zip(*pts)
+            ax.plot(w, q, mk, label=variant)
+            for wi, qi, pi in pts:
+                ax.annotate(str(pi), (wi, qi), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("wall time (s)")
+        ax.set_ylabel("worst width ratio to sampled hull (-)")
+        ax.set_title(case + " (labels: pieces)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (seconds)")
-    ap.add_argument("--only", type=int, nargs="*", help="run only these sections (1-6)")
+    ap.add_argument("--only", type=int, nargs="*", help="run only these sections (1-7)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     if args.quick:
@@ -170,7 +261,7 @@ def main(argv=None):
     else:
         sections = {1: lambda: double_pendulum_modes(1.0, 64, False), 2: lambda: single_box_breakdown(1.2),
                     3: lambda: strategies(0.8, 16), 4: lambda: simplified_vs_not(0.8, 16), 5: pendulum_ra,
-                    6: lambda: urdf_robot(0.3)}
+                    6: lambda: urdf_robot(0.3), 7: work_precision}
         for k in args.only or sorted(sections):
             sections[k]()
     print(f"\ntotal {time.perf_counter() - t0:.1f} s")

@@ -106,9 +106,18 @@ def fig_reduction_area(sol, path, title=None):
         ax2.axvline(rec.t, color="tab:red", ls=":", lw=1.0)
     ax1.set_ylabel(r"$\mathcal{RA}(t)$ [J]")
     ax1.legend(loc="best")
-    ax1.set_title(title or r"Reduction area $\mathcal{RA}(t) = $ diam$[H_H]$ $-$ diam$([H_H] \cap [H_V])$")
-    for name, enc, style in (("$[H_H(t)]$", c.h_h, dict(color="tab:blue", alpha=0.25)),
-                             ("$[H_V(t)]$", c.h_v, dict(color="tab:orange", alpha=0.45))):
+    ax1.set_title(title or r"Reduction area (eq. 16) of the set with the largest one: "
+                  "\n" r"$\mathcal{RA}(t) = $ diam$[H_H]$ $-$ diam$([H_H] \cap [H_V])$")
+    # the same set's H_H and H_V (RA(t) is computed from them); the hulls over all sets lighter
+    per_set = getattr(c, "h_h_set", None) is not None and np.size(c.h_h_set.lo) == t.size
+    bands = []
+    if per_set:
+        bands += [("$[H_H(t)]$ of that set", c.h_h_set, dict(color="tab:blue", alpha=0.35)),
+                  ("$[H_V(t)]$ of that set", c.h_v_set, dict(color="tab:orange", alpha=0.55))]
+    else:
+        bands += [("$[H_H(t)]$", c.h_h, dict(color="tab:blue", alpha=0.25)),
+                  ("$[H_V(t)]$", c.h_v, dict(color="tab:orange", alpha=0.45))]
+    for name, enc, style in bands:
         lo, hi = np.asarray(enc.lo, float).ravel(), np.asarray(enc.hi, float).ravel()
         ok = np.isfinite(lo) & np.isfinite(hi)
         ax2.fill_between(t[ok], lo[ok], hi[ok], step=None, label=name, **style)
@@ -198,12 +207,33 @@ def fig_consistency_plane(sol, energy, path, test_index=0, pair=None, grid=160, 
 
 
 # --------------------------------------------------------------------------- Fig. 5
-def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None, tube=True):
+def _state_units(names, n):
+    """Axis units of the states: ``x = (q, qd)`` of a mechanical system, angles in rad
+    and rates in rad/s (prismatic joints: m, m/s; not known here)."""
+    if n % 2:
+        return [""] * n
+    return [" [rad]"] * (n // 2) + [" [rad/s]"] * (n // 2)
+
+
+def _finite_extent(lo, hi, width_cap):
+    """(min, max) over the entries whose bounds are finite and width at most ``width_cap``."""
+    ok = np.isfinite(lo) & np.isfinite(hi) & ((hi - lo) <= width_cap)
+    if not ok.any():
+        return None
+    return float(lo[ok].min()), float(hi[ok].max())
+
+
+def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None, tube=True, units=None):
     """Hull of each state's enclosure over time for each mode (paper Fig. 5).
 
     ``solutions``: dict mode -> Solution (or a single Solution). ``tube``: draw the
     enclosure over every step (``tube_t``/``tube_hull``) as a staircase, else the
     output times only. ``samples``: (S, k, n) sampled true states at ``sample_times``.
+    ``units``: axis unit strings per state (default: rad for the first half, rad/s
+    for the second). The y-axes show the verified enclosures: the last steps before a
+    break-down, whose width explodes, are drawn but do not set the axis range (an
+    enclosure wider than 4 times the widest output-time width of a completed mode, or
+    of the samples' spread, is left out of the range).
     """
     plt = _plt()
     if not isinstance(solutions, dict):
@@ -214,8 +244,21 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
     cols = 2 if n > 1 else 1
     rows = (n + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(6 * cols, 2.8 * rows), squeeze=False, sharex=True)
+    units = list(units) if units is not None else _state_units(names, n)
     for k in range(n):
         ax = axes[k // cols][k % cols]
+        # the width scale of what was verified well: completed modes' output hulls, samples
+        ref = [np.asarray(s_.hull.width(), float)[:, k] for s_ in solutions.values() if s_.status == "completed"]
+        scale = max([float(np.nanmax(w)) for w in ref if w.size] or [0.0])
+        if samples is not None:
+            sk = samples[:, :, k]
+            if np.isfinite(sk).any():
+                scale = max(scale, float(np.nanmax(sk) - np.nanmin(sk)))
+        if scale <= 0:
+            scale = max([float(np.nanmedian(np.asarray(s_.tube_hull.width(), float)[:, k]))
+                         for s_ in solutions.values() if len(s_.tube_t) > 1] or [1.0])
+        cap = 4.0 * scale
+        ylo, yhi = np.inf, -np.inf
         if samples is not None:
             S = samples.shape[0]
             step = max(1, S // 60)
@@ -236,7 +279,16 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
                 lo, hi = np.asarray(sol.hull.lo, float)[:, k], np.asarray(sol.hull.hi, float)[:, k]
             ax.plot(tt, lo, label=label, **style)
             ax.plot(tt, hi, **style)
-        ax.set_ylabel(names[k])
+            ext = _finite_extent(np.asarray(lo, float), np.asarray(hi, float), cap)
+            if ext is not None:
+                ylo, yhi = min(ylo, ext[0]), max(yhi, ext[1])
+        if samples is not None and np.isfinite(samples[:, :, k]).any():
+            ylo = min(ylo, float(np.nanmin(samples[:, :, k])))
+            yhi = max(yhi, float(np.nanmax(samples[:, :, k])))
+        if np.isfinite(ylo) and np.isfinite(yhi) and yhi > ylo:
+            pad = 0.05 * (yhi - ylo)
+            ax.set_ylim(ylo - pad, yhi + pad)
+        ax.set_ylabel(names[k] + units[k])
         if k // cols == rows - 1:
             ax.set_xlabel("t [s]")
         if k == 0:
