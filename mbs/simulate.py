@@ -401,7 +401,7 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
         _prove_mass_matrix(masses, sol)
     sol.mode = mode
     sol.state_names = system.state_names
-    sol.params = dict(system.params) if system.rhs.n_params else {}
+    sol.params = _params_record(system, ode_params)
     return sol
 
 
@@ -452,6 +452,20 @@ class _CtrlC:
 
     def after_run(self, solution):
         return None
+
+
+def _params_record(system: System, ode_params) -> dict:
+    """{name: (lo, hi)} of the parameters a run used (their hull over the boxes)."""
+    names = system.rhs.param_names
+    if not names or ode_params is None:
+        return {}
+    try:
+        p = _as_interval(ode_params)
+    except (TypeError, ValueError):
+        return {}
+    lo = np.min(np.asarray(p.lo, float).reshape(-1, len(names)), axis=0)
+    hi = np.max(np.asarray(p.hi, float).reshape(-1, len(names)), axis=0)
+    return {k: (float(a), float(b)) for k, a, b in zip(names, lo, hi)}
 
 
 def _has_width(params) -> bool:

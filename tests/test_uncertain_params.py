@@ -353,6 +353,7 @@ def test_system_parameters_by_name():
     box = Interval([0.5, 0.0], [0.51, 0.0])
     sol = simulate(system, box, 0.3, mode="i", output_dt=0.1, params={"k": [9.0, 10.0]})
     assert sol.status == "completed", sol.reason
+    assert sol.params == {"k": (9.0, 10.0)}
     trajs = [solve_ivp(lambda t, x, k=k: [x[1], -k * np.sin(x[0])], (0, 0.3), x0, method="DOP853", rtol=1e-12,
                        atol=1e-12, dense_output=True).sol for k in (9.0, 9.5, 10.0) for x0 in ([0.5, 0], [0.51, 0])]
     assert not misses(sol, trajs)
