@@ -9,6 +9,7 @@ import numpy as np
 
 from .errors import ModelError
 from .scene import Scene, SceneError, output_times
+from .uncertain import ParameterError
 
 __all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "sample_states", "final_widths"]
 
@@ -143,6 +144,9 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     try:
         system = reference_system(model, mode, scene.consistency.get("energy_rate", "unsimplified"),
                                   params=kw.get("params"))
+    except ParameterError as e:  # an unknown link or joint of [parameters]
+        msg = str(e)
+        raise SceneError(f"{scene.source}: [parameters] {msg[7:] if msg.startswith('params ') else msg}") from None
     except Exception as e:  # noqa: BLE001 - a model that cannot be built is a scene problem
         raise SceneError(f"{scene.source}: cannot build the model: {type(e).__name__}: {e}") from None
     names = system.state_names

@@ -341,7 +341,7 @@ t_end = 0.1
 """)
     assert main(["simulate", str(p), "--out", str(tmp_path / "o"), "--no-figures"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "unknown link 'tool0'" in err and "\n" not in err
+    assert "[parameters] payload: unknown link 'tool0'; links of" in err and "\n" not in err
 
 
 def test_system_parameters_by_name():
