@@ -319,8 +319,8 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
         the paper's models their parameters (``m1, m2, l1, l2, g`` / ``m, l, g``); for a
         :class:`System` its graph's parameters by name (or a sequence in their order).
         They enter the graphs as parameters (never constants); the verified solver
-        carries those with width as constant states (and then uses
-        ``error_basis="auto"`` unless told otherwise). ``sol.params`` lists them.
+        carries those with width as constant states. With parameters, ``simulate``
+        uses ``error_basis="auto"`` unless told otherwise. ``sol.params`` lists them.
     order, tol, subdivision : solver settings (see :func:`verified.solver.solve`)
     energy_rate : "unsimplified" or "simplified" (mode iii)
     test_interval, test_splits : longest time between energy tests (s) and parts per
@@ -371,10 +371,12 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     elif constraints:
         raise ValueError("mode i runs without consistency tests; use mode ii or iii for constraints")
     ode_params = _system_params(system, None if (masses is not None and system.params) else params)
-    if "error_basis" not in solver_kwargs and ode_params is not None and _has_width(ode_params):
-        # measured (tests/test_uncertain_params.py): with interval parameters the "qr"
-        # error basis breaks down early (paper URDF double pendulum, payload mass
-        # [0.2, 0.3]: 0.27 s against completed to 0.3 s with "auto", 3.7x narrower q1)
+    if "error_basis" not in solver_kwargs and ode_params is not None:
+        # measured: with parameters the "qr" error basis breaks down early (paper URDF
+        # double pendulum, payload mass [0.2, 0.3]: 0.27 s against completed to 0.3 s
+        # with "auto", 3.7x narrower q1; even with point parameters: example-robot-data's
+        # double pendulum, damping 0.05 as a parameter: 0.098 s, as a constant or with
+        # "auto" completed to 0.3 s)
         solver_kwargs["error_basis"] = "auto"
     if max_wall is not None:
         from verified.hooks import StopAfterWall
@@ -466,14 +468,6 @@ def _params_record(system: System, ode_params) -> dict:
     lo = np.min(np.asarray(p.lo, float).reshape(-1, len(names)), axis=0)
     hi = np.max(np.asarray(p.hi, float).reshape(-1, len(names)), axis=0)
     return {k: (float(a), float(b)) for k, a, b in zip(names, lo, hi)}
-
-
-def _has_width(params) -> bool:
-    try:
-        p = _as_interval(params)
-    except (TypeError, ValueError):
-        return False  # solve() reports it
-    return bool((np.asarray(p.hi) > np.asarray(p.lo)).any())
 
 
 def _check_solver_kwargs(kwargs: dict):
