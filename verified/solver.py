@@ -41,9 +41,10 @@ from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
 from .policies import REMAINDER_SLACK, MergePolicy, SplitPolicy, StepControl, WrapControl  # noqa: F401
 from .sets import DoubletonSets
+from .quadratic import QuadraticSets, QuadraticStepper
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from .taylor import TaylorODE
-from .variational import params_as_states, variational_graph
+from .variational import params_as_states, second_variational_graph, variational_graph
 
 __all__ = ["solve", "Solution", "VerifiedODE"]
 
@@ -67,6 +68,24 @@ class VerifiedODE:
             self.variational = TaylorODE(variational_graph(graph))
         self.n = graph.n_inputs
         self._augmented = None
+
+    @property
+    def second_variational(self) -> TaylorODE:
+        """Interval Taylor evaluator of the second variational equations (built on first
+        use: only second-order sets need it)."""
+        if getattr(self, "_second", None) is None:
+            self._second = TaylorODE(second_variational_graph(self.graph))
+        return self._second
+
+    @property
+    def second_variational_over_set(self):
+        """Affine Taylor evaluator of the second variational equations over a set's own
+        forms (``arithmetic="affine"``; None for interval arithmetic)."""
+        if self.arithmetic != "affine":
+            return None
+        if getattr(self, "_second_affine", None) is None:
+            self._second_affine = AffineTaylorODE(self.second_variational.graph, fresh_symbols=0)
+        return self._second_affine
 
     def with_params_as_states(self) -> "VerifiedODE":
         """The same ODE with its parameters as extra constant states (built once)."""
@@ -157,6 +176,7 @@ def solve(
     merge_slack: float | None = None,
     error_basis: str = "qr",
     arithmetic: str | None = None,
+    set_order: int = 1,
     consistency=None,
     hooks=(),
     progress=None,
@@ -210,6 +230,12 @@ def solve(
         is verified to T = 2 (interval: break-down at 0.69 s); the double pendulum,
         256 pieces, T = 1: worst ratio 1.003 in 15 s against 1.012 in 3-4 s.
         A VerifiedODE carries its own (a different value given here is an error).
+    set_order : 1 (default) or 2: the sets carried from step to step. 1: QR-Lohner
+        doubletons ``c + C r0 + Q r`` (:mod:`verified.sets`). 2: the same plus a
+        quadratic term in the initial box (:mod:`verified.quadratic`), so the flow's
+        curvature is carried instead of wrapped every step; costs the second
+        variational equations (n (n + 1) / 2 more directions). Not yet with adaptive
+        splitting or a consistency test.
     consistency : verified.consistency.EnergyTest or None
         Energy (Hamiltonian) consistency test, further constraints and the backward
         test (paper sec. 4): branch and prune at the first local maximum of the
@@ -250,20 +276,25 @@ def solve(
         t_span=t_span, t_eval=t_eval, order=order, tol=tol, h_max=h_max, h_min=h_min, max_steps=max_steps,
         max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
         wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, progress=progress)
+    if set_order not in (1, 2) or isinstance(set_order, bool):
+        raise ValueError(f"set_order must be 1 or 2, got {set_order!r}")
+    if set_order == 2 and (adaptive or consistency is not None):
+        raise ValueError("set_order=2 does not support adaptive splitting or a consistency test yet; "
+                         "use set_order=1 for those")
     hook_list = ([ProgressHook(progress, t1)] if progress is not None else []) \
         + check_hooks([] if consistency is None else [consistency]) + check_hooks(hooks)
-    setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic)
+    setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, set_order)
     for hook in hook_list:
         setup = hook.before_run(setup) or setup
     if setup.graph is not prob.graph:  # a hook appended states (the energy test's h)
         prob = VerifiedODE(setup.graph, prob.arithmetic)
-    stepper = _stepper(prob, order, setup.params, error_basis)
+    stepper = _stepper(prob, order, setup.params, error_basis, set_order)
     control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
     wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
     split = SplitPolicy(split_ratio, max_boxes, tol) if adaptive else None
     merge = MergePolicy(merge_slack) if adaptive and merge_slack is not None else None
     def make_stepper(graph):  # a stepper of this run's kind for another graph (backward tests)
-        return _stepper(VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis)
+        return _stepper(VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis, set_order)
 
     run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper)
     # benchmarks/bench_robots.py reads out_t, out_boxes, tube, tube_t, t and steps from this
@@ -320,7 +351,7 @@ def solve(
     return result
 
 
-def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic):
+def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, set_order=1):
     """The checked problem: ``(RunSetup, VerifiedODE, param_boxes, boxes)``. Uncertain
     parameters become constant states after the ODE's (``param_boxes`` (p,): their
     hull over the initial boxes, else None); ``boxes`` (B, N) the initial boxes."""
@@ -345,7 +376,7 @@ def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic):
         param_boxes = hull(p_boxes, axis=0)  # (p,): valid for every set, also after splits
         params = None
     setup = RunSetup(user_graph=graph, graph=prob.graph, n_state=n, n_steer=prob.n, params=params, t0=t0,
-                     sets=DoubletonSets.from_boxes(boxes), h_max=h_max)
+                     sets=(QuadraticSets if set_order == 2 else DoubletonSets).from_boxes(boxes), h_max=h_max)
     return setup, prob, param_boxes, boxes
 
 
@@ -493,7 +524,10 @@ class _Run:
         )
 
 
-def _stepper(prob: VerifiedODE, order, params, error_basis) -> LohnerStepper:
+def _stepper(prob: VerifiedODE, order, params, error_basis, set_order=1) -> LohnerStepper:
+    if set_order == 2:
+        return QuadraticStepper(prob.taylor, prob.variational, prob.second_variational, order, params, error_basis,
+                                second_over_set=prob.second_variational_over_set)
     return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis)
 
 

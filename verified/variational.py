@@ -17,7 +17,7 @@ from __future__ import annotations
 from .graph import Graph, GraphBuilder, Op
 from .graph_ops import embed, forward_mode
 
-__all__ = ["variational_graph"]
+__all__ = ["variational_graph", "second_variational_graph", "pair_index", "params_as_states"]
 
 
 def variational_graph(graph: Graph) -> Graph:
@@ -51,3 +51,63 @@ def params_as_states(graph: Graph) -> Graph:
     outputs = embed(b, graph, [b.input(i) for i in range(n)], [b.input(n + k) for k in range(p)])
     outputs += [b.const(0)] * p
     return b.build(outputs, list(graph.output_names) + [f"d{name}" for name in graph.param_names])
+
+
+def pair_index(n: int) -> list[tuple[int, int]]:
+    """The pairs ``(a, b)``, ``a <= b < n``, in the order :func:`second_variational_graph`
+    stores ``W_ab``."""
+    return [(a, b) for a in range(n) for b in range(a, n)]
+
+
+def second_variational_graph(graph: Graph) -> Graph:
+    """The graph of ``(x, V, W) -> (f, Df V, W')`` with, for each pair ``a <= b``,
+
+        W_ab' = D^2 f[V_a, V_b] + Df W_ab,      W_ab(t0) = 0,  V(t0) = I,
+
+    the second variational equations: ``W_ab`` is the second derivative
+    ``d^2 x(t) / dx_a(t0) dx_b(t0)`` (``V_a`` = column ``a`` of ``V``). Run through a
+    Taylor interpreter from ``(c, I, 0)``, the coefficients of ``W`` are the Hessians
+    of the Taylor coefficients ``x_[k]`` at ``c`` (over a box: enclosures of them over
+    the box) -- what a second-order set step needs (:mod:`verified.quadratic`).
+
+    Inputs ``(x_1..x_n, V row-major, W_ab for pair_index(n), each an n-vector)``;
+    outputs in the same layout. Built by forward mode twice: once for ``Df(x) v`` as a
+    graph of ``(x, v)``, then again on that graph in the directions ``(V_b, W_ab)``.
+    """
+    n = graph.n_inputs
+    if graph.n_outputs != n:
+        raise ValueError(f"variational equations need a square ODE graph, got {n} inputs and {graph.n_outputs} outputs")
+    pairs = pair_index(n)
+    # F1(x, v) = Df(x) v
+    b1 = GraphBuilder(2 * n, graph.n_params, param_names=graph.param_names)
+    x1 = [b1.input(i) for i in range(n)]
+    p1 = [b1.param(i) for i in range(graph.n_params)]
+    _, d1 = forward_mode(b1, graph, x1, p1, [[b1.input(n + i)] for i in range(n)])
+    zero1 = b1.const(0)
+    F1 = b1.build([zero1 if di[0] is None else di[0] for di in d1])
+
+    names = (list(graph.input_names) + [f"V_{i}_{j}" for i in range(n) for j in range(n)]
+             + [f"W_{a}_{c}_{i}" for a, c in pairs for i in range(n)])
+    b = GraphBuilder(n + n * n + n * len(pairs), graph.n_params, input_names=names, param_names=graph.param_names)
+    x = [b.input(i) for i in range(n)]
+    p = [b.param(i) for i in range(graph.n_params)]
+    V = [[b.input(n + i * n + j) for j in range(n)] for i in range(n)]  # V[i][j]
+    W = {pc: [b.input(n + n * n + k * n + i) for i in range(n)] for k, pc in enumerate(pairs)}
+    values, dV = forward_mode(b, graph, x, p, V)  # seeds[i][j] = V[i][j]: direction j = column j
+    zero = b.const(0)
+    outputs = list(values)
+    for di in dV:
+        outputs += [zero if dij is None else dij for dij in di]
+    dW = {}
+    for a in range(n):
+        partners = [c for c in range(a, n)]
+        # directions k <-> pair (a, partners[k]): dx = V_c, dv = W_ac
+        seeds = [[V[i][c] for c in partners] for i in range(n)] + [[W[(a, c)][i] for c in partners] for i in range(n)]
+        _, d = forward_mode(b, F1, x + [V[i][a] for i in range(n)], p, seeds)
+        for k, c in enumerate(partners):
+            dW[(a, c)] = [zero if d[i][k] is None else d[i][k] for i in range(n)]
+    for pc in pairs:
+        outputs += dW[pc]
+    out_names = (list(graph.output_names) + [f"dV_{i}_{j}" for i in range(n) for j in range(n)]
+                 + [f"dW_{a}_{c}_{i}" for a, c in pairs for i in range(n)])
+    return b.build(outputs, out_names)

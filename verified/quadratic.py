@@ -1,0 +1,247 @@
+"""Second-order sets: the QR-Lohner doubleton plus a quadratic term in the initial box.
+
+A batch of ``B`` sets is carried as
+
+    x  in  c + C u + q(u) + Q r,     u in r0,     q_i(u) = u^T S_i u,
+
+with ``c``, ``C``, ``S`` (symmetric ``S_i``) and ``Q`` float arrays, ``r0`` the initial
+radius box (fixed) and ``r`` the accumulated error in the basis ``Q`` (as in
+:class:`verified.sets.DoubletonSets`, which is this with ``S = 0``).
+
+Why: a first-order (doubleton) step bounds the curvature of the flow over the set,
+``(J(X) - J(c)) C u``, as an interval and wraps it into ``r`` every step. That term
+is quadratic in the set's size, and once wrapped it is multiplied by the interval
+Jacobian again and again: on robot arms and over the pendulum's top it grows into a
+finite-time blow-up (issue 17: a 3-link arm from q +- 1e-3 breaks down at 0.31 s
+with the set itself within 1.2x of the true hull at 0.2 s). Here the quadratic part
+of the flow is carried exactly in ``S``; only third-order terms are wrapped. This is
+a Taylor model of order 2 in the initial conditions (Makino & Berz; COSY-VI,
+TaylorModels.jl carry higher orders).
+
+One step of size ``h`` (``P`` the order-``K`` Taylor polynomial map of the flow, ``R``
+the Lagrange remainder over the a-priori enclosure, as in :mod:`verified.lohner`):
+with ``v = C u + q(u)`` and ``w = Q r``,
+
+    phi(h, c + v + w) in P(c + v) + J w + R                     (mean value in w, J over the set)
+    P(c + v) = P(c) + DP(c) v + 1/2 v^T H(c) v + 1/2 v^T (H(xi) - H(c)) v
+
+(Taylor with Lagrange remainder, ``xi`` on the segment ``[c, c + v]``, inside the box
+``U = c + C r0 + range(q)``). Expanding ``v``:
+
+    C'   = mid(DP(c) C)
+    S'_i = mid(sum_k DP(c)_ik S_k + 1/2 C^T H_i(c) C)
+    into r:  (DP(c) C - C') u,  (S' - mid S')[u, u],
+             H(c)[C u, q(u)] + 1/2 H(c)[q, q]                     (third and fourth order)
+             1/2 (H(U) - H(c))[v, v]                              (third order)
+             P(c) + R - c'
+
+``DP`` and ``H`` come from the Taylor coefficients of the second variational
+equations (:func:`verified.variational.second_variational_graph`) at the centres (thin
+enclosures) and over ``U``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import linalg
+from .interval import Interval, concatenate, point, sqr
+from .lohner import LohnerStepper, horner
+from .sets import DoubletonSets
+from .stepper import StepResult
+from .variational import pair_index
+
+__all__ = ["QuadraticSets", "QuadraticStepper", "quadratic_range"]
+
+
+def quadratic_range(S, u: Interval) -> Interval:
+    """Enclosure of ``q_i(u) = u^T S_i u`` over the boxes ``u`` (B, n): shape (B, n).
+
+    ``S`` (B, n, n, n), float or Interval, symmetric in its last two axes (only
+    ``S_ijj`` and ``S_ijk + S_ikj`` for ``j < k`` are used). Diagonal terms use the
+    square ``u_j^2`` (never negative), the others the products ``u_j u_k``."""
+    S = S if isinstance(S, Interval) else point(np.asarray(S, dtype=float))
+    B, n = u.shape
+    jj = np.arange(n)
+    sq = sqr(u)  # the square: never below 0 (a product u_j u_j would reach -rad^2)
+    diag = Interval._from_bounds(S.lo[:, :, jj, jj], S.hi[:, :, jj, jj])  # (B, n_i, n_j)
+    total = linalg.matvec(diag, sq)
+    if n > 1:
+        j, k = np.triu_indices(n, 1)
+        off = Interval._from_bounds(S.lo[:, :, j, k], S.hi[:, :, j, k]) + \
+            Interval._from_bounds(S.lo[:, :, k, j], S.hi[:, :, k, j])  # (B, n_i, pairs)
+        prod = Interval._from_bounds(u.lo[:, j], u.hi[:, j]) * Interval._from_bounds(u.lo[:, k], u.hi[:, k])
+        total = total + linalg.matvec(off, prod)
+    return total
+
+
+def _bilinear(H: Interval, a: Interval, b: Interval) -> Interval:
+    """``sum_jk H_ijk a_j b_k`` for H (B, n, n, n), a, b (B, n): shape (B, n)."""
+    B, n = a.shape
+    Hb = linalg.matvec(H.reshape((B, n * n, n)), b).reshape((B, n, n))
+    return linalg.matvec(Hb, a)
+
+
+@dataclass
+class QuadraticSets:
+    """A batch of sets ``c + C u + q(u) + Q r``, ``u`` in ``r0``, ``q_i(u) = u^T S_i u``.
+
+    Shapes: c (B, n), C (B, n, n), r0 (B, n) Interval containing 0, S (B, n, n, n)
+    (symmetric in the last two axes), Q (B, n, n), r (B, n) Interval."""
+
+    c: np.ndarray
+    C: np.ndarray
+    r0: Interval
+    S: np.ndarray
+    Q: np.ndarray
+    r: Interval
+
+    @classmethod
+    def from_boxes(cls, boxes: Interval) -> "QuadraticSets":
+        d = DoubletonSets.from_boxes(boxes)
+        nb, n = boxes.shape
+        return cls(c=d.c, C=d.C, r0=d.r0, S=np.zeros((nb, n, n, n)), Q=d.Q, r=d.r)
+
+    @property
+    def n_sets(self) -> int:
+        return self.c.shape[0]
+
+    def doubleton(self) -> DoubletonSets:
+        """The first-order part ``c + C r0 + Q r`` (without ``q``)."""
+        return DoubletonSets(self.c, self.C, self.r0, self.Q, self.r)
+
+    def q_range(self) -> Interval:
+        """Enclosure of the quadratic part ``q(u)`` over ``r0``, shape (B, n)."""
+        return quadratic_range(self.S, self.r0)
+
+    def hull(self) -> Interval:
+        return self.doubleton().hull() + self.q_range()
+
+    def affine_forms(self, extra: int = 0) -> np.ndarray:
+        """As :meth:`DoubletonSets.affine_forms`, with the range of ``q`` added to the
+        centre (its midpoint) and to the error radius (its radius and the rounding)."""
+        F = self.doubleton().affine_forms(extra)
+        n = self.c.shape[1]
+        qr = self.q_range()
+        centre = F[:n, :, 0] + qr.mid().T
+        F[:n, :, -1] = (F[:n, :, -1] + qr.rad().T + np.abs(centre) * 2.0**-52) * (1.0 + 2.0**-40) + 1e-300
+        F[:n, :, 0] = centre
+        return F
+
+    def take(self, index) -> "QuadraticSets":
+        return QuadraticSets(self.c[index], self.C[index], self.r0[index], self.S[index], self.Q[index], self.r[index])
+
+    def linear_width(self) -> np.ndarray:
+        """Width of the part carried without wrapping, ``C r0 + q(r0)``, shape (B, n)."""
+        return (linalg.matvec(self.C, self.r0) + self.q_range()).width()
+
+    def split(self, mask: np.ndarray) -> "QuadraticSets":
+        if np.any(mask):
+            raise NotImplementedError("second-order sets cannot be split yet: use adaptive=False with "
+                                      "set_order=2 (or set_order=1 for adaptive splitting)")
+        return self
+
+    def merge_overlapping(self, slack: float = 0.05) -> tuple["QuadraticSets", int]:
+        return self, 0  # (no merging of second-order sets)
+
+    @staticmethod
+    def concatenate(parts) -> "QuadraticSets":
+        return QuadraticSets(
+            c=np.concatenate([p.c for p in parts]),
+            C=np.concatenate([p.C for p in parts]),
+            r0=concatenate([p.r0 for p in parts], axis=0),
+            S=np.concatenate([p.S for p in parts]),
+            Q=np.concatenate([p.Q for p in parts]),
+            r=concatenate([p.r for p in parts], axis=0),
+        )
+
+
+class QuadraticStepper(LohnerStepper):
+    """Verified steps of :class:`QuadraticSets` (module docstring). ``second`` is a
+    Taylor evaluator (``verified.taylor.TaylorODE``) of the second variational graph;
+    the rest is as :class:`~verified.lohner.LohnerStepper` (whose a-priori enclosure,
+    step-size suggestion and error-basis policy it uses unchanged)."""
+
+    def __init__(self, taylor, variational, second, order: int, params=None, error_basis="qr", second_over_set=None):
+        super().__init__(taylor, variational, order, params, error_basis)
+        self.second = second
+        # an affine evaluator of the second variational equations takes the set's own
+        # forms for the Hessian in the Lagrange term (over the hull box, interval
+        # Taylor coefficients of the Hessian were ~100x too wide on a 3-link arm)
+        self.second_over_set = second_over_set
+        self.pairs = pair_index(self.n)
+
+    def _derivatives(self, x, h):
+        """``DP`` (B, n, n) and ``H`` (B, n, n, n) of the Taylor polynomial map over the
+        boxes ``x`` (B, n) (points: thin enclosures at them), or over affine forms
+        ``x`` (n + extra, B, m + 2) of :meth:`QuadraticSets.affine_forms`."""
+        n, K = self.n, self.order
+        npairs = len(self.pairs)
+        if isinstance(x, Interval):
+            nb = x.shape[0]
+            v0 = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
+            w0 = point(np.zeros((nb, n * npairs)))
+            co = self.second.coefficients(concatenate([x, v0, w0], axis=1), K - 1, self._params(nb))
+        else:
+            nb = x.shape[1]
+            x[n:n + n * n, :, 0] = np.eye(n).reshape(-1)[:, None]
+            co = self.second_over_set.series(x, K - 1, self._params(nb))
+        D = horner(co[:, :, n:n + n * n], h).reshape((nb, n, n))
+        Wp = horner(co[:, :, n + n * n:], h).reshape((nb, npairs, n))  # (pair, component i)
+        lo = np.empty((nb, n, n, n))
+        hi = np.empty((nb, n, n, n))
+        for k, (a, b) in enumerate(self.pairs):
+            lo[:, :, a, b] = lo[:, :, b, a] = Wp.lo[:, k, :]
+            hi[:, :, a, b] = hi[:, :, b, a] = Wp.hi[:, k, :]
+        return D, Interval._from_bounds(lo, hi)
+
+    def step(self, sets: QuadraticSets, h, X: Interval, E: Interval, cE: Interval) -> StepResult:
+        K, n, nb = self.order, self.n, sets.n_sets
+        # centre polynomial plus the Lagrange remainder over E (as the doubleton step)
+        cP = self.coefficients(point(sets.c))
+        y = horner(cP[:, :K], h) + cE[:, K] * (Interval(h) ** K)
+        # DP and H at the centres, H over U = c + C r0 + q(r0) (holds every [c, c + v])
+        Dc, Hc = self._derivatives(point(sets.c), h)
+        Cu = linalg.matvec(sets.C, sets.r0)
+        qb = sets.q_range()
+        V = Cu + qb  # every v = C u + q(u), and 0
+        if self.second_over_set is not None:
+            # the set's forms cover every segment [c, c + v] (r0 and the range of q
+            # hold 0 and are convex), which is where the Lagrange xi lies
+            _, HU = self._derivatives(sets.affine_forms(extra=n * n + n * len(self.pairs)), h)
+        else:
+            _, HU = self._derivatives(V + sets.c, h)
+        # Jacobian over the set for the error part (mean value in w = Q r)
+        if self.jacobian_over_set:
+            forms = sets.affine_forms(extra=n * n)
+            forms[n:, :, 0] = np.eye(n).reshape(-1)[:, None]
+            vc = self.variational.series(forms, K - 1, self._params(nb))
+        else:
+            Xc = X.hull(point(sets.c))
+            v0 = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
+            vc = self.variational.coefficients(concatenate([Xc, v0], axis=1), K - 1, self._params(nb))
+        J = horner(vc[:, :, n:].reshape((nb, K, n, n)), h)
+        # linear part
+        DC = linalg.matmul(Dc, sets.C)
+        C_new = DC.mid()
+        err_lin = linalg.matvec(DC - C_new, sets.r0)
+        # quadratic part: S'_i = sum_k DP_ik S_k + 1/2 C^T H_i C
+        DS = linalg.matmul(Dc, sets.S.reshape((nb, n, n * n))).reshape((nb, n, n, n))
+        HC = linalg.matmul(Hc.reshape((nb, n * n, n)), sets.C).reshape((nb, n, n, n))  # [i, a, l]
+        CtHC = linalg.matmul(np.broadcast_to(sets.C.transpose(0, 2, 1)[:, None], (nb, n, n, n)), HC)  # [i, j, l]
+        S_int = DS + CtHC * 0.5
+        S_new = S_int.mid()
+        S_new = 0.5 * (S_new + S_new.transpose(0, 1, 3, 2))  # exactly symmetric (the rest goes to err)
+        err_quad = quadratic_range(S_int - S_new, sets.r0)
+        # third and fourth order: H(c)[C u, q] + 1/2 H(c)[q, q]; 1/2 (H(U) - H(c))[v, v]
+        cubic = _bilinear(Hc, Cu, qb) + _bilinear(Hc, qb, qb) * 0.5
+        lagrange = _bilinear(HU - Hc, V, V) * 0.5
+        c_new = y.mid()
+        nonlinear = err_quad + cubic + lagrange
+        incoming = (y - c_new) + err_lin + nonlinear
+        JQ = linalg.matmul(J, sets.Q)
+        Q_out, r_new = self.basis.update(sets.Q, sets.r, JQ, incoming)
+        new = QuadraticSets(c=c_new, C=C_new, r0=sets.r0, S=S_new, Q=Q_out, r=r_new)
+        return StepResult(sets=new, previous=sets, h=h, hull=X, tube=E, nonlinear_width=nonlinear.width())
