@@ -827,3 +827,155 @@ def test_mass_matrix_proof_uses_affine_pivots_for_a_five_link_arm():
     gc = chain.numeric().pivot_graph()
     assert (gc.eval_interval(Interval(lo, hi)).lo > 0).all()
     _check_affine_range(gc, lo, hi, np.random.default_rng(6))
+
+
+# --------------------------------------------------------------------------- batched kernel = reference
+# verified.affine_taylor runs a batched kernel (boxes in SIMD lanes, loops cut at the last
+# symbol a form can carry); _affine_kernel_reference is the plain per-box statement of the
+# same rules. They must give the same numbers, so every soundness test above, run on the
+# batched kernel, speaks for the rules as written. The one allowed difference: where an
+# infinite centre makes the reference's 0 * inf a NaN in a symbol the form cannot carry,
+# the batched kernel keeps the 0 (the interval is [-inf, inf] either way, and is compared).
+
+
+def _both_kernels(graph, X, P, order, m0, n_fresh, lanes):
+    from verified.taylor import _Tape
+
+    t = _Tape(graph)
+    args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order, m0, n_fresh)
+    ref, F = at._affine_kernel_reference(*args)
+    new, kept = at._affine_kernel(*args, t.outputs, lanes)
+    return new, kept, ref.transpose(2, 1, 0, 3), F[t.outputs, 0]
+
+
+def assert_same_forms(new, ref):
+    """Same forms, value for value (NaN where NaN), except 0 for a reference NaN in a
+    symbol entry of a form whose centre is not finite; same interval ranges."""
+    same = (new == ref) | (np.isnan(new) & np.isnan(ref))
+    excused = np.zeros_like(same)
+    excused[..., 1:-1] = (new[..., 1:-1] == 0) & np.isnan(ref[..., 1:-1]) & ~np.isfinite(ref[..., :1])
+    bad = ~(same | excused)
+    assert not bad.any(), f"{bad.sum()} entries differ, first at {np.argwhere(bad)[0].tolist()}"
+    lo_n, hi_n = at.forms_to_interval(new)
+    lo_r, hi_r = at.forms_to_interval(ref)
+    np.testing.assert_array_equal(lo_n, lo_r)
+    np.testing.assert_array_equal(hi_n, hi_r)
+
+
+def check_kernels_agree(graph, x, order, params=None, fresh_symbols=None, lanes=(1, 3, 8, 16)):
+    """Both kernels on boxes x (B, n) with fresh symbols, and on the series path (dense
+    caller forms, parameters without symbols), for several chunk widths (below and above
+    _VEC_MIN, several chunks and a partial one when B is larger)."""
+    x = Interval(np.asarray(x[0], float), np.asarray(x[1], float), allow_unbounded=True) if isinstance(x, tuple) else x
+    n = graph.n_inputs
+    n_fresh = n if fresh_symbols is None else fresh_symbols
+    X, P, m0 = at._wide_symbol_forms(graph, x, params, extra=n_fresh * order)
+    for w in lanes:
+        new, kept, ref, ref_kept = _both_kernels(graph, X, P, order, m0, n_fresh, w)
+        assert_same_forms(new, ref)
+        assert_same_forms(kept, ref_kept)
+    return X, P, m0
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(program=_program, seed=st.integers(0, 2**32 - 1), order=st.integers(1, 6), fresh=st.sampled_from(FRESH),
+       nb=st.sampled_from([1, 2, 9, 19]))
+def test_batched_kernel_equals_reference_on_random_programs(program, seed, order, fresh, nb):
+    g = _program_ode(program)
+    rng = np.random.default_rng(seed)
+    lo, hi = random_boxes(2, nb, rng, center_scale=1.0, max_rad=0.2)
+    check_kernels_agree(g, (lo, hi), order, fresh_symbols=fresh)
+    # the series path: dense forms of the caller's own symbols (some zero)
+    X = random_forms(2, nb, 5, rng)
+    for w in (1, 8):
+        new, kept, ref, ref_kept = _both_kernels(g, X, np.zeros((0, nb, 7)), order, 5, 0, w)
+        assert_same_forms(new, ref)
+
+
+@pytest.mark.parametrize("fresh", FRESH)
+def test_batched_kernel_equals_reference_on_all_ops_with_parameters(fresh):
+    """Every opcode, wide and point parameters, point and wide boxes in one batch."""
+    g = trace(lambda x, p: all_ops((x[0], x[1]), p), 4, 1)
+    rng = np.random.default_rng(3)
+    lo, hi = random_boxes(4, 19, rng, center_scale=0.8, max_rad=0.1)
+    for plo, phi in ((0.5, 0.9), (0.7, 0.7)):
+        p = Interval(np.full((19, 1), plo), np.full((19, 1), phi))
+        check_kernels_agree(g, (lo, hi), 5, params=p, fresh_symbols=fresh)
+        X = random_forms(4, 19, 6, rng)
+        m = 6 + (4 if fresh is None else fresh) * 5
+        Xf = np.zeros((4, 19, m + 2))
+        Xf[..., :7] = X[..., :7]
+        Xf[..., -1] = X[..., -1]
+        P = at.box_forms(p.lo, p.hi, np.full(1, -1), m)
+        new, _, ref, _ = _both_kernels(g, Xf, P, 5, 6, 4 if fresh is None else fresh, 8)
+        assert_same_forms(new, ref)
+
+
+def test_batched_kernel_equals_reference_on_robot_graphs():
+    """The graphs the solver runs: the paper's double pendulum (and its variational graph
+    on a set's own forms) and the 3-link arm, order 12 / 11 as in solve()."""
+    from models import double_pendulum as dp
+    from verified.sets import DoubletonSets
+    from verified.variational import variational_graph
+
+    g = trace(dp.rhs, 4)
+    lo, hi = dp.initial_box()
+    edges = np.linspace(lo[0], hi[0], 20)
+    L, H = np.tile(lo, (19, 1)), np.tile(hi, (19, 1))
+    L[:, 0], H[:, 0] = edges[:-1], edges[1:]
+    check_kernels_agree(g, (L, H), 12, lanes=(1, 8, 32))
+    forms = DoubletonSets.from_boxes(Interval(L, H)).affine_forms(extra=16)
+    forms[4:, :, 0] = np.eye(4).reshape(-1)[:, None]
+    new, _, ref, _ = _both_kernels(variational_graph(g), forms, np.zeros((0, 19, 10)), 11, 8, 0, 8)
+    assert_same_forms(new, ref)
+    _, ga = _arm()
+    x0 = np.concatenate([ARM_Q0, [0.1, -0.2, 0.3]])
+    r = np.array([0.01] * 3 + [0.05] * 3)
+    check_kernels_agree(ga, ((x0 - r)[None].repeat(9, 0), (x0 + r)[None].repeat(9, 0)), 12, lanes=(1, 8))
+
+
+def test_batched_kernel_equals_reference_on_infinite_and_invalid_boxes():
+    """Unbounded boxes, overflow inside the kernel and every domain violation of
+    DOMAIN_CASES: the same intervals (unbounded where the reference is)."""
+    cases = [(lambda x, p: [x[1], -np.sin(x[1])], [[-INF, 0.1]], [[INF, 0.3]]),
+             (lambda x, p: [np.exp(x[0])], [[0.0]], [[INF]]),
+             (lambda x, p: [x[0] * x[0]], [[-INF]], [[INF]]),
+             (lambda x, p: [np.sin(x[0]) * x[1], x[0] - x[1]], [[-INF, 1.0]], [[INF, 2.0]]),
+             (lambda x, p: [x[0] * x[0] * x[0]], [[-1e300]], [[1e300]])]
+    for rhs, lo, hi in cases:
+        for fresh in FRESH:
+            check_kernels_agree(trace(rhs, len(lo[0])), (lo, hi), 5, fresh_symbols=fresh, lanes=(1, 8))
+    for _, rhs, xbox, pbox in DOMAIN_CASES:
+        g = trace(rhs, 1, 0 if pbox is None else 1)
+        p = None if pbox is None else Interval(np.array([[pbox[0]]] * 9), np.array([[pbox[1]]] * 9))
+        lo = np.linspace(xbox[0], xbox[1], 10)
+        for fresh in FRESH:
+            check_kernels_agree(g, (lo[:-1, None], lo[1:, None]), 4, params=p, fresh_symbols=fresh, lanes=(1, 8))
+
+
+def test_public_calls_equal_the_reference_in_chunks(monkeypatch):
+    """coefficients / series / affine_range through the public API, with chunks of 8
+    lanes (19 boxes: two full SIMD chunks and a partial one), equal the reference."""
+    from models import double_pendulum as dp
+
+    monkeypatch.setattr(at, "_CHUNK", 8)
+    g = trace(dp.rhs, 4)
+    rng = np.random.default_rng(11)
+    c = np.array(dp.initial_point())
+    lo, hi = c - rng.uniform(0, 0.01, (19, 4)), c + rng.uniform(0, 0.01, (19, 4))
+    x = Interval(lo, hi)
+    ode = AffineTaylorODE(g)
+    X, P, m0 = at._wide_symbol_forms(g, x, None, extra=4 * 12)
+    _, _, ref, ref_kept = _both_kernels(g, X, P, 12, m0, 4, 1)
+    F, m = ode.forms(x, 12)
+    assert_same_forms(F, ref)
+    C = ode.coefficients(x, 12)
+    lo_r, hi_r = at.forms_to_interval(ref)
+    np.testing.assert_array_equal(C.lo, lo_r)
+    np.testing.assert_array_equal(C.hi, hi_r)
+    R = at.affine_range(g, x)
+    X1, P1, m1 = at._wide_symbol_forms(g, x, None, extra=0)
+    _, _, _, kept1 = _both_kernels(g, X1, P1, 1, m1, 0, 1)
+    lo_r, hi_r = at.forms_to_interval(kept1.transpose(1, 0, 2))
+    np.testing.assert_array_equal(R.lo, lo_r)
+    np.testing.assert_array_equal(R.hi, hi_r)

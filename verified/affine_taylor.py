@@ -55,15 +55,16 @@ _UPF = 1.0 + 2.0**-40  # covers the relative rounding of up to 2^12 operations o
 _TINY = 1e-300  # covers the absolute (underflow) rounding of as many
 _U = 2.0**-52  # bound on the relative rounding error of one operation (round to nearest: 2^-53)
 INF = math.inf
+_NO_SLOTS = np.zeros(0, dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _up(x):
     """An upper bound of a non-negative quantity computed in a few float operations."""
     return x * _UPF + _TINY
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _pm(a, b):
     """Product of two non-negative bounds with 0 * inf = 0 (a zero radius stays exact)."""
     if a == 0.0 or b == 0.0:
@@ -301,11 +302,15 @@ def _unary_into(Z, x, m, kind, known_lo=-INF):
 
 
 # --------------------------------------------------------------------------
-# The interpreter. F[s, k, b, :] is the form of coefficient k of tape slot s for box b:
-# index 0 the centre, 1..m the symbol coefficients, m + 1 the error radius.
+# The reference interpreter: one box at a time, every loop over all m symbols.
+# F[s, k, b, :] is the form of coefficient k of tape slot s for box b: index 0 the
+# centre, 1..m the symbol coefficients, m + 1 the error radius. The solver runs the
+# batched interpreter below (_affine_kernel), which computes the same numbers faster;
+# this one is the plain statement of the rules that tests/test_affine_taylor.py checks
+# it against, bit for bit. A change to a rule goes into both.
 # --------------------------------------------------------------------------
 @njit(cache=True)
-def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh):
+def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
 
     Returns the forms of the coefficients, (n, order + 1, B, m + 2), and those of every
@@ -487,6 +492,580 @@ def _sqrconv(Z, F, u, k, j0, b, m):
 
 
 # --------------------------------------------------------------------------
+# The batched interpreter (the one the solver runs). Same operations, in the same
+# order and with the same roundings as _affine_kernel_reference, so the same bits;
+# three things make it faster:
+#
+# * boxes are processed in chunks of up to ``lanes`` lanes, laid out box-innermost in
+#   one array A[row, lane]: the form of coefficient k of slot s is rows
+#   (s (K + 1) + k) (m + 2) + 0..m+1 (then the reciprocals, two scratch forms and the
+#   coefficients x_[k]; see _affine_kernel). Every
+#   loop over a form's entries runs over the lanes innermost, with no dependence
+#   between lanes, so it compiles to SIMD instructions (no fastmath: each lane does
+#   exactly the reference's operations). Below _VEC_MIN lanes the lanes are taken one
+#   at a time instead (entries innermost), as the reference does;
+# * the working arrays hold one chunk, not the whole batch (the reference allocated
+#   slots x orders x boxes x entries: 2 GB for the UR5 at 64 boxes);
+# * loops over symbols stop at L[s, k], a bound, from the tape's structure, of the
+#   highest symbol that can be nonzero in the forms of slot s at order k. With fresh
+#   symbols the order-k forms carry at most m0 + k n of them instead of m0 + K n. The
+#   entries beyond are exact zeros in the reference too, where they add exact zeros
+#   to every sum (or |T_i| for an untouched T_i, which is kept): the same bits. (One
+#   exception: once a centre is infinite, the reference's inf * 0 puts NaN into such
+#   entries, where this kernel keeps 0; the range is [-inf, inf] either way.)
+#
+# Every helper below takes forms as first rows z, x, y of A (result z = "Z"), works on
+# lanes 0..cb-1 and touches entries 0..L and m + 1 only.
+# --------------------------------------------------------------------------
+_VEC_MIN = 8  # from this many lanes on, lanes innermost (measured: equal at 8 lanes)
+_CHUNK = 32  # lanes per chunk (SIMD width times enough independent work)
+_CHUNK_BYTES = 256 * 2**20  # at most this much working memory per chunk (fewer lanes then)
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_clear(A, z, L, m, cb):
+    for i in range(L + 1):
+        for c in range(cb):
+            A[z + i, c] = 0.0
+    for c in range(cb):
+        A[z + m + 1, c] = 0.0
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_copy(A, z, x, L, m, cb):
+    for i in range(L + 1):
+        for c in range(cb):
+            A[z + i, c] = A[x + i, c]
+    for c in range(cb):
+        A[z + m + 1, c] = A[x + m + 1, c]
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_acc_mul(A, z, x, y, L, m, w, cb, R):
+    """Z += w * x * y (:func:`_acc_mul`); R is scratch (>= 3, lanes)."""
+    aw = abs(w)
+    if cb < _VEC_MIN:
+        for c in range(cb):
+            e = A[z + m + 1, c]
+            x0 = A[x + 0, c]
+            y0 = A[y + 0, c]
+            t0 = w * (x0 * y0)
+            cc = A[z + 0, c] + t0
+            rnd = 2.0 * abs(t0) + abs(cc)
+            A[z + 0, c] = cc
+            rx = 0.0
+            ry = 0.0
+            for i in range(1, L + 1):
+                xi = A[x + i, c]
+                yi = A[y + i, c]
+                rx += abs(xi)
+                ry += abs(yi)
+                p = w * (x0 * yi + y0 * xi)
+                ti = A[z + i, c] + p
+                rnd += 2.0 * (abs(w * x0 * yi) + abs(w * y0 * xi)) + abs(ti)
+                A[z + i, c] = ti
+            ex = A[x + m + 1, c]
+            ey = A[y + m + 1, c]
+            nl = _pm(_up(rx) + ex, _up(ry) + ey) + _pm(abs(x0), ey) + _pm(abs(y0), ex)
+            A[z + m + 1, c] = _up(e + _pm(aw, nl) + rnd * _U)
+        return
+    for c in range(cb):
+        x0 = A[x + 0, c]
+        y0 = A[y + 0, c]
+        t0 = w * (x0 * y0)
+        cc = A[z + 0, c] + t0
+        R[2, c] = 2.0 * abs(t0) + abs(cc)
+        A[z + 0, c] = cc
+        R[0, c] = 0.0
+        R[1, c] = 0.0
+    for i in range(1, L + 1):
+        for c in range(cb):
+            xi = A[x + i, c]
+            yi = A[y + i, c]
+            x0 = A[x + 0, c]
+            y0 = A[y + 0, c]
+            R[0, c] += abs(xi)
+            R[1, c] += abs(yi)
+            p = w * (x0 * yi + y0 * xi)
+            ti = A[z + i, c] + p
+            R[2, c] += 2.0 * (abs(w * x0 * yi) + abs(w * y0 * xi)) + abs(ti)
+            A[z + i, c] = ti
+    for c in range(cb):
+        x0 = A[x + 0, c]
+        y0 = A[y + 0, c]
+        ex = A[x + m + 1, c]
+        ey = A[y + m + 1, c]
+        nl = _pm(_up(R[0, c]) + ex, _up(R[1, c]) + ey) + _pm(abs(x0), ey) + _pm(abs(y0), ex)
+        A[z + m + 1, c] = _up(A[z + m + 1, c] + _pm(aw, nl) + R[2, c] * _U)
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_acc_sqr(A, z, x, L, m, w, cb, R):
+    """Z += w * x^2 (:func:`_acc_sqr`)."""
+    if cb < _VEC_MIN:
+        for c in range(cb):
+            x0 = A[x + 0, c]
+            r = 0.0
+            for i in range(1, L + 1):
+                r += abs(A[x + i, c])
+            ex = A[x + m + 1, c]
+            q = _up(_up(r) + ex)
+            q2 = _pm(q, q)
+            half = 0.5 * q2 * w
+            t0 = w * (x0 * x0) + half
+            cc = A[z + 0, c] + t0
+            rnd = 2.0 * abs(t0) + abs(cc) + abs(half)
+            A[z + 0, c] = cc
+            for i in range(1, L + 1):
+                p = 2.0 * w * (x0 * A[x + i, c])
+                ti = A[z + i, c] + p
+                rnd += 2.0 * abs(p) + abs(ti)
+                A[z + i, c] = ti
+            A[z + m + 1, c] = _up(A[z + m + 1, c] + _up(half) + _pm(2.0 * w * abs(x0), ex) + rnd * _U)
+        return
+    for c in range(cb):
+        R[0, c] = 0.0
+    for i in range(1, L + 1):
+        for c in range(cb):
+            R[0, c] += abs(A[x + i, c])
+    for c in range(cb):
+        x0 = A[x + 0, c]
+        q = _up(_up(R[0, c]) + A[x + m + 1, c])
+        q2 = _pm(q, q)
+        half = 0.5 * q2 * w
+        t0 = w * (x0 * x0) + half
+        cc = A[z + 0, c] + t0
+        R[2, c] = 2.0 * abs(t0) + abs(cc) + abs(half)
+        R[1, c] = half
+        A[z + 0, c] = cc
+    for i in range(1, L + 1):
+        for c in range(cb):
+            p = 2.0 * w * (A[x + 0, c] * A[x + i, c])
+            ti = A[z + i, c] + p
+            R[2, c] += 2.0 * abs(p) + abs(ti)
+            A[z + i, c] = ti
+    for c in range(cb):
+        x0 = A[x + 0, c]
+        ex = A[x + m + 1, c]
+        A[z + m + 1, c] = _up(A[z + m + 1, c] + _up(R[1, c]) + _pm(2.0 * w * abs(x0), ex) + R[2, c] * _U)
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_acc_add(A, z, x, L, m, sign, cb, R):
+    """Z += sign * x (:func:`_acc_add`)."""
+    if cb < _VEC_MIN:
+        for c in range(cb):
+            rnd = 0.0
+            for i in range(L + 1):
+                t = A[z + i, c] + sign * A[x + i, c]
+                rnd += abs(t)
+                A[z + i, c] = t
+            A[z + m + 1, c] = _up(A[z + m + 1, c] + A[x + m + 1, c] + rnd * _U)
+        return
+    for c in range(cb):
+        R[2, c] = 0.0
+    for i in range(L + 1):
+        for c in range(cb):
+            t = A[z + i, c] + sign * A[x + i, c]
+            R[2, c] += abs(t)
+            A[z + i, c] = t
+    for c in range(cb):
+        A[z + m + 1, c] = _up(A[z + m + 1, c] + A[x + m + 1, c] + R[2, c] * _U)
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_div_int_into(A, z, x, L, m, kf, cb, R):
+    """Z = x / kf for a positive integer kf (:func:`_div_int_into`)."""
+    if cb < _VEC_MIN:
+        for c in range(cb):
+            rnd = 0.0
+            for i in range(L + 1):
+                t = A[x + i, c] / kf
+                rnd += abs(t)
+                A[z + i, c] = t
+            A[z + m + 1, c] = _up(A[x + m + 1, c] / kf + rnd * _U)
+        return
+    for c in range(cb):
+        R[2, c] = 0.0
+    for i in range(L + 1):
+        for c in range(cb):
+            t = A[x + i, c] / kf
+            R[2, c] += abs(t)
+            A[z + i, c] = t
+    for c in range(cb):
+        A[z + m + 1, c] = _up(A[x + m + 1, c] / kf + R[2, c] * _U)
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_scale_into(A, z, x, L, m, d, cb):
+    """Z = d * x (:func:`_scale_into`); rare (sqrt at order 0), lanes one at a time."""
+    for c in range(cb):
+        rnd = 0.0
+        for i in range(L + 1):
+            t = d * A[x + i, c]
+            rnd += abs(t)
+            A[z + i, c] = t
+        A[z + m + 1, c] = _up(_pm(abs(d), A[x + m + 1, c]) + rnd * _U)
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_frozen_point_into(A, z, x, L, m, cb):
+    """The graph op ``mid`` (:func:`_frozen_point_into`); Z has no symbols."""
+    for c in range(cb):
+        c0 = A[x + 0, c]
+        w = A[x + m + 1, c]
+        for i in range(1, L + 1):
+            w += abs(A[x + i, c])
+        A[z + 0, c] = 0.0
+        A[z + m + 1, c] = 0.0
+        if math.isfinite(c0) and math.isfinite(w):
+            A[z + 0, c] = c0
+        else:
+            A[z + m + 1, c] = INF
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_unary_into(A, z, x, L, m, kind, known_lo, cb):
+    """Z = f(x) by the mean-value form (:func:`_unary_into`), lane by lane."""
+    for c in range(cb):
+        c0 = A[x + 0, c]
+        r = 0.0
+        for i in range(1, L + 1):
+            r += abs(A[x + i, c])
+        ex = A[x + m + 1, c]
+        w = _up(_up(r) + ex)
+        poison = not (math.isfinite(c0) and math.isfinite(w))
+        if not poison:
+            xlo = max(_k.rd(c0 - w), min(known_lo, c0))
+            xhi = _k.ru(c0 + w)
+            poison = not xlo <= xhi
+        if not poison:
+            fl, fh = _value(kind, c0, c0)
+            dl, dh = _deriv(kind, c0, c0)
+            sl, sh = _deriv(kind, xlo, xhi)
+            poison = (not (fl <= fh and dl <= dh and sl <= sh) or not (math.isfinite(fl) and math.isfinite(fh))
+                      or not (math.isfinite(sl) and math.isfinite(sh)))
+        if poison:
+            for i in range(L + 1):
+                A[z + i, c] = 0.0
+            A[z + m + 1, c] = INF
+            continue
+        f0 = 0.5 * fl + 0.5 * fh
+        frad = max(fh - f0, f0 - fl)
+        d = 0.5 * dl + 0.5 * dh
+        slope = max(abs(sl - d), abs(sh - d))
+        rnd = 0.0
+        for i in range(1, L + 1):
+            t = d * A[x + i, c]
+            rnd += abs(t)
+            A[z + i, c] = t
+        A[z + 0, c] = f0
+        e = _up(_up(frad) + _pm(abs(d), ex) + _pm(_up(slope) + _up(slope) * _U, w) + rnd * _U)
+        A[z + m + 1, c] = e
+        gl, gh = _value(kind, xlo, xhi)
+        if gl <= gh and math.isfinite(gl) and math.isfinite(gh):
+            g0 = 0.5 * gl + 0.5 * gh
+            grad = _up(max(gh - g0, g0 - gl))
+            if grad < e:
+                for i in range(1, L + 1):
+                    A[z + i, c] = 0.0
+                A[z + 0, c] = g0
+                A[z + m + 1, c] = grad
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_sqrconv(A, z, u, k, j0, L, m, cb, R):
+    """Z += sum_{j=j0}^{k-j0} u_j u_{k-j} (:func:`_sqrconv`); ``u`` is the row of the
+    slot's order-0 form, its order j at ``u + j (m + 2)``."""
+    m2 = m + 2
+    for j in range(j0, (k + 1) // 2):
+        _b_acc_mul(A, z, u + j * m2, u + (k - j) * m2, L, m, 2.0, cb, R)
+    if k % 2 == 0 and k // 2 >= j0:
+        _b_acc_sqr(A, z, u + (k // 2) * m2, L, m, 1.0, cb, R)
+
+
+@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+def _b_quotient_step(A, s, u, v, k, rec, t, sc, L, m, cb, R):
+    """w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j v_{k-j}) * rec (:func:`_quotient_step`),
+    with ``s, u, v`` the rows of the order-0 forms of w, u, v, ``t, sc`` scratch rows."""
+    m2 = m + 2
+    _b_clear(A, sc, L, m, cb)
+    for j in range(1, k):
+        _b_acc_mul(A, sc, s + j * m2, v + (k - j) * m2, L, m, float(j), cb, R)
+    _b_div_int_into(A, t, sc, L, m, float(k), cb, R)
+    _b_clear(A, sc, L, m, cb)
+    _b_acc_add(A, sc, u + k * m2, L, m, 1.0, cb, R)
+    _b_acc_add(A, sc, t, L, m, -1.0, cb, R)
+    _b_clear(A, s + k * m2, L, m, cb)
+    _b_acc_mul(A, s + k * m2, sc, rec, L, m, 1.0, cb, R)
+
+
+@njit(cache=True)
+def _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh):
+    """Bounds of the highest nonzero symbol: L[s, k] for the forms of slot s at order k
+    (and of everything its recurrence reads and writes: operands at orders <= k, its
+    own and its partner's earlier orders, its reciprocal, scratch) and Lo[i, k] for the
+    coefficient forms x_[k] (inputs ``Lx``, parameters ``Lp`` at order 0)."""
+    nslots = op.size
+    n = outputs.size
+    L = np.zeros((nslots, order + 1), np.int64)
+    PM = np.zeros((nslots, order + 1), np.int64)  # max over orders <= k
+    Lo = np.zeros((n, order + 1), np.int64)
+    Lo[:, 0] = Lx
+    for k in range(order):
+        for s in range(nslots):
+            o = op[s]
+            if o == T_AUX:
+                continue  # set with its owner
+            if k > 0 and cst[s]:
+                lv = 0
+            elif o == T_CONST or o == T_MID:
+                lv = 0
+            elif o == T_PARAM:
+                lv = Lp[idx[s]]
+            elif o == T_INPUT:
+                lv = Lo[idx[s], k]
+            else:
+                lv = 0
+                if a0[s] >= 0:
+                    lv = max(lv, PM[a0[s], k])
+                if a1[s] >= 0:
+                    lv = max(lv, PM[a1[s], k])
+                if k > 0:
+                    lv = max(lv, PM[s, k - 1])
+                    if aux[s] >= 0:
+                        lv = max(lv, PM[aux[s], k - 1])
+            L[s, k] = lv
+            PM[s, k] = lv if k == 0 else max(PM[s, k - 1], lv)
+            if aux[s] >= 0:
+                a = aux[s]
+                L[a, k] = lv
+                PM[a, k] = lv if k == 0 else max(PM[a, k - 1], lv)
+        for i in range(n):
+            lv = L[outputs[i], k]
+            if i < n_fresh:
+                lv = max(lv, m0 + k * n_fresh + i + 1)
+            Lo[i, k + 1] = lv
+    return L, Lo
+
+
+@njit(cache=True)
+def _highest_nonzero(A):
+    """Per row j of forms A (rows, B, m + 2): the highest symbol index i in 1..m with
+    A[j, b, i] != 0 for some box b (NaN counts as nonzero), 0 if none."""
+    rows, nb, m2 = A.shape
+    out = np.zeros(rows, np.int64)
+    for j in range(rows):
+        for b in range(nb):
+            for i in range(m2 - 2, out[j], -1):
+                if A[j, b, i] != 0.0 or A[j, b, i] != A[j, b, i]:
+                    out[j] = i
+                    break
+    return out
+
+
+@njit(cache=True)
+def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes):
+    """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
+
+    Returns the forms of the coefficients, (B, order + 1, n, m + 2), and the order-0
+    forms of the slots ``keep``, (len(keep), B, m + 2); ``lanes`` boxes at a time.
+    The same numbers as :func:`_affine_kernel_reference` (see the comment above).
+    """
+    nslots = op.size
+    n, nb, m2 = X.shape
+    m = m2 - 2
+    Lx = _highest_nonzero(X)
+    Lp = _highest_nonzero(P)
+    L, Lo = _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh)
+    res = np.zeros((nb, order + 1, n, m2))
+    kept = np.zeros((keep.size, nb, m2))
+    CB = max(1, min(nb, lanes))
+    K1 = order + 1
+    KM = K1 * m2  # rows per slot
+    # rows of A: slot forms (s, k) at s KM + k m2; the reciprocal of slot s at
+    # RB + s m2; scratch forms T, S at TB, SB; the coefficient x_[k] of input i at
+    # OB + i KM + k m2
+    RB = nslots * KM
+    TB = RB + nslots * m2
+    SB = TB + m2
+    OB = SB + m2
+    A = np.zeros((OB + n * KM, CB))
+    R = np.zeros((3, CB))  # per-lane sums
+    for b0 in range(0, nb, CB):
+        cb = min(CB, nb - b0)
+        for i in range(n):
+            for r in range(m2):
+                for c in range(cb):
+                    A[OB + i * KM + r, c] = X[i, b0 + c, r]
+        for k in range(order):
+            fk = float(k)
+            for s in range(nslots):
+                o = op[s]
+                if o == T_AUX or (k > 0 and cst[s]):
+                    continue  # a constant's coefficients >= 1 stay exactly 0
+                u = a0[s] * KM  # first rows of the operands' order-0 forms
+                v = a1[s] * KM
+                s0 = s * KM
+                z = s0 + k * m2  # the form being computed
+                uk = u + k * m2
+                rec = RB + s * m2
+                Ls = L[s, k]
+                if o == T_CONST:
+                    if k == 0:
+                        mid = 0.5 * clo[s] + 0.5 * chi[s]
+                        e = _up(max(chi[s] - mid, mid - clo[s]))
+                        for c in range(cb):
+                            A[z, c] = mid
+                            A[z + m + 1, c] = e
+                elif o == T_PARAM:
+                    if k == 0:
+                        for r in range(Ls + 1):
+                            for c in range(cb):
+                                A[z + r, c] = P[idx[s], b0 + c, r]
+                        for c in range(cb):
+                            A[z + m + 1, c] = P[idx[s], b0 + c, m + 1]
+                elif o == T_MID:
+                    if k == 0:
+                        _b_frozen_point_into(A, z, u, L[a0[s], 0], m, cb)
+                elif o == T_INPUT:
+                    _b_copy(A, z, OB + idx[s] * KM + k * m2, Ls, m, cb)
+                elif o == T_ADD or o == T_SUB:
+                    _b_clear(A, z, Ls, m, cb)
+                    _b_acc_add(A, z, uk, Ls, m, 1.0, cb, R)
+                    _b_acc_add(A, z, v + k * m2, Ls, m, 1.0 if o == T_ADD else -1.0, cb, R)
+                elif o == T_NEG:
+                    for r in range(Ls + 1):
+                        for c in range(cb):
+                            A[z + r, c] = -A[uk + r, c]
+                    for c in range(cb):
+                        A[z + m + 1, c] = A[uk + m + 1, c]
+                elif o == T_MUL:
+                    _b_clear(A, z, Ls, m, cb)
+                    if cst[a0[s]]:  # (c w)_[k] = c_[0] w_[k]: the other terms are exact zeros
+                        _b_acc_mul(A, z, u, v + k * m2, Ls, m, 1.0, cb, R)
+                    elif cst[a1[s]]:
+                        _b_acc_mul(A, z, uk, v, Ls, m, 1.0, cb, R)
+                    else:
+                        for j in range(k + 1):
+                            _b_acc_mul(A, z, u + j * m2, v + (k - j) * m2, Ls, m, 1.0, cb, R)
+                elif o == T_SQR:
+                    _b_clear(A, z, Ls, m, cb)
+                    _b_sqrconv(A, z, u, k, 0, Ls, m, cb, R)
+                elif o == T_DIV:
+                    if k == 0:
+                        _b_unary_into(A, rec, v, Ls, m, 7, -INF, cb)
+                    # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0 (the sum is 0 for a constant v)
+                    _b_clear(A, TB, Ls, m, cb)
+                    _b_acc_add(A, TB, uk, Ls, m, 1.0, cb, R)
+                    if not cst[a1[s]]:
+                        for j in range(1, k + 1):
+                            _b_acc_mul(A, TB, v + j * m2, s0 + (k - j) * m2, Ls, m, -1.0, cb, R)
+                    _b_clear(A, z, Ls, m, cb)
+                    _b_acc_mul(A, z, TB, rec, Ls, m, 1.0, cb, R)
+                elif o == T_SQRT:
+                    if k == 0:
+                        _b_unary_into(A, z, u, Ls, m, 0, -INF, cb)
+                        _b_scale_into(A, TB, z, Ls, m, 2.0, cb)
+                        _b_unary_into(A, rec, TB, Ls, m, 7, -INF, cb)
+                    else:
+                        # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
+                        _b_clear(A, TB, Ls, m, cb)
+                        _b_acc_add(A, TB, uk, Ls, m, 1.0, cb, R)
+                        _b_clear(A, SB, Ls, m, cb)
+                        _b_sqrconv(A, SB, s0, k, 1, Ls, m, cb, R)
+                        _b_acc_add(A, TB, SB, Ls, m, -1.0, cb, R)
+                        _b_clear(A, z, Ls, m, cb)
+                        _b_acc_mul(A, z, TB, rec, Ls, m, 1.0, cb, R)
+                elif o == T_EXP:
+                    if k == 0:
+                        _b_unary_into(A, z, u, Ls, m, 1, -INF, cb)
+                    else:
+                        _b_clear(A, TB, Ls, m, cb)
+                        for j in range(1, k + 1):
+                            _b_acc_mul(A, TB, u + j * m2, s0 + (k - j) * m2, Ls, m, float(j), cb, R)
+                        _b_div_int_into(A, z, TB, Ls, m, fk, cb, R)
+                elif o == T_LOG:
+                    if k == 0:
+                        _b_unary_into(A, z, u, Ls, m, 2, -INF, cb)
+                        _b_unary_into(A, rec, u, Ls, m, 7, -INF, cb)
+                    else:
+                        # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
+                        _b_quotient_step(A, s0, u, u, k, rec, TB, SB, Ls, m, cb, R)
+                elif o == T_SIN or o == T_COS:
+                    ss = s0 if o == T_SIN else aux[s] * KM
+                    cs = aux[s] * KM if o == T_SIN else s0
+                    if k == 0:
+                        _b_unary_into(A, ss, u, Ls, m, 3, -INF, cb)
+                        _b_unary_into(A, cs, u, Ls, m, 4, -INF, cb)
+                    else:
+                        _b_clear(A, TB, Ls, m, cb)
+                        for j in range(1, k + 1):
+                            _b_acc_mul(A, TB, u + j * m2, cs + (k - j) * m2, Ls, m, float(j), cb, R)
+                        _b_div_int_into(A, ss + k * m2, TB, Ls, m, fk, cb, R)
+                        _b_clear(A, TB, Ls, m, cb)
+                        for j in range(1, k + 1):
+                            _b_acc_mul(A, TB, u + j * m2, ss + (k - j) * m2, Ls, m, -float(j), cb, R)
+                        _b_div_int_into(A, cs + k * m2, TB, Ls, m, fk, cb, R)
+                elif o == T_TAN:
+                    vs = aux[s] * KM  # v = 1 + tan^2 = tan'
+                    if k == 0:
+                        _b_unary_into(A, z, u, Ls, m, 5, -INF, cb)
+                        _b_clear(A, vs, Ls, m, cb)
+                        for c in range(cb):
+                            A[vs, c] = 1.0
+                        _b_acc_sqr(A, vs, z, Ls, m, 1.0, cb, R)
+                    else:
+                        _b_clear(A, TB, Ls, m, cb)
+                        for j in range(1, k + 1):
+                            _b_acc_mul(A, TB, u + j * m2, vs + (k - j) * m2, Ls, m, float(j), cb, R)
+                        _b_div_int_into(A, z, TB, Ls, m, fk, cb, R)
+                        _b_clear(A, vs + k * m2, Ls, m, cb)
+                        _b_sqrconv(A, vs + k * m2, s0, k, 0, Ls, m, cb, R)
+                elif o == T_ATAN:
+                    vs = aux[s] * KM  # v = 1 + u^2, atan(u)' = u' / v
+                    if k == 0:
+                        _b_unary_into(A, z, u, Ls, m, 6, -INF, cb)
+                        _b_clear(A, vs, Ls, m, cb)
+                        for c in range(cb):
+                            A[vs, c] = 1.0
+                        _b_acc_sqr(A, vs, u, Ls, m, 1.0, cb, R)
+                        _b_unary_into(A, rec, vs, Ls, m, 7, 1.0, cb)  # v0 = 1 + u0^2 >= 1
+                    else:
+                        _b_clear(A, vs + k * m2, Ls, m, cb)
+                        _b_sqrconv(A, vs + k * m2, u, k, 0, Ls, m, cb, R)
+                        # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
+                        _b_quotient_step(A, s0, u, vs, k, rec, TB, SB, Ls, m, cb, R)
+            # x_[k+1] = f_[k] / (k + 1)
+            for i in range(n):
+                o = outputs[i]
+                z = OB + i * KM + (k + 1) * m2
+                _b_div_int_into(A, z, o * KM + k * m2, L[o, k], m, fk + 1.0, cb, R)
+                if i < n_fresh:
+                    # the error of x_[k+1] becomes a symbol of its own: later orders then
+                    # carry it with its dependencies instead of as a bare radius
+                    sym = 1 + m0 + k * n_fresh + i
+                    for c in range(cb):
+                        A[z + sym, c] = A[z + m + 1, c]
+                        A[z + m + 1, c] = 0.0
+        for c in range(cb):
+            for k in range(K1):
+                for i in range(n):
+                    for r in range(m2):
+                        res[b0 + c, k, i, r] = A[OB + i * KM + k * m2 + r, c]
+            for j in range(keep.size):
+                for r in range(m2):
+                    kept[j, b0 + c, r] = A[keep[j] * KM + r, c]
+    return res, kept
+
+
+def _lanes(tape, order, m, n):
+    """Boxes per chunk: _CHUNK, fewer if the chunk's arrays would pass _CHUNK_BYTES."""
+    per_box = (tape.op.size * (order + 2) + n * (order + 1) + 2) * (m + 2) * 8
+    return int(max(1, min(_CHUNK, _CHUNK_BYTES // per_box)))
+
+
+# --------------------------------------------------------------------------
 # Forms <-> intervals
 # --------------------------------------------------------------------------
 def box_forms(lo: np.ndarray, hi: np.ndarray, symbols: np.ndarray, m: int) -> np.ndarray:
@@ -570,11 +1149,12 @@ def affine_range(graph, x, params=None) -> Interval:
     n = graph.n_inputs
     tape = _Tape(graph)
     X, P, m = _wide_symbol_forms(graph, x, params, extra=0)
-    # one pass at order 0 gives every slot's form; the kernel's "state outputs" are
-    # not used here, any valid slots will do
+    # one pass at order 0 gives every slot's form, kept for the output slots; the
+    # kernel's "state outputs" are not used here, any valid slots will do
     dummy = np.full(n, tape.outputs[0] if tape.outputs.size else 0, dtype=np.int64)
-    _, F = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo, tape.chi, dummy, X, P, 1, m, 0)
-    lo, hi = forms_to_interval(F[tape.outputs, 0].transpose(1, 0, 2))
+    _, G = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo, tape.chi, dummy, X, P,
+                          1, m, 0, tape.outputs, _lanes(tape, 1, m, n))
+    lo, hi = forms_to_interval(G.transpose(1, 0, 2))
     return Interval._from_bounds(lo, hi)
 
 
@@ -633,8 +1213,8 @@ class AffineTaylorODE:
     def _run(self, X, P, order, m0):
         t = self._tape
         F, _ = _affine_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order,
-                              m0, self.n_fresh)
-        return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
+                              m0, self.n_fresh, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n))
+        return F
 
     def coefficients(self, x, order, params=None):
         """Interval enclosures of ``x_[0..order]``, shape (B, order + 1, n)."""
