@@ -979,3 +979,19 @@ def test_public_calls_equal_the_reference_in_chunks(monkeypatch):
     lo_r, hi_r = at.forms_to_interval(kept1.transpose(1, 0, 2))
     np.testing.assert_array_equal(R.lo, lo_r)
     np.testing.assert_array_equal(R.hi, hi_r)
+
+
+def test_forms_to_interval_a_nan_anywhere_is_the_whole_line():
+    """A NaN in the centre, any symbol or the error radius gives [-inf, inf] (and only
+    there); infinite entries give unbounded, never NaN, ranges."""
+    F = np.tile(np.array([0.5, 0.1, -0.2, 0.0, 1e-3]), (7, 1))
+    for j in range(5):
+        F[j, j] = np.nan
+    F[5, 1] = np.inf
+    F[6, 0] = -np.inf
+    lo, hi = at.forms_to_interval(F)
+    assert (lo[:5] == -INF).all() and (hi[:5] == INF).all()
+    assert lo[5] == -INF and hi[5] == INF and lo[6] == -INF
+    assert not (np.isnan(lo).any() or np.isnan(hi).any())
+    lo1, hi1 = at.forms_to_interval(np.array([0.5, 0.1, -0.2, 0.0, 1e-3]))
+    assert -INF < lo1 <= 0.5 - 0.301 and 0.5 + 0.301 <= hi1 < INF

@@ -1103,7 +1103,8 @@ def forms_to_interval(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         hi = c + w
         lo = lo - (np.abs(lo) * _k.EPS + _k.ETA)
         hi = hi + (np.abs(hi) * _k.EPS + _k.ETA)
-    bad = np.isnan(F).any(axis=-1) | np.isnan(lo) | np.isnan(hi)
+    # a NaN in a form's centre, symbols or error makes lo and hi NaN (no pass over F)
+    bad = np.isnan(lo) | np.isnan(hi)
     lo = np.where(bad, -np.inf, lo)
     hi = np.where(bad, np.inf, hi)
     return lo, hi
