@@ -383,6 +383,11 @@ class ChainParameters:
             m.damping = list(base.damping)
             mass, com, I_c = list(base.mass), list(base.com), list(base.I_c)
             m.base_potential = base.base_potential
+
+            def ev(x):  # sympy numbers -> floats (frame placements of DH chains)
+                if isinstance(x, tuple):
+                    return tuple(ev(y) for y in x)
+                return float(x) if is_sympy(x) else x
         for i, k in self._mass.items():
             mass[i] = p[k]
         h = [tuple(mul(mass[i], c) for c in com[i]) for i in range(n)]
@@ -402,6 +407,7 @@ class ChainParameters:
         for bi, T, k, c, I in self._payloads:
             mp = p[k] if inv is None else mul(p[k], inv)
             c_link = tuple(p[v[1]] if isinstance(v, tuple) else v for v in c)
+            T = ev(T)                          # the link's placement in the body (symbolic for DH)
             cb = sp3.apply(T, c_link)          # the payload's centre of mass in the body frame
             Ib = sp3.rotate_inertia(T[0], I)   # its inertia about it, body axes
             mass[bi] = add(mass[bi], mp)
