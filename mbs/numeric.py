@@ -24,7 +24,7 @@ Algorithms (Featherstone, "Rigid Body Dynamics Algorithms"; Pinocchio's names):
   no pivoting, so it traces into a fixed graph): a pivot that is not (proven) positive --
   M singular, e.g. masses on a joint axis -- raises :class:`~mbs.errors.SingularMassMatrixError`
   naming the joints (floats, constants, intervals); never a silent 0.  The solve itself
-  is :func:`verified.preconditioned.solve` (``(C M)^-1 C b`` with ``C = mid(M)^-1``) by
+  is :func:`verified.preconditioned.solve` (a frozen congruence ``K M K^T`` of M) by
   default, which keeps interval-type evaluations of qdd tight; ``linear_solve = "ldl"``
   selects plain LDL^T substitution instead.
 

@@ -200,7 +200,7 @@ def test_arm_interval_taylor_coefficients_contain_arb_series():
 
 def test_arm_qdd_affine_within_2x_of_pinocchio_range(arm_pin):
     """Issue 17's target 'qdd enclosure over the 3-link +-0.01 box within 2x of the sampled
-    range' in the evaluator the solver uses (affine): measured 1.76-1.80x (plain LDL^T:
+    range' in the evaluator the solver uses (affine): measured 1.82-1.87x (plain LDL^T:
     3.1-2.5x, so this fails without the preconditioner)."""
     _, _, qdd = arm_pin
     gp, gl = _arm_graphs()

@@ -691,7 +691,7 @@ class GraphBuilder:
         derivatives are 0).
 
         Only for expressions whose value does not depend on which point is taken: a
-        preconditioner ``C = mid(M)^-1`` in ``(C M)^-1 (C b) = M^-1 b`` (see
+        preconditioner ``K`` from ``mid(M)`` in ``K^T (K M K^T)^-1 K b = M^-1 b`` (see
         :meth:`solve`). Every evaluator then encloses the true function, and forward
         derivatives (which treat ``C`` as constant) are exact too, because the
         identity holds for every fixed ``C``
