@@ -109,7 +109,8 @@ _SIMULATION = {"t_end", "output_dt", "mode"}
 # solver settings: name -> (type check, description)
 _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_min": float,
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
-           "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str}
+           "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
+           "set_order": int, "merge_slack": float}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str}
 _ENERGY_RATES = ("unsimplified", "simplified")
@@ -534,6 +535,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         raise SceneError(f"{where} arithmetic: {solver['arithmetic']!r} is not 'interval' or 'affine'")
     if "order" in solver and solver["order"] < 2:
         raise SceneError(f"{where} order: must be >= 2")
+    if "set_order" in solver and solver["set_order"] not in (1, 2):
+        raise SceneError(f"{where} set_order: {solver['set_order']!r} is not 1 or 2")
 
     # [consistency]
     where = f"{source}: [consistency]"

@@ -181,3 +181,10 @@ def test_scene_model_names_users_type():
     assert load_model("panda").n == 7 and load_model("panda").joint_names == load_model("panda_arm").joint_names
     with pytest.raises(SceneError, match="unknown model 'pandas'"):
         loads_scene('[model]\nname = "pandas"\n[initial]\nbox = [0.0]\n[simulation]\nt_end = 0.1\n')
+
+
+def test_solver_set_order_and_merge_slack():
+    text = GOOD.replace("order = 12\n", "order = 12\nset_order = 2\nmerge_slack = 0.1\n")
+    kw = loads_scene(text).simulate_kwargs(NAMES)
+    assert kw["set_order"] == 2 and kw["merge_slack"] == 0.1
+    _err(GOOD.replace("order = 12\n", "order = 12\nset_order = 3\n"), "set_order", "not 1 or 2")
