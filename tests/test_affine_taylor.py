@@ -954,12 +954,21 @@ def test_batched_kernel_equals_reference_on_infinite_and_invalid_boxes():
 
 
 def test_public_calls_equal_the_reference_in_chunks(monkeypatch):
-    """coefficients / series / affine_range through the public API, with chunks of 8
-    lanes (19 boxes: two full SIMD chunks and a partial one), equal the reference."""
+    """coefficients / series / affine_range through the public API, with chunks of at
+    most 8 lanes (19 boxes: 7 + 7 + 5 lanes, the per-box path) and of 16 (10 + 9, the
+    SIMD path), equal the reference."""
     from models import double_pendulum as dp
 
-    monkeypatch.setattr(at, "_CHUNK", 8)
     g = trace(dp.rhs, 4)
+    for chunk, lanes in ((8, 7), (16, 10)):
+        monkeypatch.setattr(at, "_CHUNK", chunk)
+        assert at._lanes(at._Tape(g), 12, 52, 4, 19) == lanes
+        _check_public_calls(g)
+
+
+def _check_public_calls(g):
+    from models import double_pendulum as dp
+
     rng = np.random.default_rng(11)
     c = np.array(dp.initial_point())
     lo, hi = c - rng.uniform(0, 0.01, (19, 4)), c + rng.uniform(0, 0.01, (19, 4))
@@ -979,6 +988,17 @@ def test_public_calls_equal_the_reference_in_chunks(monkeypatch):
     lo_r, hi_r = at.forms_to_interval(kept1.transpose(1, 0, 2))
     np.testing.assert_array_equal(R.lo, lo_r)
     np.testing.assert_array_equal(R.hi, hi_r)
+    from verified.sets import DoubletonSets
+    from verified.variational import variational_graph
+
+    vg = variational_graph(g)
+    forms = DoubletonSets.from_boxes(x).affine_forms(extra=16)
+    forms[4:, :, 0] = np.eye(4).reshape(-1)[:, None]
+    S = AffineTaylorODE(vg, fresh_symbols=0).series(forms, 11)
+    _, _, ref_s, _ = _both_kernels(vg, forms, np.zeros((0, 19, 10)), 11, 8, 0, 1)
+    lo_r, hi_r = at.forms_to_interval(ref_s)
+    np.testing.assert_array_equal(S.lo, lo_r)
+    np.testing.assert_array_equal(S.hi, hi_r)
 
 
 def test_forms_to_interval_a_nan_anywhere_is_the_whole_line():

@@ -523,26 +523,33 @@ _CHUNK_BYTES = 256 * 2**20  # at most this much working memory per chunk (fewer 
 
 
 @njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
-def _b_clear(A, z, L, m, cb):
-    for i in range(L + 1):
-        for c in range(cb):
-            A[z + i, c] = 0.0
-    for c in range(cb):
-        A[z + m + 1, c] = 0.0
+def _b_clear(F, z, L, m, nl):
+    """Z = 0 (entries 0..L and m + 1), F the flat view of A (rows, nl lanes). Rows
+    z..z+L of A are one contiguous run of (L + 1) nl numbers: cleared as such, all
+    lanes (those beyond cb belong to no box of this chunk and are never output)."""
+    for q in range(z * nl, (z + L + 1) * nl):
+        F[q] = 0.0
+    for q in range((z + m + 1) * nl, (z + m + 2) * nl):
+        F[q] = 0.0
 
 
 @njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
-def _b_copy(A, z, x, L, m, cb):
-    for i in range(L + 1):
-        for c in range(cb):
-            A[z + i, c] = A[x + i, c]
-    for c in range(cb):
-        A[z + m + 1, c] = A[x + m + 1, c]
+def _b_copy(F, z, x, L, m, nl, sign):
+    """Z = sign * x for sign = +1 or -1 (entries 0..L), error radius copied; all
+    lanes, as :func:`_b_clear`."""
+    d = (x - z) * nl
+    for q in range(z * nl, (z + L + 1) * nl):
+        F[q] = sign * F[q + d]
+    for q in range((z + m + 1) * nl, (z + m + 2) * nl):
+        F[q] = F[q + d]
 
 
 @njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
-def _b_acc_mul(A, z, x, y, L, m, w, cb, R):
-    """Z += w * x * y (:func:`_acc_mul`); R is scratch (>= 3, lanes)."""
+def _b_acc_mul(A, z, x, y, lz, lxy, m, w, cb, R):
+    """Z += w * x * y (:func:`_acc_mul`) for x, y without symbols beyond ``lxy`` and Z
+    without symbols beyond ``lz``; returns Z's new bound. R is scratch (>= 3, lanes).
+    Beyond lxy the reference's terms are x_i = y_i = 0: Z_i stays, its rounding sum
+    gains |Z_i| (the tail loops)."""
     aw = abs(w)
     if cb < _VEC_MIN:
         for c in range(cb):
@@ -555,7 +562,7 @@ def _b_acc_mul(A, z, x, y, L, m, w, cb, R):
             A[z + 0, c] = cc
             rx = 0.0
             ry = 0.0
-            for i in range(1, L + 1):
+            for i in range(1, lxy + 1):
                 xi = A[x + i, c]
                 yi = A[y + i, c]
                 rx += abs(xi)
@@ -564,11 +571,13 @@ def _b_acc_mul(A, z, x, y, L, m, w, cb, R):
                 ti = A[z + i, c] + p
                 rnd += 2.0 * (abs(w * x0 * yi) + abs(w * y0 * xi)) + abs(ti)
                 A[z + i, c] = ti
+            for i in range(lxy + 1, lz + 1):
+                rnd += abs(A[z + i, c])
             ex = A[x + m + 1, c]
             ey = A[y + m + 1, c]
             nl = _pm(_up(rx) + ex, _up(ry) + ey) + _pm(abs(x0), ey) + _pm(abs(y0), ex)
             A[z + m + 1, c] = _up(e + _pm(aw, nl) + rnd * _U)
-        return
+        return max(lz, lxy)
     for c in range(cb):
         x0 = A[x + 0, c]
         y0 = A[y + 0, c]
@@ -578,7 +587,7 @@ def _b_acc_mul(A, z, x, y, L, m, w, cb, R):
         A[z + 0, c] = cc
         R[0, c] = 0.0
         R[1, c] = 0.0
-    for i in range(1, L + 1):
+    for i in range(1, lxy + 1):
         for c in range(cb):
             xi = A[x + i, c]
             yi = A[y + i, c]
@@ -590,6 +599,9 @@ def _b_acc_mul(A, z, x, y, L, m, w, cb, R):
             ti = A[z + i, c] + p
             R[2, c] += 2.0 * (abs(w * x0 * yi) + abs(w * y0 * xi)) + abs(ti)
             A[z + i, c] = ti
+    for i in range(lxy + 1, lz + 1):
+        for c in range(cb):
+            R[2, c] += abs(A[z + i, c])
     for c in range(cb):
         x0 = A[x + 0, c]
         y0 = A[y + 0, c]
@@ -597,16 +609,17 @@ def _b_acc_mul(A, z, x, y, L, m, w, cb, R):
         ey = A[y + m + 1, c]
         nl = _pm(_up(R[0, c]) + ex, _up(R[1, c]) + ey) + _pm(abs(x0), ey) + _pm(abs(y0), ex)
         A[z + m + 1, c] = _up(A[z + m + 1, c] + _pm(aw, nl) + R[2, c] * _U)
+    return max(lz, lxy)
 
 
 @njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
-def _b_acc_sqr(A, z, x, L, m, w, cb, R):
-    """Z += w * x^2 (:func:`_acc_sqr`)."""
+def _b_acc_sqr(A, z, x, lz, lx, m, w, cb, R):
+    """Z += w * x^2 (:func:`_acc_sqr`); bounds as in :func:`_b_acc_mul`."""
     if cb < _VEC_MIN:
         for c in range(cb):
             x0 = A[x + 0, c]
             r = 0.0
-            for i in range(1, L + 1):
+            for i in range(1, lx + 1):
                 r += abs(A[x + i, c])
             ex = A[x + m + 1, c]
             q = _up(_up(r) + ex)
@@ -616,16 +629,18 @@ def _b_acc_sqr(A, z, x, L, m, w, cb, R):
             cc = A[z + 0, c] + t0
             rnd = 2.0 * abs(t0) + abs(cc) + abs(half)
             A[z + 0, c] = cc
-            for i in range(1, L + 1):
+            for i in range(1, lx + 1):
                 p = 2.0 * w * (x0 * A[x + i, c])
                 ti = A[z + i, c] + p
                 rnd += 2.0 * abs(p) + abs(ti)
                 A[z + i, c] = ti
+            for i in range(lx + 1, lz + 1):
+                rnd += abs(A[z + i, c])
             A[z + m + 1, c] = _up(A[z + m + 1, c] + _up(half) + _pm(2.0 * w * abs(x0), ex) + rnd * _U)
-        return
+        return max(lz, lx)
     for c in range(cb):
         R[0, c] = 0.0
-    for i in range(1, L + 1):
+    for i in range(1, lx + 1):
         for c in range(cb):
             R[0, c] += abs(A[x + i, c])
     for c in range(cb):
@@ -638,39 +653,49 @@ def _b_acc_sqr(A, z, x, L, m, w, cb, R):
         R[2, c] = 2.0 * abs(t0) + abs(cc) + abs(half)
         R[1, c] = half
         A[z + 0, c] = cc
-    for i in range(1, L + 1):
+    for i in range(1, lx + 1):
         for c in range(cb):
             p = 2.0 * w * (A[x + 0, c] * A[x + i, c])
             ti = A[z + i, c] + p
             R[2, c] += 2.0 * abs(p) + abs(ti)
             A[z + i, c] = ti
+    for i in range(lx + 1, lz + 1):
+        for c in range(cb):
+            R[2, c] += abs(A[z + i, c])
     for c in range(cb):
         x0 = A[x + 0, c]
         ex = A[x + m + 1, c]
         A[z + m + 1, c] = _up(A[z + m + 1, c] + _up(R[1, c]) + _pm(2.0 * w * abs(x0), ex) + R[2, c] * _U)
+    return max(lz, lx)
 
 
 @njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
-def _b_acc_add(A, z, x, L, m, sign, cb, R):
-    """Z += sign * x (:func:`_acc_add`)."""
+def _b_acc_add(A, z, x, lz, lx, m, sign, cb, R):
+    """Z += sign * x (:func:`_acc_add`); bounds as in :func:`_b_acc_mul`."""
     if cb < _VEC_MIN:
         for c in range(cb):
             rnd = 0.0
-            for i in range(L + 1):
+            for i in range(lx + 1):
                 t = A[z + i, c] + sign * A[x + i, c]
                 rnd += abs(t)
                 A[z + i, c] = t
+            for i in range(lx + 1, lz + 1):
+                rnd += abs(A[z + i, c])
             A[z + m + 1, c] = _up(A[z + m + 1, c] + A[x + m + 1, c] + rnd * _U)
-        return
+        return max(lz, lx)
     for c in range(cb):
         R[2, c] = 0.0
-    for i in range(L + 1):
+    for i in range(lx + 1):
         for c in range(cb):
             t = A[z + i, c] + sign * A[x + i, c]
             R[2, c] += abs(t)
             A[z + i, c] = t
+    for i in range(lx + 1, lz + 1):
+        for c in range(cb):
+            R[2, c] += abs(A[z + i, c])
     for c in range(cb):
         A[z + m + 1, c] = _up(A[z + m + 1, c] + A[x + m + 1, c] + R[2, c] * _U)
+    return max(lz, lx)
 
 
 @njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
@@ -774,30 +799,35 @@ def _b_unary_into(A, z, x, L, m, kind, known_lo, cb):
 
 
 @njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
-def _b_sqrconv(A, z, u, k, j0, L, m, cb, R):
+def _b_sqrconv(A, z, u, us, L, k, j0, lz, m, cb, R):
     """Z += sum_{j=j0}^{k-j0} u_j u_{k-j} (:func:`_sqrconv`); ``u`` is the row of the
-    slot's order-0 form, its order j at ``u + j (m + 2)``."""
+    order-0 form of slot ``us``, its order j at ``u + j (m + 2)``, bounds L[us, j];
+    returns Z's new bound."""
     m2 = m + 2
     for j in range(j0, (k + 1) // 2):
-        _b_acc_mul(A, z, u + j * m2, u + (k - j) * m2, L, m, 2.0, cb, R)
+        lz = _b_acc_mul(A, z, u + j * m2, u + (k - j) * m2, lz, max(L[us, j], L[us, k - j]), m, 2.0, cb, R)
     if k % 2 == 0 and k // 2 >= j0:
-        _b_acc_sqr(A, z, u + (k // 2) * m2, L, m, 1.0, cb, R)
+        lz = _b_acc_sqr(A, z, u + (k // 2) * m2, lz, L[us, k // 2], m, 1.0, cb, R)
+    return lz
 
 
 @njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
-def _b_quotient_step(A, s, u, v, k, rec, t, sc, L, m, cb, R):
+def _b_quotient_step(A, Af, s, ss, u, us, v, vs, L, k, rec, t, sc, Ls, m, cb, R):
     """w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j v_{k-j}) * rec (:func:`_quotient_step`),
-    with ``s, u, v`` the rows of the order-0 forms of w, u, v, ``t, sc`` scratch rows."""
+    with ``s, u, v`` the rows of the order-0 forms of slots ``ss, us, vs`` (w, u, v),
+    ``rec`` of 1 / v_0 (bound L[ss, 0]), ``t, sc`` scratch rows, Ls the bound of w_k."""
     m2 = m + 2
-    _b_clear(A, sc, L, m, cb)
+    CB = A.shape[1]
+    _b_clear(Af, sc, Ls, m, CB)
+    ls = 0
     for j in range(1, k):
-        _b_acc_mul(A, sc, s + j * m2, v + (k - j) * m2, L, m, float(j), cb, R)
-    _b_div_int_into(A, t, sc, L, m, float(k), cb, R)
-    _b_clear(A, sc, L, m, cb)
-    _b_acc_add(A, sc, u + k * m2, L, m, 1.0, cb, R)
-    _b_acc_add(A, sc, t, L, m, -1.0, cb, R)
-    _b_clear(A, s + k * m2, L, m, cb)
-    _b_acc_mul(A, s + k * m2, sc, rec, L, m, 1.0, cb, R)
+        ls = _b_acc_mul(A, sc, s + j * m2, v + (k - j) * m2, ls, max(L[ss, j], L[vs, k - j]), m, float(j), cb, R)
+    _b_div_int_into(A, t, sc, Ls, m, float(k), cb, R)
+    _b_clear(Af, sc, Ls, m, CB)
+    lt = _b_acc_add(A, sc, u + k * m2, 0, L[us, k], m, 1.0, cb, R)
+    lt = _b_acc_add(A, sc, t, lt, ls, m, -1.0, cb, R)
+    _b_clear(Af, s + k * m2, Ls, m, CB)
+    _b_acc_mul(A, s + k * m2, sc, rec, 0, max(lt, L[ss, 0]), m, 1.0, cb, R)
 
 
 @njit(cache=True)
@@ -890,7 +920,8 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
     TB = RB + nslots * m2
     SB = TB + m2
     OB = SB + m2
-    A = np.zeros((OB + n * KM, CB))
+    Af = np.zeros((OB + n * KM) * CB)
+    A = Af.reshape((OB + n * KM, CB))  # the same numbers; Af for runs of whole rows
     R = np.zeros((3, CB))  # per-lane sums
     for b0 in range(0, nb, CB):
         cb = min(CB, nb - b0)
@@ -929,40 +960,39 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
                     if k == 0:
                         _b_frozen_point_into(A, z, u, L[a0[s], 0], m, cb)
                 elif o == T_INPUT:
-                    _b_copy(A, z, OB + idx[s] * KM + k * m2, Ls, m, cb)
+                    _b_copy(Af, z, OB + idx[s] * KM + k * m2, Ls, m, CB, 1.0)
                 elif o == T_ADD or o == T_SUB:
-                    _b_clear(A, z, Ls, m, cb)
-                    _b_acc_add(A, z, uk, Ls, m, 1.0, cb, R)
-                    _b_acc_add(A, z, v + k * m2, Ls, m, 1.0 if o == T_ADD else -1.0, cb, R)
+                    _b_clear(Af, z, Ls, m, CB)
+                    lz = _b_acc_add(A, z, uk, 0, L[a0[s], k], m, 1.0, cb, R)
+                    _b_acc_add(A, z, v + k * m2, lz, L[a1[s], k], m, 1.0 if o == T_ADD else -1.0, cb, R)
                 elif o == T_NEG:
-                    for r in range(Ls + 1):
-                        for c in range(cb):
-                            A[z + r, c] = -A[uk + r, c]
-                    for c in range(cb):
-                        A[z + m + 1, c] = A[uk + m + 1, c]
+                    _b_copy(Af, z, uk, Ls, m, CB, -1.0)
                 elif o == T_MUL:
-                    _b_clear(A, z, Ls, m, cb)
+                    _b_clear(Af, z, Ls, m, CB)
                     if cst[a0[s]]:  # (c w)_[k] = c_[0] w_[k]: the other terms are exact zeros
-                        _b_acc_mul(A, z, u, v + k * m2, Ls, m, 1.0, cb, R)
+                        _b_acc_mul(A, z, u, v + k * m2, 0, max(L[a0[s], 0], L[a1[s], k]), m, 1.0, cb, R)
                     elif cst[a1[s]]:
-                        _b_acc_mul(A, z, uk, v, Ls, m, 1.0, cb, R)
+                        _b_acc_mul(A, z, uk, v, 0, max(L[a0[s], k], L[a1[s], 0]), m, 1.0, cb, R)
                     else:
+                        lz = 0
                         for j in range(k + 1):
-                            _b_acc_mul(A, z, u + j * m2, v + (k - j) * m2, Ls, m, 1.0, cb, R)
+                            lz = _b_acc_mul(A, z, u + j * m2, v + (k - j) * m2, lz, max(L[a0[s], j], L[a1[s], k - j]),
+                                            m, 1.0, cb, R)
                 elif o == T_SQR:
-                    _b_clear(A, z, Ls, m, cb)
-                    _b_sqrconv(A, z, u, k, 0, Ls, m, cb, R)
+                    _b_clear(Af, z, Ls, m, CB)
+                    _b_sqrconv(A, z, u, a0[s], L, k, 0, 0, m, cb, R)
                 elif o == T_DIV:
                     if k == 0:
                         _b_unary_into(A, rec, v, Ls, m, 7, -INF, cb)
                     # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0 (the sum is 0 for a constant v)
-                    _b_clear(A, TB, Ls, m, cb)
-                    _b_acc_add(A, TB, uk, Ls, m, 1.0, cb, R)
+                    _b_clear(Af, TB, Ls, m, CB)
+                    lt = _b_acc_add(A, TB, uk, 0, L[a0[s], k], m, 1.0, cb, R)
                     if not cst[a1[s]]:
                         for j in range(1, k + 1):
-                            _b_acc_mul(A, TB, v + j * m2, s0 + (k - j) * m2, Ls, m, -1.0, cb, R)
-                    _b_clear(A, z, Ls, m, cb)
-                    _b_acc_mul(A, z, TB, rec, Ls, m, 1.0, cb, R)
+                            lt = _b_acc_mul(A, TB, v + j * m2, s0 + (k - j) * m2, lt, max(L[a1[s], j], L[s, k - j]),
+                                            m, -1.0, cb, R)
+                    _b_clear(Af, z, Ls, m, CB)
+                    _b_acc_mul(A, z, TB, rec, 0, max(lt, L[s, 0]), m, 1.0, cb, R)
                 elif o == T_SQRT:
                     if k == 0:
                         _b_unary_into(A, z, u, Ls, m, 0, -INF, cb)
@@ -970,20 +1000,22 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
                         _b_unary_into(A, rec, TB, Ls, m, 7, -INF, cb)
                     else:
                         # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
-                        _b_clear(A, TB, Ls, m, cb)
-                        _b_acc_add(A, TB, uk, Ls, m, 1.0, cb, R)
-                        _b_clear(A, SB, Ls, m, cb)
-                        _b_sqrconv(A, SB, s0, k, 1, Ls, m, cb, R)
-                        _b_acc_add(A, TB, SB, Ls, m, -1.0, cb, R)
-                        _b_clear(A, z, Ls, m, cb)
-                        _b_acc_mul(A, z, TB, rec, Ls, m, 1.0, cb, R)
+                        _b_clear(Af, TB, Ls, m, CB)
+                        lt = _b_acc_add(A, TB, uk, 0, L[a0[s], k], m, 1.0, cb, R)
+                        _b_clear(Af, SB, Ls, m, CB)
+                        ls = _b_sqrconv(A, SB, s0, s, L, k, 1, 0, m, cb, R)
+                        lt = _b_acc_add(A, TB, SB, lt, ls, m, -1.0, cb, R)
+                        _b_clear(Af, z, Ls, m, CB)
+                        _b_acc_mul(A, z, TB, rec, 0, max(lt, L[s, 0]), m, 1.0, cb, R)
                 elif o == T_EXP:
                     if k == 0:
                         _b_unary_into(A, z, u, Ls, m, 1, -INF, cb)
                     else:
-                        _b_clear(A, TB, Ls, m, cb)
+                        _b_clear(Af, TB, Ls, m, CB)
+                        lt = 0
                         for j in range(1, k + 1):
-                            _b_acc_mul(A, TB, u + j * m2, s0 + (k - j) * m2, Ls, m, float(j), cb, R)
+                            lt = _b_acc_mul(A, TB, u + j * m2, s0 + (k - j) * m2, lt, max(L[a0[s], j], L[s, k - j]),
+                                            m, float(j), cb, R)
                         _b_div_int_into(A, z, TB, Ls, m, fk, cb, R)
                 elif o == T_LOG:
                     if k == 0:
@@ -991,7 +1023,7 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
                         _b_unary_into(A, rec, u, Ls, m, 7, -INF, cb)
                     else:
                         # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
-                        _b_quotient_step(A, s0, u, u, k, rec, TB, SB, Ls, m, cb, R)
+                        _b_quotient_step(A, Af, s0, s, u, a0[s], u, a0[s], L, k, rec, TB, SB, Ls, m, cb, R)
                 elif o == T_SIN or o == T_COS:
                     ss = s0 if o == T_SIN else aux[s] * KM
                     cs = aux[s] * KM if o == T_SIN else s0
@@ -999,43 +1031,50 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
                         _b_unary_into(A, ss, u, Ls, m, 3, -INF, cb)
                         _b_unary_into(A, cs, u, Ls, m, 4, -INF, cb)
                     else:
-                        _b_clear(A, TB, Ls, m, cb)
+                        # both partners have the bounds L[s] (see _live_counts)
+                        _b_clear(Af, TB, Ls, m, CB)
+                        lt = 0
                         for j in range(1, k + 1):
-                            _b_acc_mul(A, TB, u + j * m2, cs + (k - j) * m2, Ls, m, float(j), cb, R)
+                            lt = _b_acc_mul(A, TB, u + j * m2, cs + (k - j) * m2, lt, max(L[a0[s], j], L[s, k - j]),
+                                            m, float(j), cb, R)
                         _b_div_int_into(A, ss + k * m2, TB, Ls, m, fk, cb, R)
-                        _b_clear(A, TB, Ls, m, cb)
+                        _b_clear(Af, TB, Ls, m, CB)
+                        lt = 0
                         for j in range(1, k + 1):
-                            _b_acc_mul(A, TB, u + j * m2, ss + (k - j) * m2, Ls, m, -float(j), cb, R)
+                            lt = _b_acc_mul(A, TB, u + j * m2, ss + (k - j) * m2, lt, max(L[a0[s], j], L[s, k - j]),
+                                            m, -float(j), cb, R)
                         _b_div_int_into(A, cs + k * m2, TB, Ls, m, fk, cb, R)
                 elif o == T_TAN:
                     vs = aux[s] * KM  # v = 1 + tan^2 = tan'
                     if k == 0:
                         _b_unary_into(A, z, u, Ls, m, 5, -INF, cb)
-                        _b_clear(A, vs, Ls, m, cb)
+                        _b_clear(Af, vs, Ls, m, CB)
                         for c in range(cb):
                             A[vs, c] = 1.0
-                        _b_acc_sqr(A, vs, z, Ls, m, 1.0, cb, R)
+                        _b_acc_sqr(A, vs, z, 0, Ls, m, 1.0, cb, R)
                     else:
-                        _b_clear(A, TB, Ls, m, cb)
+                        _b_clear(Af, TB, Ls, m, CB)
+                        lt = 0
                         for j in range(1, k + 1):
-                            _b_acc_mul(A, TB, u + j * m2, vs + (k - j) * m2, Ls, m, float(j), cb, R)
+                            lt = _b_acc_mul(A, TB, u + j * m2, vs + (k - j) * m2, lt, max(L[a0[s], j], L[s, k - j]),
+                                            m, float(j), cb, R)
                         _b_div_int_into(A, z, TB, Ls, m, fk, cb, R)
-                        _b_clear(A, vs + k * m2, Ls, m, cb)
-                        _b_sqrconv(A, vs + k * m2, s0, k, 0, Ls, m, cb, R)
+                        _b_clear(Af, vs + k * m2, Ls, m, CB)
+                        _b_sqrconv(A, vs + k * m2, s0, s, L, k, 0, 0, m, cb, R)
                 elif o == T_ATAN:
                     vs = aux[s] * KM  # v = 1 + u^2, atan(u)' = u' / v
                     if k == 0:
                         _b_unary_into(A, z, u, Ls, m, 6, -INF, cb)
-                        _b_clear(A, vs, Ls, m, cb)
+                        _b_clear(Af, vs, Ls, m, CB)
                         for c in range(cb):
                             A[vs, c] = 1.0
-                        _b_acc_sqr(A, vs, u, Ls, m, 1.0, cb, R)
+                        _b_acc_sqr(A, vs, u, 0, L[a0[s], 0], m, 1.0, cb, R)
                         _b_unary_into(A, rec, vs, Ls, m, 7, 1.0, cb)  # v0 = 1 + u0^2 >= 1
                     else:
-                        _b_clear(A, vs + k * m2, Ls, m, cb)
-                        _b_sqrconv(A, vs + k * m2, u, k, 0, Ls, m, cb, R)
+                        _b_clear(Af, vs + k * m2, Ls, m, CB)
+                        _b_sqrconv(A, vs + k * m2, u, a0[s], L, k, 0, 0, m, cb, R)
                         # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
-                        _b_quotient_step(A, s0, u, vs, k, rec, TB, SB, Ls, m, cb, R)
+                        _b_quotient_step(A, Af, s0, s, u, a0[s], vs, aux[s], L, k, rec, TB, SB, Ls, m, cb, R)
             # x_[k+1] = f_[k] / (k + 1)
             for i in range(n):
                 o = outputs[i]
@@ -1059,10 +1098,14 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
     return res, kept
 
 
-def _lanes(tape, order, m, n):
-    """Boxes per chunk: _CHUNK, fewer if the chunk's arrays would pass _CHUNK_BYTES."""
+def _lanes(tape, order, m, n, nb):
+    """Boxes per chunk for a batch of nb: at most _CHUNK, fewer if the chunk's arrays
+    would pass _CHUNK_BYTES; chunks of about equal width (33 boxes: 17 + 16 lanes, both
+    SIMD, not 32 + 1)."""
     per_box = (tape.op.size * (order + 2) + n * (order + 1) + 2) * (m + 2) * 8
-    return int(max(1, min(_CHUNK, _CHUNK_BYTES // per_box)))
+    cap = int(max(1, min(_CHUNK, _CHUNK_BYTES // per_box)))
+    chunks = -(-max(nb, 1) // cap)
+    return -(-max(nb, 1) // chunks)
 
 
 # --------------------------------------------------------------------------
@@ -1154,7 +1197,7 @@ def affine_range(graph, x, params=None) -> Interval:
     # kernel's "state outputs" are not used here, any valid slots will do
     dummy = np.full(n, tape.outputs[0] if tape.outputs.size else 0, dtype=np.int64)
     _, G = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo, tape.chi, dummy, X, P,
-                          1, m, 0, tape.outputs, _lanes(tape, 1, m, n))
+                          1, m, 0, tape.outputs, _lanes(tape, 1, m, n, X.shape[1]))
     lo, hi = forms_to_interval(G.transpose(1, 0, 2))
     return Interval._from_bounds(lo, hi)
 
@@ -1214,7 +1257,7 @@ class AffineTaylorODE:
     def _run(self, X, P, order, m0):
         t = self._tape
         F, _ = _affine_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order,
-                              m0, self.n_fresh, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n))
+                              m0, self.n_fresh, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1]))
         return F
 
     def coefficients(self, x, order, params=None):
