@@ -192,7 +192,7 @@ class EnergyTest(Hook):
                  max_interval: float = 0.1, splits: int = 10, strategy: str = "gradient",
                  refine: str = "pruned", min_gain: float = 0.1, backward_depth: int = 0,
                  max_boxes: int = 4096, contract: str = "step", prune: bool = True, align=None,
-                 check_claim: bool = True):
+                 check_claim: bool = True, reset_h: bool = True):
         if energy is None and not constraints:
             raise ValueError("EnergyTest needs an energy graph or at least one constraint")
         if energy is not None and (not isinstance(energy, Graph) or energy.n_outputs != 1):
@@ -230,6 +230,7 @@ class EnergyTest(Hook):
                              "(verified.policies.EnergyAlignedBasis) or None")
         self.align = align
         self.check_claim = bool(check_claim)
+        self.reset_h = bool(reset_h)
 
     # ------------------------------------------------------------------ solver hook
     def before_run(self, setup):
@@ -278,11 +279,15 @@ class EnergyTest(Hook):
         """Contract the sets with ``H(x) - h = 0`` (``contract="step"``), record
         ``RA(t)``; at ``t*`` branch and prune (returns the surviving sets)."""
         changed = False
+        if self.reset_h and self._energy is not None:
+            sets, ch = self._reset_h(sets)
+            changed |= ch
         if self._claim is not None:
             # the claim over every state the step's tube encloses, and at the new centres
             self._refute_claim(step.tube, sets.c, step.t)
         if self.contract == "step" and self._contraction is not None:
-            sets, changed = self._contract(sets)
+            sets, ch = self._contract(sets)
+            changed |= ch
             if sets.n_sets == 0:
                 run.stop("the energy contraction removed every set (inconsistent model or energy rate?)",
                          "breakdown")
@@ -318,6 +323,58 @@ class EnergyTest(Hook):
             run.stop("the consistency test removed every set (inconsistent model or constraints?)", "breakdown")
         return sets
 
+    def _reset_h(self, sets):
+        """``(sets, changed)``: ``h`` restarted from ``H`` over the set where ``H_V`` has
+        become wider than ``H_H`` (the integrated ``h`` then carries no information and
+        only grows; with the unsimplified ``dH/dt`` over wide sets it grew past the
+        solver's width limit and ended the run before the states did: pendulum, T = 3,
+        4 x 4 pieces, break-down at 1.56 s with the test, 1.94 s without).
+
+        Sound: every true trajectory has ``h(t) = H(x(t))`` (eq. (12) is an identity
+        along it), so ``h`` may be re-initialized from the state part of the set, as at
+        ``t0`` (:meth:`initial_sets`): ``H(x) ∈ H(c) + DH(X) (C r0 + Q r)``, its
+        ``r0`` part (midpoint) linear, the rest a fresh error. Done only for sets whose
+        ``Q`` keeps ``h`` in its own column and row (block diagonal, as
+        :class:`verified.policies.BlockBasis` keeps it; a QR basis that mixed ``h``
+        into the state directions cannot be separated without wrapping)."""
+        n_s = self._n_s
+        nb = sets.n_sets
+        if nb == 0:
+            return sets, False
+        X = sets.hull()
+        with np.errstate(all="ignore"):
+            hh = self._eval(self._energy, X[:, :n_s])[:, 0]
+        hv = X[:, n_s]
+        block = (sets.Q[:, :n_s, n_s] == 0).all(axis=1) & (sets.Q[:, n_s, :n_s] == 0).all(axis=1)
+        redo = block & np.isfinite(hh.lo) & np.isfinite(hh.hi) & ~(hv.width() <= hh.width())
+        if not redo.any():
+            return sets, False
+        idx = np.flatnonzero(redo)
+        S = sets.take(idx)
+        cx = S.c[:, :n_s]
+        Xs = X[idx][:, :n_s].hull(point(cx))
+        with np.errstate(all="ignore"):
+            Hc = self._eval(self._energy, point(cx))[:, 0]
+            DH = self._jac(self._energy, Xs)[:, 0, :]  # (k, n_s)
+        rowC = _row_times(DH, S.C[:, :n_s, :])  # (k, N) over r0
+        rowQ = _row_times(DH, S.Q[:, :n_s, :])  # (k, N) over r (its h entry is 0: block)
+        row_mid = rowC.mid()
+        c_h = Hc.mid()
+        rest = (Hc - c_h) + _dot(rowC - row_mid, S.r0) + _dot(rowQ, S.r)
+        ok = np.isfinite(rest.lo) & np.isfinite(rest.hi) & np.isfinite(row_mid).all(axis=1)
+        if not ok.any():
+            return sets, False
+        idx, S = idx[ok], S.take(np.flatnonzero(ok))
+        row_mid, c_h, rest = row_mid[ok], c_h[ok], rest[ok]
+        c, C, Q = sets.c.copy(), sets.C.copy(), sets.Q.copy()
+        r = sets.r.copy()
+        c[idx, n_s] = c_h
+        C[idx, n_s, :] = row_mid
+        r.lo[idx, n_s], r.hi[idx, n_s] = rest.lo, rest.hi
+        self.stats["h_resets"] += int(idx.size)
+        _assign(sets, DoubletonSets(c, C, sets.r0, Q, r))
+        return sets, False
+
     def _contract(self, sets):
         """``(sets, changed)``: the sets contracted with ``H(x) - h = 0``
         (:mod:`verified.energy_contraction`); empty sets dropped."""
@@ -328,8 +385,11 @@ class EnergyTest(Hook):
         if res.ratio.size:
             self.stats["contraction_ratio_min"] = min(self.stats["contraction_ratio_min"], float(res.ratio.min()))
         self.stats["contraction_s"] += time.perf_counter() - w0
-        changed = bool(res.empty.any() or (res.ratio < 1).any())
-        return (res.sets if changed else sets), changed
+        if res.empty.any():
+            return res.sets, True
+        if (res.ratio < 1).any():
+            _assign(sets, res.sets)
+        return sets, False
 
     def after_run(self, solution):
         solution.consistency = self.finish()
@@ -404,7 +464,7 @@ class EnergyTest(Hook):
         self._last_test_t = float(t0)  # the interval to the first test starts at t0
         self.stats = dict(tests=0, pruned_boxes=0, test_s=0.0, backward_s=0.0, backward_runs=0,
                           backward_deleted=0, refinements_skipped=0, contractions=0, contracted_empty=0,
-                          contraction_s=0.0, contraction_ratio_min=1.0)
+                          contraction_s=0.0, contraction_ratio_min=1.0, h_resets=0)
         return graph
 
     def initial_sets(self, sets):
@@ -725,6 +785,14 @@ class EnergyTest(Hook):
         self.record.h_h_set = concatenate([h.reshape((1,)) for h in self._hh_set], axis=0) if self._hh_set else empty
         self.record.h_v_set = concatenate([h.reshape((1,)) for h in self._hv_set], axis=0) if self._hv_set else empty
         return self.record
+
+
+def _assign(sets: DoubletonSets, new: DoubletonSets) -> None:
+    """Make ``sets`` hold ``new`` (the same sets in the same order, contracted): in
+    place, so the solver still sees the step's own sets (adaptive splitting uses the
+    step's per-set widths, and a rollback to the step before stays possible); both
+    enclose the same true states set by set."""
+    sets.c, sets.C, sets.r0, sets.Q, sets.r = new.c, new.C, new.r0, new.Q, new.r
 
 
 def _row_times(row: Interval, M: np.ndarray) -> Interval:
