@@ -221,16 +221,20 @@ def _grid_hull(f, lo, hi, T, k=41):
 
 
 def _plot_work_precision(results, path):
+    """One panel per case: worst ratio against wall time (log-log) where runs complete;
+    where every run of a case breaks down, the break-down time against wall time."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     cases = list(dict.fromkeys(r["case"] for r in results))
     fig, axes = plt.subplots(1, len(cases), figsize=(5 * len(cases), 4), squeeze=False)
     for ax, case in zip(axes[0], cases):
+        rows = [r for r in results if r["case"] == case]
+        done = any(np.isfinite(r["ratio"]) for r in rows)
         for variant, mk in (("no test", "o-"), ("contraction", "s-"), ("contraction + prune", "^-"),
                             ("prune only", "v--")):
-            pts = [(r["wall_s"], r["ratio"], r["pieces"]) for r in results
-                   if r["case"] == case and r["variant"] == variant and np.isfinite(r["ratio"])]
+            pts = [(r["wall_s"], r["ratio"] if done else r["t_reached"], r["pieces"]) for r in rows
+                   if r["variant"] == variant and (np.isfinite(r["ratio"]) or not done)]
             if not pts:
                 continue
             w, q, p = zip(*pts)
@@ -238,9 +242,12 @@ def _plot_work_precision(results, path):
             for wi, qi, pi in pts:
                 ax.annotate(str(pi), (wi, qi), fontsize=7, xytext=(3, 3), textcoords="offset points")
         ax.set_xscale("log")
-        ax.set_yscale("log")
+        if done:
+            ax.set_yscale("log")
+            ax.set_ylabel("worst width ratio to sampled hull (-), lower is better")
+        else:
+            ax.set_ylabel("break-down time (s), higher is better")
         ax.set_xlabel("wall time (s)")
-        ax.set_ylabel("worst width ratio to sampled hull (-)")
         ax.set_title(case + " (labels: pieces)")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)

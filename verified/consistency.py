@@ -192,7 +192,7 @@ class EnergyTest(Hook):
                  max_interval: float = 0.1, splits: int = 10, strategy: str = "gradient",
                  refine: str = "pruned", min_gain: float = 0.1, backward_depth: int = 0,
                  max_boxes: int = 4096, contract: str = "step", prune: bool = True, align=None,
-                 check_claim: bool = True, reset_h: bool = True):
+                 check_claim: bool = True, reset_h: bool = False):
         if energy is None and not constraints:
             raise ValueError("EnergyTest needs an energy graph or at least one constraint")
         if energy is not None and (not isinstance(energy, Graph) or energy.n_outputs != 1):
