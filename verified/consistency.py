@@ -555,8 +555,8 @@ class EnergyTest(Hook):
         enclosures of the same set ``S`` (eq. (16) for that set; a sum over sets would
         compare the energy spread *between* sets, which is no overestimation). The
         record (Fig. 2) keeps the largest per-set value, ``H_H`` and ``H_V`` of that
-        set, and the hulls over all sets. The sets whose ``RA`` peaked are the ones
-        tested (:attr:`peaked`)."""
+        set, and the hulls over all sets. ``t*`` is the first local maximum of that
+        record; the sets with ``RA > 0`` there are the ones tested (:attr:`peaked`)."""
         self.peaked = None
         if self._energy is not None:
             X = sets.hull()
@@ -584,12 +584,17 @@ class EnergyTest(Hook):
         del hist[:-3]
         self._ra_sets_t.append(t)
         del self._ra_sets_t[:-3]
-        if len(hist) >= 2 and self._ra_sets_t[-2] > self._last_test_t:
-            # RA(t0) = 0 (H_V(0) is H_H(0)), so the first step can be a local maximum too
-            before = hist[-3] if len(hist) >= 3 and self._ra_sets_t[-3] > self._last_test_t else 0.0
-            peak = (hist[-2] > hist[-1]) & (hist[-2] >= before) & (hist[-2] > 0)
-            if peak.any():
-                self.peaked = peak
+        # t*: the first local maximum of the recorded RA (the largest per-set value)
+        # after the previous test; RA(t0) = 0 (H_V(0) is H_H(0)), so the first step can
+        # be one too. Tested then: the sets with overestimation (per-set RA > 0) at t*.
+        # (Testing every set at its own maximum tested at almost every step with 256
+        # sets: mode ii of the demo 3x slower, no narrower.)
+        ra_hist, t_hist = self._ra, self._ra_t
+        if len(ra_hist) >= 2 and t_hist[-2] > self._last_test_t:
+            before = ra_hist[-3] if len(ra_hist) >= 3 and t_hist[-3] > self._last_test_t else 0.0
+            if ra_hist[-2] > ra_hist[-1] and ra_hist[-2] >= before and ra_hist[-2] > 0:
+                if len(hist) >= 2:
+                    self.peaked = hist[-2] > 0
                 return "previous"
         if since >= self.max_interval * (1 - 1e-12):
             return "now"
