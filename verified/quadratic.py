@@ -271,7 +271,9 @@ class QuadraticStepper(LohnerStepper):
         # ... and in second-order mean value form, J(x) = DP(c) + H(xi)[x - c]: its spread
         # is |H| |x - c| where the first-order enclosure's compounds through the graph
         # (3-link arm: the error part grew 2.6x per step with the first alone)
-        d = sets.hull() - sets.c
+        # xi - c on [c + v, c + v + w] lies in the hull of V (every v, and 0) and the set - c
+        # (r need not hold 0, so c + v itself need not be in the set)
+        d = (sets.hull() - sets.c).hull(V)
         J_mv = Dc + linalg.matvec(HU.reshape((nb, n * n, n)), d).reshape((nb, n, n))
         J = J.intersect(J_mv)
         # linear part
