@@ -248,3 +248,24 @@ def test_true_claims_are_not_refused_and_sympy_proves_them():
     assert prove_energy_rate(rhs, H, None) and prove_energy_rate(rhs, H, zero)
     assert prove_energy_rate(rhs, H, rate_along(H, rhs))
     assert not prove_energy_rate(rhs, H, trace(lambda x, p: [0.01 * x[1] * x[1]], 2))
+
+
+# ----------------------------------------------------------------------------- BlockBasis
+def test_block_basis_keeps_the_states_enclosure_of_the_run_without_the_test():
+    """With h in its own block of the error basis, the energy test's augmented run
+    encloses the states exactly as the run without it (same steps); the contraction
+    can then only narrow. Sound against the sampling oracle."""
+    from verified.policies import BlockBasis
+    rhs, H = _dp()
+    lo, hi = dp.initial_box()
+    kw = dict(t_eval=[0.25, 0.5], subdivision=[16, 1, 1, 1], h_max=0.1)
+    plain = solve(rhs, Interval(lo, hi), (0.0, 0.5), **kw)
+    aug = solve(rhs, Interval(lo, hi), (0.0, 0.5), consistency=EnergyTest(H, "derive", contract="off", prune=False),
+                error_basis=BlockBasis("qr", 4), **kw)
+    assert plain.stats["steps"] == aug.stats["steps"]
+    np.testing.assert_allclose(aug.hull.lo, plain.hull.lo, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(aug.hull.hi, plain.hull.hi, rtol=0, atol=1e-13)
+    con = solve(rhs, Interval(lo, hi), (0.0, 0.5), consistency=EnergyTest(H, "derive", prune=False),
+                error_basis=BlockBasis("qr", 4), **kw)
+    assert (con.hull[-1].width() <= plain.hull[-1].width() * (1 + 1e-9)).all()
+    _check(con, lambda x: dp.rhs(x), lo, hi, 0.5, n_random=10)
