@@ -999,6 +999,14 @@ def _check_public_calls(g):
     lo_r, hi_r = at.forms_to_interval(ref_s)
     np.testing.assert_array_equal(S.lo, lo_r)
     np.testing.assert_array_equal(S.hi, hi_r)
+    # one set: series runs the reference kernel itself; one box with fresh symbols: the batched one
+    S1 = AffineTaylorODE(vg, fresh_symbols=0).series(forms[:, 4:5], 11)
+    np.testing.assert_array_equal(S1.lo, lo_r[4:5])
+    np.testing.assert_array_equal(S1.hi, hi_r[4:5])
+    F1, _ = ode.forms(x[4:5], 12)
+    X5, P5, m5 = at._wide_symbol_forms(g, x[4:5], None, extra=4 * 12)
+    _, _, ref1, _ = _both_kernels(g, X5, P5, 12, m5, 4, 1)
+    assert_same_forms(F1, ref1)
 
 
 def test_forms_to_interval_a_nan_anywhere_is_the_whole_line():

@@ -835,11 +835,13 @@ def _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh)
     """Bounds of the highest nonzero symbol: L[s, k] for the forms of slot s at order k
     (and of everything its recurrence reads and writes: operands at orders <= k, its
     own and its partner's earlier orders, its reciprocal, scratch) and Lo[i, k] for the
-    coefficient forms x_[k] (inputs ``Lx``, parameters ``Lp`` at order 0)."""
+    coefficient forms x_[k] (inputs ``Lx``, parameters ``Lp`` at order 0). Computed
+    order by order in (order, slot) tables of int32 (a big tape's operands are far
+    apart: one order's row stays in cache), returned as (slot, order)."""
     nslots = op.size
     n = outputs.size
-    L = np.zeros((nslots, order + 1), np.int64)
-    PM = np.zeros((nslots, order + 1), np.int64)  # max over orders <= k
+    LT = np.zeros((order + 1, nslots), np.int32)
+    PT = np.zeros((order + 1, nslots), np.int32)  # max over orders <= k
     Lo = np.zeros((n, order + 1), np.int64)
     Lo[:, 0] = Lx
     for k in range(order):
@@ -858,25 +860,25 @@ def _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh)
             else:
                 lv = 0
                 if a0[s] >= 0:
-                    lv = max(lv, PM[a0[s], k])
+                    lv = max(lv, PT[k, a0[s]])
                 if a1[s] >= 0:
-                    lv = max(lv, PM[a1[s], k])
+                    lv = max(lv, PT[k, a1[s]])
                 if k > 0:
-                    lv = max(lv, PM[s, k - 1])
+                    lv = max(lv, PT[k - 1, s])
                     if aux[s] >= 0:
-                        lv = max(lv, PM[aux[s], k - 1])
-            L[s, k] = lv
-            PM[s, k] = lv if k == 0 else max(PM[s, k - 1], lv)
+                        lv = max(lv, PT[k - 1, aux[s]])
+            LT[k, s] = lv
+            PT[k, s] = lv if k == 0 else max(PT[k - 1, s], lv)
             if aux[s] >= 0:
                 a = aux[s]
-                L[a, k] = lv
-                PM[a, k] = lv if k == 0 else max(PM[a, k - 1], lv)
+                LT[k, a] = lv
+                PT[k, a] = lv if k == 0 else max(PT[k - 1, a], lv)
         for i in range(n):
-            lv = L[outputs[i], k]
+            lv = LT[k, outputs[i]]
             if i < n_fresh:
                 lv = max(lv, m0 + k * n_fresh + i + 1)
             Lo[i, k + 1] = lv
-    return L, Lo
+    return np.ascontiguousarray(LT.T), Lo
 
 
 @njit(cache=True)
@@ -1256,8 +1258,14 @@ class AffineTaylorODE:
 
     def _run(self, X, P, order, m0):
         t = self._tape
-        F, _ = _affine_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order,
-                              m0, self.n_fresh, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1]))
+        args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order, m0, self.n_fresh)
+        if X.shape[1] == 1 and self.n_fresh == 0:
+            # one box, no fresh symbols (the variational series of a single set): nothing
+            # to skip and no lanes to fill, and on big tapes (a 6-dof arm's variational
+            # graph: 28k slots) the per-box reference measured 1.2-1.4x faster. Same bits.
+            F, _ = _affine_kernel_reference(*args)
+            return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
+        F, _ = _affine_kernel(*args, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1]))
         return F
 
     def coefficients(self, x, order, params=None):
