@@ -17,7 +17,12 @@ Layout (keys exactly as issue 7 asks)::
         ...
       ],
       "stats": {"wall_s": ..., "steps": ..., "max_boxes": ..., "pruned_boxes": ..., ...},
-      "parameters": {"payload.mass": [lo, hi], ...}   # uncertain parameters (only if any)
+      "parameters": {"payload.mass": [lo, hi], ...},  # uncertain parameters (only if any)
+      "frames": {"tool0": {"t": [...], "position": [[[lo, hi] x 3] per output time],
+                           "rotation": [[[lo, hi] x 9] per output time], "tube_t": [...],
+                           "tube": [[[lo, hi] x 3] per step], "method": "both"}},
+                                      # frame enclosures (chains; mbs.frames), m
+      "control": ["pd", ...]          # controllers of a closed loop (only if any)
     }
 
 Bounds are JSON numbers written with Python's ``repr`` (17 significant digits at
@@ -88,8 +93,10 @@ def _jsonable(v):
 
 
 def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=None,
-                     t_end: float | None = None, extra_stats: dict | None = None) -> dict:
-    """The result.json dict of a :class:`verified.solver.Solution` (see module doc)."""
+                     t_end: float | None = None, extra_stats: dict | None = None, frames=()) -> dict:
+    """The result.json dict of a :class:`verified.solver.Solution` (see module doc);
+    ``frames``: frame names whose enclosures (``sol.frame(name)``, :mod:`mbs.frames`)
+    go under ``"frames"``."""
     names = list(state_names if state_names is not None else getattr(sol, "state_names", ()) or
                  [f"x{i + 1}" for i in range(sol.hull.shape[-1])])
     outputs = []
@@ -122,6 +129,12 @@ def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=
     if params:
         out["parameters"] = {str(k): [bound_to_json(float(lo)), bound_to_json(float(hi))]
                              for k, (lo, hi) in params.items()}
+    fr = getattr(sol, "frame", None)
+    if frames and fr is not None:
+        out["frames"] = {str(k): fr(k).to_json() for k in frames}
+    control = getattr(sol, "control", None)
+    if control is not None:
+        out["control"] = [c.name for c in control.controllers]
     return out
 
 

@@ -14,13 +14,16 @@ from .uncertain import ParameterError
 __all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "sample_states", "final_widths"]
 
 
-def reference_system(model, mode="ii", energy_rate="unsimplified", params=None):
+def reference_system(model, mode="ii", energy_rate="unsimplified", params=None, control=None, q_init=None):
     """The :class:`mbs.system.System` of a model (a name or a Chain) in ``mode``: the
     float right-hand side for sampling and the energy graph for Fig. 3 (with the
-    uncertain ``params`` as graph parameters, see :func:`mbs.simulate.simulate`).
-    Uses :func:`mbs.simulate.system_for` (the system the simulation integrates)."""
+    uncertain ``params`` as graph parameters, see :func:`mbs.simulate.simulate`;
+    under ``control`` the closed loop, with the state ``t`` for time-dependent
+    references). Uses :func:`mbs.simulate.system_for` (the system the simulation
+    integrates)."""
     from .simulate import system_for
-    return system_for(model, "ii" if mode == "i" else mode, energy_rate=energy_rate, params=params)
+    return system_for(model, "ii" if mode == "i" else mode, energy_rate=energy_rate, params=params,
+                      control=control, q_init=q_init)
 
 
 def sample_points(lo, hi, count: int, seed: int = 0) -> np.ndarray:
@@ -152,6 +155,21 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     names = system.state_names
     x0 = scene.initial_box(names)
     kw = scene.simulate_kwargs(names)
+    if scene.control is not None:
+        from .control import ControlError
+        try:
+            system = reference_system(model, mode, params=kw.get("params"), control=scene.control,
+                                      q_init=np.asarray(x0.mid(), float)[:len(names) // 2])
+        except ControlError as e:
+            msg = str(e)
+            raise SceneError(f"{scene.source}: [control] {msg[8:] if msg.startswith('control ') else msg}") \
+                from None
+        except ParameterError as e:
+            raise SceneError(f"{scene.source}: [parameters] {e}") from None
+        if system.n > x0.shape[-1]:   # the time as a state: a point at t0 = 0
+            from verified.interval import Interval
+            x0 = Interval(np.r_[np.asarray(x0.lo, float), 0.0], np.r_[np.asarray(x0.hi, float), 0.0])
+    x_user = x0 if scene.control is None else None
     kw["mode"] = mode
     t_model = time.perf_counter() - t0
     log(f"{scene.name}: mode {mode}, {len(names)} states ({', '.join(names)}), t_end = {t_end:g} s")
@@ -160,7 +178,8 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
                                                  ((k, system.params[k]) for k in system.rhs.param_names)))
     bar = Progress(t_end, f"mode {mode}", enabled=None if progress else False)
     try:
-        sol = simulate(model, x0, t_end, output_dt=dt, progress=bar, max_wall=max_wall, **kw)
+        x_sim = x0 if x_user is not None else x0[:len(names)]
+        sol = simulate(model, x_sim, t_end, output_dt=dt, progress=bar, max_wall=max_wall, **kw)
     except (ValueError, TypeError, ModelError) as e:  # settings the solver refuses
         raise SceneError(f"{scene.source}: cannot simulate: {e}") from None
     finally:
@@ -192,10 +211,30 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
 
     extra = {"wall_total_s": wall, "model_s": t_model, "samples_checked": report["checked"],
              "samples_escaped": report["escaped"], "output_times_requested": len(want) + 1}
+    frames = []
+    if getattr(sol, "frame", None) is not None and len(sol.t):
+        from .frames import default_frame
+        frames = list(scene.frames) if scene.frames else [default_frame(sol.frame.chain)]
+        bad = [f for f in frames if f not in sol.frame.chain.frames]
+        if bad:
+            raise SceneError(f"{scene.source}: [simulation] frames: unknown frame(s) {', '.join(map(repr, bad))}; "
+                             f"frames of the model: {', '.join(sol.frame.names)}")
+        t_fr = time.perf_counter()
+        for f in frames:
+            enc = sol.frame(f)
+            log(f"frame {f!r} at t = {enc.t[-1]:g} s: position widths "
+                + ", ".join(_fmt_width(v) for v in np.asarray(enc.position.width()[-1], float)) + " m")
+        extra["frames_s"] = time.perf_counter() - t_fr
     path = write_result(out / "result.json", sol, scene=scene.source, mode=mode,
                         state_names=list(getattr(sol, "state_names", None) or names), t_end=t_end,
-                        extra_stats=extra)
+                        extra_stats=extra, frames=frames)
+    report["frames"] = frames
     report["paths"]["result"] = path
+    if figures and not interrupted and frames:
+        from .frame_figures import fig_frame_region
+        report["paths"]["frame_region"] = fig_frame_region(
+            sol.frame(frames[0]), out / "frame_region.png", title=f"{scene.name}: frame {frames[0]!r}",
+            samples=_frame_samples(sol, frames[0], traj, names))
     if figures and not interrupted:
         report["paths"]["enclosures"] = fig_enclosures(
             {mode: sol}, out / "enclosures.png", samples=traj, sample_times=traj_t,
@@ -226,3 +265,15 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     for k, p in report["paths"].items():
         log(f"wrote {p}")
     return report
+
+
+def _frame_samples(sol, frame, traj, names):
+    """Positions (S, k, 3) of ``frame`` along sampled trajectories (float kinematics)."""
+    if traj is None:
+        return None
+    chain = sol.frame.chain
+    n = chain.n
+    num = sol.frame.cparams.float_model() if sol.frame.cparams is not None else chain.numeric()
+    q = traj[..., :n].reshape(-1, n)
+    pos = np.array([np.asarray(num.frame_placement(frame, qi)[1], float) for qi in q])
+    return pos.reshape(traj.shape[:-1] + (3,))

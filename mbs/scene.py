@@ -48,6 +48,8 @@
     t_end = 1.0             # required [s]
     output_dt = 0.1         # outputs at k * output_dt (one float product each) and t_end
     mode = "ii"             # "i" | "ii" | "iii" (paper sec. 5.2)
+    frames = ["tool0"]      # chains: frames enclosed in result.json and frame_region.png
+                            # (default: the end effector, tool0 / tool / the last link)
 
     [solver]                # passed to verified.solver.solve
     order = 12
@@ -55,6 +57,19 @@
     subdivision = [64, 1, 1, 1]   # per state (list in state order or {x1 = 64}), or one int
     h_max = 0.05
     max_boxes = 4096
+
+    [control]               # optional: joint torques (modes i, ii; see mbs.control)
+    type = "pd"             # "pd" or "computed_torque"
+    kp = [100, 100]         # N m/rad per joint (or one number, or {joint = number}); or
+    kd = [20, 20]           # bandwidth = 4.0 (rad/s) and damping_ratio = 1.0 instead
+    q_ref = [0.5, -0.3]     # default: the centre of the initial q box
+    gravity_compensation = true           # pd: add g(q) of the nominal model
+    nominal = { mass_scale = 1.1 }        # the controller's model: point parameters
+    [control.trajectory]    # instead of q_ref: rest-to-rest quintic (t_end <= duration)
+    q_end = [1.0, 0.2]
+    duration = 2.0
+    [control.disturbance]   # constant unknown torques [N m]
+    joint1 = [-0.1, 0.1]
 
     [consistency]           # the energy consistency test (modes ii and iii)
     test_interval = 0.1
@@ -103,9 +118,9 @@ PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
 MODES = ("i", "ii", "iii")
 ERD_PREFIX = "example-robot-data:"
 
-_TOP = {"name", "description", "model", "parameters", "initial", "simulation", "solver", "consistency"}
+_TOP = {"name", "description", "model", "parameters", "initial", "simulation", "solver", "consistency", "control"}
 _MODEL = {"name", "urdf", "dh", "convention", "lock", "gravity"}
-_SIMULATION = {"t_end", "output_dt", "mode"}
+_SIMULATION = {"t_end", "output_dt", "mode", "frames"}
 # solver settings: name -> (type check, description)
 _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_min": float,
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
@@ -264,6 +279,8 @@ class Scene:
     solver: dict = field(default_factory=dict)
     consistency: dict = field(default_factory=dict)
     physical: dict = field(default_factory=dict)   # payload / mass_scale / mass / damping (mbs.uncertain)
+    control: object = None                         # the [control] table(s) (mbs.control.parse_control)
+    frames: tuple = ()                             # [simulation] frames: enclosed frames (default: the tool)
     _model: object = field(default=None, repr=False)
 
     # ---------------------------------------------------------------- model
@@ -343,6 +360,8 @@ class Scene:
         params.update(self.physical)
         if params:
             kw["params"] = params
+        if self.control is not None:
+            kw["control"] = self.control
         kw["mode"] = self.mode
         return kw
 
@@ -515,6 +534,11 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     output_dt = sim.get("output_dt")
     if output_dt is not None:
         output_dt = _number(output_dt, f"{where} output_dt", positive=True)
+    frames = sim.get("frames", [])
+    if isinstance(frames, str):
+        frames = [frames]
+    if not isinstance(frames, list) or not all(isinstance(f, str) for f in frames):
+        raise SceneError(f"{where} frames: expected a list of frame (link) names")
     mode = sim.get("mode", "ii")
     if mode not in MODES:
         raise SceneError(f"{where} mode: {mode!r} is not one of {', '.join(MODES)}")
@@ -551,9 +575,20 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         raise SceneError(f"{where} energy_rate: {cons['energy_rate']!r} is not one of "
                          f"{', '.join(_ENERGY_RATES)}")
 
+    # [control]
+    control = data.get("control")
+    if control is not None:
+        from .control import ControlError, parse_control
+        try:
+            parse_control(control)   # structure now; joints and gains against the model when it runs
+        except ControlError as e:
+            raise SceneError(f"{source}: {e}") from None
+        if mode == "iii":
+            raise SceneError(f"{source}: [control] needs mode i or ii (the numeric model), not iii")
+
     scene = Scene(source=source, name=name, description=description, model_spec=spec,
                   parameters=params, physical=physical, initial=initial, t_end=t_end, output_dt=output_dt,
-                  mode=mode, solver=solver, consistency=cons)
+                  mode=mode, solver=solver, consistency=cons, control=control, frames=tuple(frames))
     if isinstance(initial, list) and isinstance(solver.get("subdivision"), list) \
             and len(solver["subdivision"]) != len(initial):
         raise SceneError(f"{source}: [solver] subdivision has {len(solver['subdivision'])} entries, "

@@ -174,6 +174,7 @@ class _MassMatrix:
 
     def __init__(self, chain, cparams=None):
         self.chain = chain
+        self.cparams = cparams
         if cparams is None:
             self.num = chain.numeric()
             self.graph = self.num.pivot_graph()
@@ -185,10 +186,62 @@ class _MassMatrix:
         self.n = chain.n
 
 
-def system_for(model, mode: str = "ii", *, energy_rate: str = "unsimplified", params=None) -> System:
+def system_for(model, mode: str = "ii", *, energy_rate: str = "unsimplified", params=None, control=None,
+               q_init=None) -> System:
     """The :class:`System` that ``mode`` integrates for ``model`` (see module docstring);
-    ``params`` as for :func:`simulate`."""
+    ``params`` and ``control`` as for :func:`simulate` (``q_init``: the pose a PD
+    controller without ``q_ref`` holds)."""
+    if control is not None:
+        return _controlled_system(model, mode, params, control, q_init)[0]
     return _system_and_chain(model, mode, energy_rate, params)[0]
+
+
+def _model_chain(model, params):
+    """(chain, ChainParameters or None, name) of a chain model (for controllers)."""
+    from .chain import Chain
+    from .uncertain import ChainParameters
+    if isinstance(model, System):
+        raise ModelError(f"{model.name}: controllers need a chain model (a model name, URDF or mbs.Chain), "
+                         "not a bare System; write the torque into the System's rhs instead")
+    if isinstance(model, str):
+        name = model
+        if model in PAPER_MODELS:
+            chain = _paper_chain(model, params)
+        else:
+            from .robots import load_model
+            chain = load_model(model)
+    elif isinstance(model, Chain):
+        chain, name = model, None
+    else:
+        raise TypeError(f"model must be a model name, an mbs.Chain or an mbs.system.System, "
+                        f"got {type(model).__name__}")
+    cp = None
+    if params is not None or chain.free_symbols:
+        _require_dict(params if params is not None else {}, name or chain.name)
+        cp = ChainParameters(chain, params or {}, model_name=name)
+    return chain, cp, name or chain.name
+
+
+def _controlled_system(model, mode, params, control, q_init):
+    """(System, _MassMatrix, ClosedLoop) of ``model`` under ``control`` (modes i, ii)."""
+    from .control import closed_loop
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if mode == "iii":
+        raise ValueError("controllers are supported in modes i and ii (the numeric model); "
+                         "mode iii's symbolic models take no torque inputs")
+    chain, cp, name = _model_chain(model, params)
+    loop = closed_loop(chain, control, cp, q_init=q_init, model_name=name)
+    rhs = loop.rhs_graph()
+    pdict = {k: (float(a), float(b)) for k, a, b in zip(loop.param_names, loop.lo, loop.hi)}
+    what = ", ".join(c.name for c in loop.controllers)
+    if mode == "i":
+        system = System(name=name, rhs=rhs, params=pdict, description=f"numeric model under control ({what}), no test")
+    else:
+        system = System(name=name, rhs=rhs, energy=loop.energy_graph(), energy_rate=loop.energy_rate_graph(),
+                        params=pdict, description=f"numeric model under control ({what}); "
+                                                  "dH/dt = qd^T tau - qd^T D qd (eq. 7)")
+    return system, _MassMatrix(chain, cp), loop
 
 
 def _system_and_chain(model, mode: str, energy_rate: str, params=None):
@@ -297,7 +350,8 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
              energy_rate: str = "unsimplified", test_interval: float | None = None, test_splits: int | None = None,
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
              backward_depth: int = 0,
-             constraints=(), progress=None, max_wall: float | None = None, **solver_kwargs) -> Solution:
+             constraints=(), progress=None, max_wall: float | None = None, control=None,
+             **solver_kwargs) -> Solution:
     """Verified enclosure of ``model`` from the initial box ``x0`` in simulation ``mode``.
 
     Parameters
@@ -340,6 +394,14 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
         verified so far. Ctrl-C during the integration likewise returns the partial
         solution with ``status="interrupted"`` (after the step in progress; a second
         Ctrl-C aborts at once).
+    control : None, a controller of :mod:`mbs.control` (``PD``, ``ComputedTorque``,
+        ``Disturbance``, ``FunctionController``), a list of them (torques add up) or a
+        scene's ``[control]`` table as a dict. The torque enters the equations of
+        motion (eq. (2)); mode ii integrates ``dH/dt = qd^T tau - qd^T D qd`` (eq. (7)).
+        A time-dependent reference appends the state ``t`` (``t' = 1``, started at the
+        point ``t0``) after ``(q, qd)``: ``sol.state_names`` ends with ``"t"``. ``x0``
+        is still the ``(q, qd)`` box. A PD controller without ``q_ref`` holds the
+        centre of the initial q box.
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
         an unknown keyword raises ``TypeError`` naming ``simulate()``
 
@@ -350,11 +412,33 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     "completed", "breakdown", "stopped" (``max_wall``) or "interrupted" (Ctrl-C).
     """
     _check_solver_kwargs(solver_kwargs)
-    system, masses = _system_and_chain(model, mode, energy_rate, params)
     t0, t_end = float(t0), float(t_end)
     if not (np.isfinite(t_end) and t_end > t0):
         raise ValueError(f"t_end must be a finite time after t0 = {t0}, got {t_end!r}")
-    box = _initial_box(x0, system.n, system.name)
+    loop = None
+    if control is not None:
+        n2 = _model_chain(model, params)[0].n * 2 if not isinstance(model, System) else model.n
+        box = _initial_box(x0, n2, str(model))
+        q_init = np.asarray(box.hull(axis=0).mid() if box.ndim > 1 else box.mid(), float)[:n2 // 2]
+        system, masses, loop = _controlled_system(model, mode, params, control, q_init)
+        if loop.t_end_max is not None and t_end > loop.t_end_max * (1 + 1e-12):
+            raise ValueError(f"t_end = {t_end:g} s is past the end of the reference trajectory "
+                             f"({loop.t_end_max:g} s); the quintic is not continued past it")
+        if loop.timed:  # the time as the last state, a point: t' = 1
+            lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
+            tcol = np.full(lo.shape[:-1] + (1,), t0)
+            box = Interval(np.concatenate([lo, tcol], axis=-1), np.concatenate([hi, tcol], axis=-1))
+            if subdivision is not None and not isinstance(subdivision, (int, np.integer)):
+                subdivision = list(subdivision) + [1] * (system.n - len(list(subdivision)))
+        params = system.params
+        if "arithmetic" not in solver_kwargs:
+            # measured: a 2-link arm under computed torque (q, qd +- 1e-3, T = 1): interval
+            # arithmetic breaks down at 0.26 s ("qr") / 0.89 s ("auto"), affine completes
+            # with widths 1e-3..4e-3; the controller doubles the graph's depth
+            solver_kwargs["arithmetic"] = "affine"
+    else:
+        system, masses = _system_and_chain(model, mode, energy_rate, params)
+        box = _initial_box(x0, system.n, system.name)
     if masses is not None:
         _check_initial_mass_matrix(masses, box)
     if split_strategy not in STRATEGIES:
@@ -370,7 +454,8 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
                           max_boxes=solver_kwargs.get("max_boxes", 4096))
     elif constraints:
         raise ValueError("mode i runs without consistency tests; use mode ii or iii for constraints")
-    ode_params = _system_params(system, None if (masses is not None and system.params) else params)
+    ode_params = _system_params(system, None if ((masses is not None and system.params) or loop is not None)
+                                else params)
     if "error_basis" not in solver_kwargs and ode_params is not None:
         # measured: with parameters the "qr" error basis breaks down early (paper URDF
         # double pendulum, payload mass [0.2, 0.3]: 0.27 s against completed to 0.3 s
@@ -404,6 +489,10 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     sol.mode = mode
     sol.state_names = system.state_names
     sol.params = _params_record(system, ode_params)
+    sol.control = loop
+    if masses is not None:
+        from .frames import attach_frames
+        attach_frames(sol, masses.chain, loop.cparams if loop is not None else getattr(masses, "cparams", None))
     return sol
 
 
