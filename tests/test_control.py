@@ -1,0 +1,251 @@
+"""Controllers in the equations of motion (issue 14 item 1), against an independent
+oracle: Pinocchio's aba (plant) and crba / nonLinearEffects / gravity (nominal model)
+with the control law written again in numpy floats, integrated by DOP853."""
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.integrate import solve_ivp
+
+from sampling import in_union
+from mbs.control import (PD, ClosedLoop, ComputedTorque, ControlError, Disturbance, FunctionController, Quintic,
+                         closed_loop, parse_control)
+from mbs.simulate import simulate
+from models.registry import get
+from verified.interval import Interval
+
+Q0 = np.array([0.5, -0.3])
+E = 1e-3
+
+
+def box(q0, e=E, ed=E):
+    n = len(q0)
+    return Interval(np.r_[q0 - e, -ed * np.ones(n)], np.r_[q0 + e, ed * np.ones(n)])
+
+
+def pin_model(chain, scale=1.0, payloads=()):
+    model = pin.Model(chain.to_pinocchio())
+    for j in range(1, model.njoints):
+        I = model.inertias[j]
+        model.inertias[j] = pin.Inertia(I.mass * scale, I.lever, I.inertia * scale)
+    for link, m, com in payloads:
+        fr = model.frames[model.getFrameId(link)]
+        model.inertias[fr.parentJoint] = model.inertias[fr.parentJoint] + fr.placement.act(
+            pin.Inertia(m, np.asarray(com, float), np.zeros((3, 3))))
+    return model
+
+
+def quintic(q0, q1, T, t):
+    s = min(max(t / T, 0.0), 1.0)
+    p = 10 * s**3 - 15 * s**4 + 6 * s**5
+    dp = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
+    ddp = (60 * s - 180 * s**2 + 120 * s**3) / T**2
+    return q0 + (q1 - q0) * p, (q1 - q0) * dp, (q1 - q0) * ddp
+
+
+def closed_loop_trajectory(plant, law, x0, t_end):
+    """DOP853 (rtol = atol = 1e-12) of qdd = aba(q, qd, law(t, q, qd))."""
+    data = plant.createData()
+    n = plant.nv
+
+    def f(t, x):
+        q, qd = x[:n], x[n:]
+        return np.r_[qd, pin.aba(plant, data, q, qd, law(t, q, qd))]
+    s = solve_ivp(f, (0.0, t_end), x0, method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True)
+    assert s.success
+    return s.sol
+
+
+def corners(lo, hi, k, seed=0):
+    rng = np.random.default_rng(seed)
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    pts = [lo, hi, 0.5 * (lo + hi)]
+    signs = rng.integers(0, 2, (k, lo.size)).astype(bool)
+    pts += [np.where(s, hi, lo) for s in signs]
+    return pts
+
+
+def misses(sol, trajs, n, per_step=3):
+    bad = []
+    for t, b in zip(sol.t, sol.boxes):
+        b2 = Interval(b.lo[..., :n], b.hi[..., :n])
+        bad += [(t, tr(t)) for tr in trajs if not in_union(tr(t), b2)]
+    for j, b in enumerate(sol.tube):
+        b2 = Interval(b.lo[..., :n], b.hi[..., :n])
+        for t in np.linspace(sol.tube_t[j], sol.tube_t[j + 1], per_step):
+            bad += [(t, tr(t)) for tr in trajs if not in_union(tr(t), b2)]
+    return bad
+
+
+# --------------------------------------------------------------------------- computed torque
+def ct_oracle(chain, x0s, t_end, kp=25.0, kd=10.0, scale=1.1):
+    plant, nominal = pin_model(chain), pin_model(chain, scale)
+    nd = nominal.createData()
+
+    def law(t, q, qd):
+        v = kp * (Q0 - q) + kd * (0 - qd)
+        return pin.crba(nominal, nd, q) @ v + pin.nonLinearEffects(nominal, nd, q, qd)
+    return [closed_loop_trajectory(plant, law, x0, t_end) for x0 in x0s]
+
+
+@pytest.mark.parametrize("mode", ["i", "ii"])
+def test_computed_torque_with_mass_error_encloses_pinocchio(mode):
+    chain = get("planar2")
+    x0 = box(Q0)
+    sol = simulate("planar2", x0, 0.6, mode=mode, output_dt=0.2, order=10, progress=False,
+                   control=ComputedTorque(kp=25.0, kd=10.0, q_ref=Q0, nominal={"mass_scale": 1.1}))
+    assert sol.status == "completed", sol.reason
+    assert sol.state_names == ("q1", "q2", "qd1", "qd2")   # constant reference: no time state
+    trajs = ct_oracle(chain, corners(x0.lo, x0.hi, 6), 0.6)
+    assert not misses(sol, trajs, 4)
+    # the mass error shows: the nominal model's gravity is 10% too large, the arm moves
+    # away from the reference (and the enclosure follows it, not the reference)
+    assert not Interval(sol.hull.lo[-1], sol.hull.hi[-1]).contains(np.r_[Q0, 0, 0]).all()
+    if mode == "ii":
+        assert sol.consistency is not None and len(sol.consistency.ra_t) > 0
+
+
+def test_a_wrong_controller_graph_is_caught_by_the_oracle(monkeypatch):
+    """Mutant: the traced law with Kp 2% too small must let oracle states escape."""
+    chain = get("planar2")
+    real = ComputedTorque.torque
+
+    def broken(self, t, q, qd, p):
+        self.Kp = self.Kp * 0.98 if not getattr(self, "_mut", False) else self.Kp
+        self._mut = True
+        return real(self, t, q, qd, p)
+    monkeypatch.setattr(ComputedTorque, "torque", broken)
+    x0 = box(Q0, 1e-6, 1e-6)
+    sol = simulate("planar2", x0, 0.6, mode="i", output_dt=0.2, order=10, progress=False,
+                   control=ComputedTorque(kp=25.0, kd=10.0, q_ref=Q0, nominal={"mass_scale": 1.1}))
+    assert sol.status == "completed"
+    trajs = ct_oracle(chain, corners(x0.lo, x0.hi, 2), 0.6)
+    assert misses(sol, trajs, 4)
+
+
+# --------------------------------------------------------------------------- PD, quintic, disturbance
+def test_pd_tracking_quintic_with_disturbance_encloses_pinocchio():
+    chain = get("planar2")
+    q1 = np.array([0.9, 0.1])
+    kp, kd = np.array([40.0, 15.0]), np.array([12.0, 4.0])
+    ctl = [PD(kp, kd, Quintic(Q0, q1, 1.0), gravity_compensation=True),
+           Disturbance({"joint1": [-0.2, 0.2]})]
+    x0 = box(Q0)
+    sol = simulate("planar2", x0, 0.6, mode="ii", output_dt=0.2, order=10, progress=False, control=ctl)
+    assert sol.status == "completed", sol.reason
+    assert sol.state_names[-1] == "t"
+    assert sol.params == {"disturbance.joint1": (-0.2, 0.2)}
+    t_w = np.asarray(sol.hull.width())[:, -1]
+    assert np.all(t_w < 1e-12)                         # the time stays a point
+    assert np.allclose(sol.hull.mid()[:, -1], sol.t)
+    plant, nd = pin_model(chain), None
+    data = plant.createData()
+    trajs = []
+    for k, w in enumerate([-0.2, 0.2, 0.0]):
+        def law(t, q, qd, w=w):
+            r, rd, _ = quintic(Q0, q1, 1.0, t)
+            return kp * (r - q) + kd * (rd - qd) + pin.computeGeneralizedGravity(plant, data, q) + np.r_[w, 0.0]
+        trajs += [closed_loop_trajectory(plant, law, x, 0.6) for x in corners(x0.lo, x0.hi, 2, seed=k)]
+    assert not misses(sol, trajs, 4)
+
+
+def test_function_controller_with_parameter_and_time():
+    chain = get("planar2")
+
+    def tau(t, q, qd, p):
+        return [p["k"] * (0.5 - q[0]) - 3.0 * qd[0] + 2.0 * np.sin(3.0 * t) + 18.0 * np.cos(q[0]),
+                8.0 * (-0.3 - q[1]) - 2.0 * qd[1]]
+    ctl = FunctionController(tau, {"k": [30.0, 31.0]})
+    x0 = box(Q0)
+    sol = simulate("planar2", x0, 0.4, mode="i", output_dt=0.2, order=10, progress=False, control=ctl)
+    assert sol.status == "completed", sol.reason
+    assert sol.state_names[-1] == "t" and "fn.k" in sol.params
+    plant = pin_model(chain)
+    trajs = []
+    for k in (30.0, 31.0):
+        def law(t, q, qd, k=k):
+            return np.array([k * (0.5 - q[0]) - 3.0 * qd[0] + 2.0 * np.sin(3.0 * t) + 18.0 * np.cos(q[0]),
+                             8.0 * (-0.3 - q[1]) - 2.0 * qd[1]])
+        trajs += [closed_loop_trajectory(plant, law, x, 0.4) for x in corners(x0.lo, x0.hi, 2, seed=int(k))]
+    assert not misses(sol, trajs, 4)
+
+
+def test_time_state_does_not_steer_steps_or_widen():
+    """The same law, once with t as a state (uses_time=True) and once without: the same
+    steps and (up to rounding) the same enclosures."""
+    def law(t, q, qd, p):
+        return [25.0 * (0.5 - q[0]) - 10.0 * qd[0] + 17.7, 25.0 * (-0.3 - q[1]) - 10.0 * qd[1] + 4.8]
+    x0 = box(Q0)
+    kw = dict(mode="i", output_dt=0.25, order=10, progress=False)
+    a = simulate("planar2", x0, 0.5, control=FunctionController(law), **kw)
+    b = simulate("planar2", x0, 0.5, control=FunctionController(law, uses_time=True), **kw)
+    assert a.state_names[-1] != "t" and b.state_names[-1] == "t"
+    assert a.tube_t.shape == b.tube_t.shape and np.allclose(a.tube_t, b.tube_t, rtol=0, atol=1e-13)
+    wa, wb = np.asarray(a.hull.width()), np.asarray(b.hull.width())[:, :4]
+    assert np.allclose(wa, wb, rtol=1e-6, atol=1e-15)
+
+
+def test_energy_rate_is_qd_tau_minus_damping_and_matches_grad_h_f():
+    chain = get("double_pendulum_urdf")  # damped joints (0.05)
+    loop = closed_loop(chain, [PD(5.0, 1.0, [0.3, 0.2]), Disturbance([[0.1, 0.1], [-0.2, -0.2]])], q_init=[0, 0])
+    f, H, R = loop.rhs_graph(), loop.energy_graph(), loop.energy_rate_graph()
+    rng = np.random.default_rng(1)
+    p = np.array([0.1, -0.2])
+    for _ in range(5):
+        x = rng.uniform(-1, 1, 4)
+        grad = H.jacobian_float(x, p)[0]
+        assert np.isclose(grad @ f.eval_float(x, p), R.eval_float(x, p)[0], rtol=1e-9, atol=1e-12)
+        q, qd = x[:2], x[2:]
+        tau = np.array([5.0 * (0.3 - q[0]) - qd[0] + 0.1, 5.0 * (0.2 - q[1]) - qd[1] - 0.2])
+        assert np.isclose(R.eval_float(x, p)[0], qd @ tau - 0.05 * qd @ qd, rtol=1e-12)
+
+
+# --------------------------------------------------------------------------- bad specifications
+@pytest.mark.parametrize("ctl, match", [
+    (PD({"no_such_joint": 1.0}, 1.0), "unknown joint 'no_such_joint'"),
+    (PD([1.0, 2.0, 3.0], 1.0), r"wrong shape \(3,\)"),
+    (PD([1.0, float("nan")], 1.0), "NaN"),
+    (PD(1.0, -1.0), ">= 0"),
+    (PD(), "kp and kd"),
+    (PD(1.0, 1.0, bandwidth=3.0), "either kp and kd or bandwidth"),
+    (ComputedTorque(1.0, 1.0, nominal={"mass_scale": [1.0, 1.1]}), "point values"),
+    (ComputedTorque(1.0, 1.0, nominal={"payload": {"link": "nowhere", "mass": 1}}), "unknown link"),
+    (Disturbance({"joint1": [1.0, 0.0]}), "inverted"),
+    (Disturbance([1.0]), "expected 2 entries"),
+    (FunctionController(lambda t, q, qd, p: [q[0]]), "must return 2 torques"),
+    (PD(1.0, 1.0, Quintic(None, [0, 0, 0], 1.0)), "wrong shape"),
+])
+def test_bad_control_specs_raise_one_line_errors(ctl, match):
+    with pytest.raises(ControlError, match=match) as e:
+        closed_loop(get("planar2"), ctl, q_init=[0.0, 0.0])
+    assert "\n" not in str(e.value)
+
+
+def test_run_past_the_quintic_is_refused():
+    with pytest.raises(ValueError, match="past the end of the reference"):
+        simulate("planar2", box(Q0), 1.5, mode="i", progress=False,
+                 control=PD(10.0, 5.0, Quintic(None, [1.0, 0.0], 1.0)))
+
+
+def test_parse_control_tables():
+    ctl = parse_control({"type": "pd", "kp": {"joint1": 10.0}, "kd": 2.0, "gravity_compensation": True,
+                         "trajectory": {"q_end": [1.0, 0.0], "duration": 2.0},
+                         "disturbance": {"joint2": [-0.1, 0.1]}})
+    assert [type(c) for c in ctl] == [PD, Disturbance]
+    assert isinstance(ctl[0].q_ref, Quintic)
+    loop = ClosedLoop(get("planar2"), ctl, q_init=[0.0, 0.0])
+    assert loop.timed and loop.param_names == ("disturbance.joint2",)
+    assert np.array_equal(loop.controllers[0].Kp, [10.0, 0.0])
+    for bad, match in [({"type": "lqr"}, "unknown controller"), ({"kp": 1}, "missing type"),
+                       ({"type": "pd", "kq": 1}, "unknown key"), ({}, "empty"),
+                       ({"type": "pd", "q_ref": [0, 0], "trajectory": {"q_end": [0, 0], "duration": 1}}, "not both")]:
+        with pytest.raises(ControlError, match=match):
+            parse_control(bad)
+
+
+def test_bare_system_and_mode_iii_refuse_controllers():
+    from mbs.simulate import system_for
+    with pytest.raises(ValueError, match="modes i and ii"):
+        simulate("planar2", box(Q0), 0.1, mode="iii", control=PD(1.0, 1.0), progress=False)
+    sysm = system_for("planar2", "ii")
+    with pytest.raises(Exception, match="chain model"):
+        simulate(sysm, box(Q0), 0.1, mode="ii", control=PD(1.0, 1.0), progress=False)
