@@ -1,0 +1,151 @@
+"""Frame enclosures (issue 14 item 3) against oracles: Pinocchio's
+framesForwardKinematics (UR5, tool0) and the planar arm's closed-form kinematics, at
+DOP853-sampled closed-loop states (output times and inside every step)."""
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import mbs.frames as frames_mod
+from mbs.control import PD, ComputedTorque
+from mbs.frames import default_frame, evaluate_frame, frame_enclosure, frame_graph
+from mbs.simulate import simulate
+from models.registry import get
+from verified.interval import Interval
+
+from test_control import Q0, box, closed_loop_trajectory, corners, ct_oracle, pin_model
+
+SLACK = 1e-9
+
+
+def tip(q):
+    """End of link 2 of planar2 (1 m links, DH): closed form."""
+    return np.array([np.cos(q[0]) + np.cos(q[0] + q[1]), np.sin(q[0]) + np.sin(q[0] + q[1]), 0.0])
+
+
+def frame_misses(enc, trajs, fk, per_step=3):
+    bad = []
+    for k, t in enumerate(enc.t):
+        for tr in trajs:
+            p = fk(tr(t))
+            if not enc.contains(k, p, SLACK):
+                bad.append((t, p))
+    for j, b in enumerate(enc.tube_boxes):
+        for t in np.linspace(enc.tube_t[j], enc.tube_t[j + 1], per_step):
+            for tr in trajs:
+                p = fk(tr(t))
+                if not np.any(np.all((b.lo - SLACK <= p) & (p <= b.hi + SLACK), axis=-1)):
+                    bad.append((t, p))
+    return bad
+
+
+@pytest.fixture(scope="module")
+def arm_run():
+    chain = get("planar2")
+    x0 = box(Q0, 1e-2, 1e-2)
+    sol = simulate("planar2", x0, 0.6, mode="i", output_dt=0.2, order=10, progress=False,
+                   control=ComputedTorque(kp=25.0, kd=10.0, q_ref=Q0, nominal={"mass_scale": 1.1}))
+    assert sol.status == "completed", sol.reason
+    trajs = ct_oracle(chain, corners(x0.lo, x0.hi, 8), 0.6)
+    return sol, trajs
+
+
+@pytest.mark.parametrize("method", ["both", "mean-value", "affine", "interval"])
+def test_planar_tip_enclosure_contains_closed_form_kinematics(arm_run, method):
+    sol, trajs = arm_run
+    enc = sol.frame("link2", method=method)
+    assert enc.position.shape == (len(sol.t), 3) and len(enc.tube_boxes) == len(sol.tube)
+    assert not frame_misses(enc, trajs, lambda x: tip(x[:2]))
+
+
+def test_both_is_the_tightest(arm_run):
+    sol, _ = arm_run
+    w = {m: np.asarray(sol.frame("link2", method=m).position.width())[1:, :2] for m in
+         ("both", "mean-value", "affine", "interval")}
+    for m in ("mean-value", "affine", "interval"):
+        assert np.all(w["both"] <= w[m] * (1 + 1e-12))
+    assert w["both"].sum() < 0.9 * w["interval"].sum()
+
+
+def test_a_frame_enclosure_without_the_jacobian_term_is_caught(arm_run, monkeypatch):
+    """Mutant: the mean-value form without J (x - c) (just FK at the centre)."""
+    sol, trajs = arm_run
+
+    def centre_only(graph, X):
+        c = X.mid()
+        return graph.eval_interval(Interval(c, c))
+    monkeypatch.setattr(frames_mod, "_mean_value", centre_only)
+    enc = frame_enclosure(sol, get("planar2"), "link2", method="mean-value")
+    assert frame_misses(enc, trajs, lambda x: tip(x[:2]))
+
+
+def test_ur5_tool0_with_payload_contains_pinocchio_frames():
+    """UR5 under PD with gravity compensation, payload 1 kg +- 10% on tool0: tool0's
+    enclosure holds Pinocchio's framesForwardKinematics of sampled closed-loop states."""
+    chain = get("ur5")
+    q0 = np.array([0.0, -1.2, 1.4, -1.6, -1.57, 0.0])
+    x0 = box(q0, 1e-3, 1e-3)
+    T = 0.06
+    sol = simulate("ur5", x0, T, mode="i", output_dt=0.03, order=8, progress=False,
+                   params={"payload": {"link": "tool0", "mass": [0.9, 1.1]}},
+                   control=PD(bandwidth=3.0, gravity_compensation=True, q_ref=q0))
+    assert sol.status == "completed", sol.reason
+    enc = sol.frame("tool0")
+    assert np.all(np.asarray(enc.position.width())[-1] < 0.01)
+    nominal = pin_model(chain, payloads=[("tool0", 1.0, [0, 0, 0])])
+    nd = nominal.createData()
+    Md = np.diag(pin.crba(nominal, nd, q0))
+    kp, kd = 9.0 * Md, 6.0 * Md
+    model = pin.Model(chain.to_pinocchio())
+    data = model.createData()
+    fid = model.getFrameId("tool0")
+
+    def fk(x):
+        pin.framesForwardKinematics(model, data, x[:6])
+        return data.oMf[fid].translation.copy()
+    trajs = []
+    for k, m in enumerate([0.9, 1.1]):
+        plant = pin_model(chain, payloads=[("tool0", m, [0, 0, 0])])
+
+        def law(t, q, qd):
+            return kp * (q0 - q) - kd * qd + pin.computeGeneralizedGravity(nominal, nd, q)
+        trajs += [closed_loop_trajectory(plant, law, x, T) for x in corners(x0.lo, x0.hi, 2, seed=k)]
+    assert not frame_misses(enc, trajs, fk, per_step=2)
+    # orientation too: Pinocchio's rotation inside the rotation enclosure at the end
+    for tr in trajs:
+        pin.framesForwardKinematics(model, data, tr(T)[:6])
+        R = data.oMf[fid].rotation
+        assert np.all(enc.rotation.lo[-1] - SLACK <= R) and np.all(R <= enc.rotation.hi[-1] + SLACK)
+
+
+def test_frames_in_result_json_and_errors(tmp_path, arm_run):
+    from mbs.results import write_result
+    sol, _ = arm_run
+    p = write_result(tmp_path / "r.json", sol, frames=["link2"])
+    d = json.loads(p.read_text())
+    fr = d["frames"]["link2"]
+    assert len(fr["position"]) == len(sol.t) and len(fr["tube"]) == len(sol.tube)
+    lo = np.array([[a for a, _ in row] for row in fr["position"]])
+    assert np.array_equal(lo, sol.frame("link2").position.lo)       # exact doubles
+    assert d["control"] == ["computed_torque"]
+    with pytest.raises(Exception, match="unknown frame 'nope'"):
+        sol.frame("nope")
+    assert default_frame(get("ur5")) == "tool0" and default_frame(get("planar2")) == "link2"
+
+
+def test_frame_graph_matches_pinocchio_at_points():
+    chain = get("ur5")
+    g = frame_graph(chain, "tool0")
+    model = pin.Model(chain.to_pinocchio())
+    data = model.createData()
+    fid = model.getFrameId("tool0")
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        q = rng.uniform(-2, 2, 6)
+        pin.framesForwardKinematics(model, data, q)
+        y = g.eval_float(q)
+        assert np.allclose(y[:3], data.oMf[fid].translation, atol=1e-12)
+        assert np.allclose(y[3:].reshape(3, 3), data.oMf[fid].rotation, atol=1e-12)
+    Y = evaluate_frame(g, Interval(np.c_[q - 1e-3].T, np.c_[q + 1e-3].T))
+    assert Y.shape == (1, 12)
