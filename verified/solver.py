@@ -180,6 +180,9 @@ def solve(
     consistency=None,
     hooks=(),
     progress=None,
+    workers=None,
+    client=None,
+    chunks=None,
 ) -> Solution:
     """Verified enclosure of all solutions of ``x' = f(x, p)`` from ``x0``.
 
@@ -252,6 +255,14 @@ def solve(
     wrap_target : wrapping control: the next step is shortened when a step injected
         more than this fraction of a set's linear size through the spread of the
         Jacobian over the set (np.inf turns the control off)
+    workers, client, chunks : chunked execution (:mod:`verified.parallel`). With any of
+        them given the initial boxes are split into ``chunks`` contiguous chunks, each
+        integrated with its own step sizes, and the results merged into one Solution
+        (merged tube: one box per chunk on the union of the chunks' step times).
+        ``workers``: None (default: this process, one batch), ``"auto"`` (every core
+        when dask.distributed is installed and there are >= 2 boxes) or an int (> 1: a
+        local Dask cluster of that many 1-thread processes, kept for later calls).
+        ``client``: a ``distributed.Client`` or a scheduler address ``"tcp://host:port"``.
 
     Returns
     -------
@@ -270,6 +281,10 @@ def solve(
     TypeError
         when ``ode`` is not a Graph or VerifiedODE.
     """
+    if workers is not None or client is not None or chunks is not None:  # chunked: verified/parallel.py
+        kw = {k: v for k, v in locals().items() if k not in ("ode", "x0", "t_span", "workers", "client", "chunks")}
+        from .parallel import solve_parallel
+        return solve_parallel(ode, x0, t_span, workers=workers, client=client, chunks=chunks, **kw)
     wall0 = time.perf_counter()
     # every argument is checked before the tapes are built and before any step
     t0, t1, outs, h_max = check_settings(

@@ -1,0 +1,216 @@
+"""Chunked execution (verified/parallel.py): in-process chunks and Dask workers give
+enclosures that contain sampled DOP853 trajectories, with the status and t_reached of
+the in-process run; a killed worker's chunk is retried; an unreachable scheduler is a
+one-line error."""
+
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from models import double_pendulum as dp
+from verified import parallel
+from verified.graph import trace
+from verified.hooks import Hook, StopAfterWall
+from verified.interval import Interval
+from verified.solver import VerifiedODE, solve
+
+from sampling import misses, sample_initial_points, trajectories
+
+distributed = pytest.importorskip("distributed")
+
+T = 0.3
+SUB = [16, 1, 1, 1]
+
+
+@pytest.fixture(scope="module")
+def ode():
+    return VerifiedODE(trace(dp.rhs, 4))
+
+
+@pytest.fixture(scope="module")
+def box():
+    lo, hi = dp.initial_box()
+    return Interval(lo, hi)
+
+
+@pytest.fixture(scope="module")
+def oracle(box):
+    pts = sample_initial_points(np.asarray(box.lo), np.asarray(box.hi), 24, seed=3)
+    return trajectories(lambda x: dp.rhs(x), pts, T)
+
+
+@pytest.fixture(scope="module")
+def client():
+    from distributed import Client, LocalCluster
+    # the workers import this module (the slow hook below): put tests/ on their path
+    here = os.path.dirname(__file__)
+    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH")) if p)
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=50)
+    c = Client(cluster, set_as_default=False)
+    yield c
+    c.close()
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def single(ode, box):
+    return solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB)
+
+
+def test_inprocess_chunks_contain_samples(ode, box, oracle, single):
+    sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, workers=1, chunks=4)
+    assert sol.stats["backend"] == "inprocess" and sol.stats["chunks"] == 4
+    assert sol.status == single.status == "completed" and sol.t_reached == single.t_reached == T
+    np.testing.assert_array_equal(sol.t, single.t)
+    assert all(b.shape == (16, 4) for b in sol.boxes)
+    assert not misses(sol, oracle)
+    assert not misses(single, oracle)
+    # own step sizes: the merged tube is on the union of the chunks' step times, one box per chunk
+    assert all(tb.shape == (4, 4) for tb in sol.tube)
+    assert np.all(np.diff(sol.tube_t) > 0) and sol.tube_t[0] == 0.0 and sol.tube_t[-1] == T
+    for c in sol.chunks:
+        assert set(c["tube_t"]).issubset(set(sol.tube_t))
+    # the same enclosures up to the step sizes
+    w1, w2 = np.asarray(single.hull[-1].width()), np.asarray(sol.hull[-1].width())
+    assert np.all(np.abs(w2 / w1 - 1) < 0.01)
+    assert sol.stats["steps"] == sum(sol.stats["chunk_steps"])
+
+
+def test_dask_chunks_contain_samples(ode, box, oracle, single, client):
+    ticks = []
+    sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, client=client,
+                progress=lambda t, t_end: ticks.append((t, t_end)))
+    assert sol.stats["backend"] == "dask" and sol.stats["chunks"] == 2
+    assert sol.status == single.status and sol.t_reached == single.t_reached
+    assert not misses(sol, oracle)
+    w1, w2 = np.asarray(single.hull[-1].width()), np.asarray(sol.hull[-1].width())
+    assert np.all(np.abs(w2 / w1 - 1) < 0.01)
+    assert ticks and ticks[-1] == (T, T) and all(b[0] >= a[0] for a, b in zip(ticks, ticks[1:]))
+    assert sol.stats["sent_bytes"] > 0 and sol.stats["received_bytes"] > 0
+
+
+def test_uncertain_parameters_per_chunk(client):
+    """Per-box parameter rows travel with their boxes; a graph with parameters ships."""
+    g = trace(lambda x, p: [x[1], -p[0] * np.sin(x[0])], 2, 1)
+    x0 = Interval([0.5, 0.0], [0.6, 0.0])
+    p = Interval([9.7], [9.9])
+    a = solve(g, x0, (0.0, 0.5), params=p, subdivision=[4, 1])
+    b = solve(g, x0, (0.0, 0.5), params=p, subdivision=[4, 1], client=client, chunks=4)
+    assert a.status == b.status == "completed"
+    assert np.all(b.hull[-1].lo <= a.hull[-1].hi) and np.all(a.hull[-1].lo <= b.hull[-1].hi)
+    w1, w2 = np.asarray(a.hull[-1].width()), np.asarray(b.hull[-1].width())
+    assert np.all(w2 < 1.05 * w1)
+
+
+def test_breakdown_of_one_chunk_is_the_merged_status(ode, box):
+    """A wide single box breaks down (~0.45 s) where narrow pieces do not: worst status,
+    smallest t_reached, the reason names the chunk; outputs only where every chunk got."""
+    narrow = box.subdivide([64, 1, 1, 1]).reshape(-1, 4)[:2]
+    sol = solve(ode, [narrow, box], (0.0, 0.7), t_eval=[0.2, 0.4, 0.6, 0.7], workers=1, chunks=2)
+    c = sol.chunks
+    assert c[0]["status"] == "completed" and c[1]["status"] == "breakdown"
+    assert sol.status == "breakdown" and sol.t_reached == c[1]["t_reached"] < 0.6
+    assert sol.reason.startswith("chunk 1 (boxes 2..2)")
+    assert sol.t[-1] <= sol.t_reached and len(sol.boxes) == len(sol.t)
+    assert sol.tube_t[-1] == sol.t_reached
+
+
+class SlowSteps(Hook):
+    """Sleep after every step (so that a worker can be killed while it holds a chunk)."""
+
+    def __init__(self, seconds):
+        self.seconds = seconds
+
+    def after_step(self, step, sets, run):
+        time.sleep(self.seconds)
+        return None
+
+
+def test_killed_worker_chunk_is_retried(ode, box, oracle, single, client):
+    pids = client.run(os.getpid)
+    killed = {}
+
+    def killer():
+        deadline = time.time() + 60
+        while time.time() < deadline and not killed:
+            busy = [w for w, keys in client.processing().items() if any("verified-chunk" in str(k) for k in keys)]
+            if busy:
+                time.sleep(0.3)  # well inside the chunk (>= 1 s of sleeping steps)
+                os.kill(pids[busy[0]], signal.SIGKILL)
+                killed[busy[0]] = pids[busy[0]]
+                return
+            time.sleep(0.05)
+
+    th = threading.Thread(target=killer)
+    th.start()
+    sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, client=client, chunks=2,
+                hooks=[SlowSteps(0.1)])
+    th.join()
+    assert killed, "no worker was busy"
+    assert sol.status == "completed" and sol.t_reached == T
+    assert all(c["status"] == "completed" for c in sol.chunks)
+    # no chunk result came from the killed process
+    assert list(killed.values())[0] not in [c["worker_pid"] for c in sol.chunks]
+    assert not misses(sol, oracle)
+    np.testing.assert_allclose(np.asarray(sol.hull[-1].width()), np.asarray(single.hull[-1].width()), rtol=0.01)
+
+
+def test_unreachable_scheduler_is_one_line_error(monkeypatch, box):
+    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT", 1.0)
+    t = time.perf_counter()
+    with pytest.raises(parallel.SchedulerError) as e:
+        solve(trace(dp.rhs, 4), box, (0.0, 0.1), client="tcp://127.0.0.1:9")
+    assert time.perf_counter() - t < 30
+    msg = str(e.value)
+    assert "tcp://127.0.0.1:9" in msg and "\n" not in msg and "1 s" in msg
+    with pytest.raises(ValueError, match="tcp://host:port"):
+        parallel.connect("nonsense")
+
+
+def test_fallbacks_and_bad_arguments(ode, box, monkeypatch):
+    # fewer pieces than workers: one chunk, in-process
+    sol = solve(ode, box.subdivide([2, 1, 1, 1]).reshape(-1, 4)[:1], (0.0, 0.05), workers=2)
+    assert sol.stats["backend"] == "inprocess" and sol.stats["chunks"] == 1
+    # Dask missing: an explicit workers > 1 warns and runs in-process; "auto" silently
+    monkeypatch.setattr(parallel, "dask_available", lambda: False)
+    with pytest.warns(RuntimeWarning, match="not installed"):
+        sol = solve(ode, box, (0.0, 0.05), subdivision=[4, 1, 1, 1], workers=2)
+    assert sol.stats["backend"] == "inprocess" and sol.status == "completed"
+    sol = solve(ode, box, (0.0, 0.05), subdivision=[4, 1, 1, 1], workers="auto")
+    assert sol.stats["backend"] == "inprocess"
+    for bad in (dict(workers=0), dict(workers="all"), dict(chunks=0), dict(chunks=1.5)):
+        with pytest.raises(ValueError):
+            solve(ode, box, (0.0, 0.05), **bad)
+    with pytest.raises(ValueError, match="tol"):  # the solver's own checks come first
+        solve(ode, box, (0.0, 0.05), workers=1, chunks=2, tol=0)
+
+
+def test_wall_cap_is_one_deadline(ode, box):
+    sol = solve(ode, box, (0.0, 5.0), subdivision=SUB, workers=1, chunks=2, hooks=[StopAfterWall(0.0)])
+    assert sol.status == "stopped" and "wall-clock" in sol.reason
+    assert all(c["steps"] == 1 for c in sol.chunks)
+
+
+def test_plan_chunks():
+    assert parallel.plan_chunks(16, 2) == [(0, 8), (8, 16)]
+    assert parallel.plan_chunks(3, 4) == [(0, 1), (1, 2), (2, 3)]
+    assert len(parallel.plan_chunks(65536, 64)) == 128
+    r = parallel.plan_chunks(1000, 3, 7)
+    assert len(r) == 7 and r[0][0] == 0 and r[-1][1] == 1000
+    assert all(a[1] == b[0] for a, b in zip(r, r[1:]))
+
+
+def test_simulate_forwards_workers(client):
+    """simulate(..., client=) reaches the chunked path, energy test included (mode ii)."""
+    from mbs.simulate import simulate
+    x0 = Interval([2.1, 3.1], [2.2, 3.2])
+    a = simulate("pendulum_paper", x0, 0.3, mode="ii", subdivision=[4, 1], progress=False)
+    b = simulate("pendulum_paper", x0, 0.3, mode="ii", subdivision=[4, 1], progress=False, client=client)
+    assert a.status == b.status == "completed" and b.stats["chunks"] == 2
+    assert b.consistency is not None and b.stats["tests"] >= a.stats["tests"]
+    assert np.all(b.hull[-1].width() < 1.1 * a.hull[-1].width() + 1e-12)

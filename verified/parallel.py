@@ -1,0 +1,653 @@
+"""Chunked execution of a verified run: independent pieces, own step sizes, one Solution.
+
+The initial boxes of a run (after ``subdivision``) are independent: the union of
+their solutions is the reachable set. :func:`solve_parallel` (what
+``solve(..., workers=, client=, chunks=)`` delegates to) partitions them into
+contiguous *chunks*, runs each chunk as its own :func:`verified.solver.solve` --
+with its own step sizes, wrapping control and (with ``adaptive``) its own splitting
+-- and merges the chunk Solutions into one :class:`~verified.solver.Solution`.
+
+Where the chunks run:
+
+* in this process, one after the other (``workers=1`` with ``chunks > 1``, or when
+  Dask is not installed): only the per-chunk step sizes change;
+* on a local Dask cluster (``dask.distributed.LocalCluster``, one process per worker,
+  1 thread each), created on first use and kept for later calls
+  (:func:`local_client`); its workers load the numba caches once when they start
+  (:func:`_warm_kernels`);
+* on an existing Dask cluster: ``client=`` a ``distributed.Client`` or a scheduler
+  address ``"tcp://host:port"`` (:func:`connect`: an unreachable address is a one-line
+  :class:`SchedulerError` after ``CONNECT_TIMEOUT`` seconds, never a hang).
+
+On Dask the ODE graph is sent once per worker (``client.scatter(..., broadcast=True)``;
+each worker builds the Taylor tapes once and keeps them for every chunk), chunks are
+ordinary tasks, so Dask's scheduler retries a chunk whose worker died (up to
+``distributed.scheduler.allowed-failures`` times) and the result is complete.
+
+What the merged Solution means (the union is the same set a single batch encloses,
+up to the step-size differences):
+
+``t``, ``boxes``, ``hull``
+    Every chunk has the same output times; ``boxes[k]`` concatenates the chunks' boxes
+    at ``t[k]`` in chunk order (= the order of the initial boxes). Only the output
+    times *every* chunk reached are kept.
+``tube_t``, ``tube``, ``tube_hull``
+    The chunks step at their own times. The merged tube is on the common grid: the
+    union of all chunks' step boundaries up to ``t_reached``; ``tube[j]`` holds one box
+    per chunk, the hull of that chunk's tube boxes over its step that contains
+    ``[tube_t[j], tube_t[j + 1]]`` (sound: that step's boxes enclose the chunk's
+    solutions on the whole step). The exact per-chunk tubes, at their own times, are in
+    ``sol.chunks[i]["tube_t"]`` / ``["tube"]``.
+``t_reached``, ``status``, ``reason``
+    ``t_reached`` is the smallest over the chunks; ``status`` the worst
+    (breakdown > interrupted > stopped > completed), ``reason`` names the chunk
+    (``"chunk 3 (boxes 96..127): ..."``). A chunk that never ran (Ctrl-C, cancelled)
+    counts as reaching ``t0``.
+``stats``
+    Counters summed over the chunks (``steps`` is the total of chunk steps,
+    ``steps_max`` the longest chunk's), ``wall_s`` of the whole call, plus
+    ``chunks``, ``workers``, ``backend`` ("inprocess", "dask-local", "dask"),
+    ``chunk_wall_s`` (each chunk's own solve time), ``setup_s`` (cluster start and
+    graph shipping), ``sent_bytes`` / ``received_bytes`` (pickled sizes per run).
+``consistency``
+    With an energy test: the chunks' records interleaved by time (RA(t), H_H, H_V
+    points of every chunk sorted by t; the tests of every chunk); each chunk's own
+    record in ``sol.chunks[i]["consistency"]``.
+
+Hooks: on Dask every chunk gets its own (pickled) copy of ``hooks`` and
+``consistency``; in-process the hooks are shared by the chunks (one run after the
+other) and ``consistency`` is copied per chunk. :class:`verified.hooks.StopAfterWall`
+becomes one wall-clock deadline for the whole call (a chunk that starts after it stops
+after one step). ``progress(t, t_end)`` is called in this process with the chunks'
+mean time reached (workers report every ~0.3 s). Ctrl-C while waiting cancels the
+chunks still running and returns what is verified (``status="interrupted"``).
+
+This module knows nothing about robots.
+"""
+
+from __future__ import annotations
+
+import atexit
+import copy
+import hashlib
+import logging
+import math
+import os
+import pickle
+import signal
+import threading
+import time
+import uuid
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .hooks import Hook, StopAfterWall
+from .interval import Interval, concatenate, hull, stack
+
+__all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
+           "default_workers", "dask_available", "SchedulerError", "CONNECT_TIMEOUT", "CHUNK_TARGET"]
+
+#: seconds to wait for a scheduler before :class:`SchedulerError`
+CONNECT_TIMEOUT = 10.0
+#: default chunk size aimed at (boxes): below ~128 boxes per batch the fixed cost of a
+#: step (~2-4 ms of Python per step and chunk) shows; measured on the double pendulum,
+#: T = 1, 256 boxes in 1/2/4/8/16 chunks on one core: 5.7/4.9/5.5/7.0/9.0 s
+CHUNK_TARGET = 512
+#: at most this many chunks per worker by default (load balance against fixed costs)
+MAX_CHUNKS_PER_WORKER = 4
+_STATUS_RANK = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
+
+
+class SchedulerError(ConnectionError):
+    """A Dask scheduler that cannot be reached (the message names the address)."""
+
+
+def dask_available() -> bool:
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def default_workers() -> int:
+    """The cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def plan_chunks(n_pieces: int, workers: int, chunks: int | None = None) -> list[tuple[int, int]]:
+    """Contiguous ``(start, stop)`` ranges of the initial boxes, one per chunk.
+
+    Default: ``workers`` chunks, more (up to ``MAX_CHUNKS_PER_WORKER`` per worker) when
+    each would still hold ``CHUNK_TARGET`` boxes; never more chunks than boxes.
+    Neighbouring boxes behave alike, so contiguous chunks keep the boxes that need
+    short steps together."""
+    if chunks is None:
+        per = max(1, min(MAX_CHUNKS_PER_WORKER, n_pieces // max(1, workers * CHUNK_TARGET)))
+        chunks = workers * per
+    chunks = max(1, min(int(chunks), n_pieces))
+    edges = np.linspace(0, n_pieces, chunks + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+# ----------------------------------------------------------------------------- problem
+@dataclass
+class _Problem:
+    """What every worker needs once: the ODE graph and its arithmetic (the Taylor
+    tapes are built on the worker, once, and kept under ``token``)."""
+
+    graph: object
+    arithmetic: str
+    token: str
+
+
+_PREPARED: dict = {}  # token -> VerifiedODE, per process (each worker builds its tapes once)
+
+
+def _prepared(problem: _Problem):
+    from .solver import VerifiedODE
+    ode = _PREPARED.get(problem.token)
+    if ode is None:
+        ode = _PREPARED[problem.token] = VerifiedODE(problem.graph, problem.arithmetic)
+    return ode
+
+
+def _warm_kernels() -> float:
+    """Load (or compile) the numba kernels in this process: a two-step solve of a tiny
+    ODE in both arithmetics. Returns the seconds it took."""
+    t = time.perf_counter()
+    from .graph import trace
+    from .solver import solve
+    g = trace(lambda x, p: [x[1], -np.sin(x[0])], 2)
+    for arithmetic in ("interval", "affine"):
+        solve(g, Interval([0.1, 0.0], [0.11, 0.01]), (0.0, 0.02), arithmetic=arithmetic, h_max=0.01)
+    return time.perf_counter() - t
+
+
+# ----------------------------------------------------------------------------- hooks
+class _Deadline(Hook):
+    """Stop after the step during which the absolute wall-clock ``deadline`` (time.time())
+    passed: :class:`StopAfterWall` made one deadline for all chunks."""
+
+    def __init__(self, deadline: float, seconds: float):
+        self.deadline, self.seconds = deadline, seconds
+
+    def after_step(self, step, sets, run):
+        if time.time() >= self.deadline:
+            run.stop(f"wall-clock limit of {self.seconds:g} s reached")
+        return None
+
+
+class _Report(Hook):
+    """On a Dask worker: publish ``(chunk, t)`` on the run's topic every ``every`` s."""
+
+    def __init__(self, topic: str, index: int, every: float = 0.3):
+        self.topic, self.index, self.every = topic, index, every
+        self._last = 0.0
+
+    def after_step(self, step, sets, run):
+        now = time.monotonic()
+        if now - self._last >= self.every:
+            self._last = now
+            try:
+                from distributed import get_worker
+                get_worker().log_event(self.topic, {"i": self.index, "t": float(step.t)})
+            except Exception:  # noqa: BLE001 - progress is best effort
+                pass
+        return None
+
+
+class _Local(Hook):
+    """In-process: forwards ``t`` of chunk ``index`` to the combined progress."""
+
+    def __init__(self, board, index):
+        self.board, self.index = board, index
+
+    def after_step(self, step, sets, run):
+        self.board.update(self.index, float(step.t))
+        return None
+
+
+class _Board:
+    """The combined progress of all chunks: ``progress(mean t, t_end)``."""
+
+    def __init__(self, progress, t0, t1, sizes):
+        self.progress, self.t0, self.t1 = progress, t0, t1
+        self.w = np.asarray(sizes, float) / float(np.sum(sizes))
+        self.t = np.full(len(sizes), float(t0))
+        self.lock = threading.Lock()
+
+    def update(self, index, t):
+        with self.lock:
+            self.t[index] = max(self.t[index], t)
+
+    def emit(self):
+        if self.progress is not None:
+            with self.lock:
+                mean = float(self.t0 + np.dot(self.w, self.t - self.t0))
+            self.progress(min(mean, self.t1), self.t1)
+
+
+def _split_hooks(hooks, t_start_wall: float):
+    """(hooks for the chunks, the run's deadline or None): StopAfterWall becomes one
+    deadline for the whole call."""
+    out, deadline = [], None
+    for h in list(hooks or ()):
+        if isinstance(h, StopAfterWall):
+            d = t_start_wall + h.seconds
+            deadline = d if deadline is None else min(deadline, d)
+            out.append(_Deadline(d, h.seconds))
+        else:
+            out.append(h)
+    return out, deadline
+
+
+# ----------------------------------------------------------------------------- Dask
+_LOCAL: dict = {}  # workers -> (cluster, client)
+
+
+def local_client(workers: int):
+    """A ``distributed.Client`` of a local cluster with ``workers`` processes of one
+    thread each, created on first use (with warm numba caches in every worker) and
+    kept for later calls until :func:`close_local_clients` / exit."""
+    got = _LOCAL.get(workers)
+    if got is not None and got[1].status == "running":
+        return got[1]
+    from distributed import Client, LocalCluster
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR)
+    client = Client(cluster, set_as_default=False)
+    client.run(_warm_kernels)
+    client.register_worker_callbacks(_warm_kernels)  # also workers restarted later (a killed worker)
+    _LOCAL[workers] = (cluster, client)
+    return client
+
+
+def close_local_clients():
+    """Shut down the local clusters :func:`local_client` started."""
+    while _LOCAL:
+        _, (cluster, client) = _LOCAL.popitem()
+        try:
+            client.close()
+            cluster.close()
+        except Exception:  # noqa: BLE001 - shutting down anyway
+            pass
+
+
+atexit.register(close_local_clients)
+
+
+def connect(address: str, timeout: float | None = None):
+    """A ``distributed.Client`` for the scheduler at ``address`` (``tcp://host:port``).
+    Raises :class:`SchedulerError` naming the address when it cannot be reached within
+    ``timeout`` seconds (default :data:`CONNECT_TIMEOUT`)."""
+    if not isinstance(address, str) or "://" not in address and ":" not in address:
+        raise ValueError(f"scheduler address must look like tcp://host:port, got {address!r}")
+    try:
+        from distributed import Client
+    except ImportError:
+        raise SchedulerError(f"cannot use the Dask scheduler at {address}: dask.distributed is not installed "
+                             "(pip install 'mbs-verified[parallel]')") from None
+    timeout = CONNECT_TIMEOUT if timeout is None else float(timeout)
+    try:
+        return Client(address, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError) as e:
+        raise SchedulerError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s "
+                             f"({type(e).__name__})") from None
+
+
+def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> float:
+    """On each worker before the chunks: build the problem's Taylor tapes and take one
+    step from one box with the run's settings (first calls of the kernels on this
+    graph). Returns the seconds spent (0 when this worker already had the problem)."""
+    if problem.token in _PREPARED:
+        return 0.0
+    from .solver import solve
+    t = time.perf_counter()
+    ode = _prepared(problem)
+    kw = {k: v for k, v in kwargs.items() if k in ("order", "tol", "error_basis", "set_order", "h_min", "wrap_target")}
+    t0, t1 = kwargs["t_span"]
+    try:
+        solve(ode, Interval(box_lo, box_hi), (t0, t1), params=params, max_steps=1, **kw)
+    except Exception:  # noqa: BLE001 - the chunk itself will report a real problem
+        pass
+    return time.perf_counter() - t
+
+
+def _run_chunk(problem: _Problem, index: int, lo, hi, params, kwargs: dict, topic: str):
+    """One chunk on a worker (a Dask task)."""
+    from .solver import solve
+    t = time.perf_counter()
+    ode = _prepared(problem)
+    kw = dict(kwargs)
+    kw["hooks"] = list(kw.get("hooks") or ()) + [_Report(topic, index)]
+    sol = solve(ode, Interval(lo, hi), kw.pop("t_span"), params=params, **kw)
+    sol.stats["chunk_task_s"] = time.perf_counter() - t
+    sol.stats["worker_pid"] = os.getpid()
+    return sol
+
+
+# ----------------------------------------------------------------------------- driver
+def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, **kwargs):
+    """``solve(ode, x0, t_span, **kwargs)`` in chunks (see the module docstring).
+
+    workers : None, "auto" or an int >= 1. "auto": every core of this machine
+        (:func:`default_workers`) when Dask is installed and there are at least two
+        boxes, else in-process. An int > 1 without Dask warns and runs in-process.
+        Ignored when ``client`` is given.
+    client : None, a ``distributed.Client`` or a scheduler address (str)
+    chunks : None (default plan, :func:`plan_chunks`) or the number of chunks
+    """
+    from .graph import Graph
+    from .solver import VerifiedODE, solve
+    from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+
+    wall0 = time.perf_counter()
+    t_wall0 = time.time()
+    # the same argument checks as solve, before any work
+    settings = {k: kwargs[k] for k in ("t_eval", "order", "tol", "h_max", "h_min", "max_steps", "max_width",
+                                       "adaptive", "split_ratio", "max_boxes", "wrap_target", "merge_slack",
+                                       "error_basis", "progress") if k in kwargs}
+    t0, t1, outs, _ = check_settings(t_span=t_span, **settings)
+    graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
+    arithmetic = kwargs.get("arithmetic")
+    if isinstance(ode, VerifiedODE):
+        if arithmetic is not None and check_arithmetic(arithmetic) != ode.arithmetic:
+            raise ValueError(f"arithmetic={arithmetic!r} differs from the VerifiedODE's {ode.arithmetic!r}")
+        arithmetic = ode.arithmetic
+    arithmetic = check_arithmetic("interval" if arithmetic is None else arithmetic)
+    if chunks is not None and (isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or chunks < 1):
+        raise ValueError(f"chunks must be None or an integer >= 1, got {chunks!r}")
+    if workers is not None and workers != "auto" and (isinstance(workers, bool) or
+                                                      not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise ValueError(f"workers must be None, 'auto' or an integer >= 1, got {workers!r}")
+    boxes = initial_boxes(x0, graph.n_inputs, kwargs.pop("subdivision", None))
+    nb = boxes.shape[0]
+    params = check_params(kwargs.pop("params", None), graph, nb, None)
+    progress = kwargs.pop("progress", None)
+    consistency = kwargs.pop("consistency", None)
+    hooks, deadline = _split_hooks(kwargs.pop("hooks", ()), t_wall0)
+
+    # where to run
+    backend, own_client = "inprocess", None
+    if client is not None:
+        if isinstance(client, str):
+            client = connect(client)
+            own_client = client
+        backend = "dask"
+        n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+    else:
+        n_workers = default_workers() if workers in (None, "auto") else int(workers)
+        if n_workers > 1 and nb >= 2:
+            if dask_available():
+                backend = "dask-local"
+            elif workers != "auto":
+                warnings.warn(f"workers={workers}: dask.distributed is not installed "
+                              "(pip install 'mbs-verified[parallel]'); running the chunks in this process",
+                              RuntimeWarning, stacklevel=3)
+    if backend == "inprocess":
+        n_workers = 1
+    if deadline is not None and chunks is None:
+        chunks = n_workers  # with a wall-clock cap every chunk should be running when it strikes
+    ranges = plan_chunks(nb, n_workers, chunks)
+    base = dict(kwargs, t_span=(t0, t1))
+    board = _Board(progress, t0, t1, [b - a for a, b in ranges])
+    results: list = [None] * len(ranges)
+    interrupted = False
+    stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend}
+
+    def chunk_params(a, b):
+        if params is None:
+            return None
+        return params[a:b] if params.ndim == 2 else params
+
+    if backend == "inprocess":
+        prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(graph, arithmetic)
+        stats_extra["setup_s"] = time.perf_counter() - wall0
+        try:
+            for i, (a, b) in enumerate(ranges):
+                kw = dict(base)
+                kw.pop("t_span")
+                if not isinstance(kw.get("error_basis", "qr"), str):
+                    kw["error_basis"] = copy.deepcopy(kw["error_basis"])
+                kw["consistency"] = None if consistency is None else copy.deepcopy(consistency)
+                kw["hooks"] = hooks + ([_Local(board, i)] if progress is not None else [])
+                if progress is not None:
+                    kw["hooks"].append(_EmitEvery(board))
+                results[i] = solve(prob, boxes[a:b], (t0, t1), params=chunk_params(a, b), **kw)
+                if results[i].status == "interrupted":
+                    interrupted = True
+                    break
+        except KeyboardInterrupt:
+            interrupted = True
+        stats_extra["sent_bytes"] = stats_extra["received_bytes"] = 0
+    else:
+        c = client if backend == "dask" else None
+        setup_t = time.perf_counter()
+        try:
+            if c is None:
+                fresh = n_workers not in _LOCAL
+                c = local_client(n_workers)
+                if fresh:
+                    stats_extra["cluster_start_s"] = time.perf_counter() - setup_t
+            results, interrupted, sizes = _run_on_dask(c, graph, arithmetic, boxes, ranges, chunk_params, base,
+                                                        consistency, hooks, board, deadline)
+            stats_extra.update(sizes)
+        finally:
+            if own_client is not None:
+                own_client.close()
+        stats_extra["setup_s"] = stats_extra.pop("setup_s", time.perf_counter() - setup_t)
+    sol = merge_solutions(results, ranges, boxes[:, :graph.n_inputs], outs, t0,
+                          tuple(graph.input_names[:graph.n_inputs]), interrupted=interrupted)
+    board.emit()
+    sol.stats.update(stats_extra)
+    sol.stats["wall_s"] = time.perf_counter() - wall0
+    return sol
+
+
+class _EmitEvery(Hook):
+    """In-process: call the combined progress after every step of any chunk."""
+
+    def __init__(self, board):
+        self.board = board
+
+    def after_step(self, step, sets, run):
+        self.board.emit()
+        return None
+
+
+class _SigintRaises:
+    """While waiting for the workers (main thread only): Ctrl-C raises
+    KeyboardInterrupt at once (no kernel of ours runs in this process then)."""
+
+    def __enter__(self):
+        self._previous = None
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+        return self
+
+    def __exit__(self, *exc):
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+        return False
+
+
+def _run_on_dask(client, graph, arithmetic, boxes, ranges, chunk_params, base, consistency, hooks, board, deadline):
+    t_setup = time.perf_counter()
+    blob = pickle.dumps(graph)
+    problem = _Problem(graph=graph, arithmetic=arithmetic,
+                       token=hashlib.sha1(blob + arithmetic.encode()).hexdigest())
+    fut_problem = client.scatter(problem, broadcast=True, hash=False)
+    topic = f"mbs-verified-progress-{uuid.uuid4().hex}"
+    client.subscribe_topic(topic, lambda event: board.update(event[1]["i"], event[1]["t"]))
+    kw = dict(base)
+    kw["consistency"] = consistency
+    kw["hooks"] = hooks
+    sent = len(blob) * max(1, len(client.scheduler_info().get("workers", {})))
+    # every worker builds the tapes and runs its first step now (measured as warm_s)
+    a0, b0 = ranges[0]
+    p0 = chunk_params(a0, a0 + 1)
+    warm = [client.submit(_warm_problem, fut_problem, boxes.lo[a0:a0 + 1], boxes.hi[a0:a0 + 1], p0, kw,
+                          workers=[addr], allow_other_workers=True, pure=False)  # a dead worker cannot block
+            for addr in client.scheduler_info().get("workers", {})]
+    t_warm = time.perf_counter()
+    client.gather(warm)
+    warm_s = time.perf_counter() - t_warm
+    futures = []
+    for i, (a, b) in enumerate(ranges):
+        p = chunk_params(a, b)
+        args = (boxes.lo[a:b], boxes.hi[a:b], p)
+        sent += len(pickle.dumps(args)) + len(pickle.dumps(kw))
+        futures.append(client.submit(_run_chunk, fut_problem, i, boxes.lo[a:b], boxes.hi[a:b], p, kw, topic,
+                                     key=f"verified-chunk-{i}-{topic[-12:]}", pure=False))
+    setup_s = time.perf_counter() - t_setup
+    results = [None] * len(ranges)
+    interrupted = False
+    try:
+        with _SigintRaises():
+            while not all(f.done() for f in futures):
+                time.sleep(0.1)
+                board.emit()
+        for i, f in enumerate(futures):
+            results[i] = f.result()
+            if results[i] is not None:
+                board.update(i, results[i].t_reached)
+    except KeyboardInterrupt:
+        interrupted = True
+        for i, f in enumerate(futures):
+            if f.done() and f.status == "finished":
+                results[i] = f.result()
+        client.cancel(futures)
+    finally:
+        try:
+            client.unsubscribe_topic(topic)
+        except Exception:  # noqa: BLE001
+            pass
+    received = sum(len(pickle.dumps(r)) for r in results if r is not None)
+    return results, interrupted, {"sent_bytes": sent, "received_bytes": received, "setup_s": setup_s,
+                                  "warm_s": warm_s}
+
+
+# ----------------------------------------------------------------------------- merge
+def _chunk_tube_hulls(sol):
+    """(S, n) lo/hi arrays: the hull of each step's tube boxes of one chunk."""
+    if not len(sol.tube):
+        n = sol.hull.shape[-1]
+        return np.zeros((0, n)), np.zeros((0, n))
+    th = sol.tube_hull
+    return np.asarray(th.lo, float), np.asarray(th.hi, float)
+
+
+def merge_solutions(results, ranges, initial, outs, t0, state_names, interrupted=False):
+    """One :class:`~verified.solver.Solution` from the chunk Solutions (``None``: a
+    chunk that did not run). See the module docstring for what each field means."""
+    from .solver import Solution
+    n = initial.shape[-1]
+    # status, reason, t_reached: the worst status; the reason of the earliest chunk of that status
+    worst, t_reached, reason, reason_t = "completed", math.inf, "", math.inf
+    for i, (sol, (a, b)) in enumerate(zip(results, ranges)):
+        if sol is None:
+            st, tr, why = "interrupted", float(t0), "interrupted before this chunk finished"
+        else:
+            st, tr, why = sol.status, float(sol.t_reached), sol.reason
+        rank = _STATUS_RANK.get(st, 3)
+        if st != "completed" and (rank > _STATUS_RANK[worst] or (rank == _STATUS_RANK[worst] and tr < reason_t)):
+            worst, reason, reason_t = st, f"chunk {i} (boxes {a}..{b - 1}): {why}", tr
+        t_reached = min(t_reached, tr)
+    if interrupted and worst == "completed":
+        worst, reason = "interrupted", "interrupted (KeyboardInterrupt)"
+    done = [s for s in results if s is not None]
+    # outputs every chunk reached
+    k = min((len(s.t) for s in results), default=1) if all(s is not None for s in results) else 1
+    out_t = np.asarray(outs[:k], float) if k else np.zeros(0)
+    if k >= 1 and all(s is not None for s in results):
+        out_boxes = [concatenate([s.boxes[j] for s in results], axis=0) for j in range(k)]
+        out_t = np.asarray(results[0].t[:k], float)
+    else:
+        out_boxes = [initial]
+        out_t = np.asarray([t0], float)
+        k = 1
+    # tube on the common grid of step boundaries
+    if len(done) == len(results) and t_reached > t0:
+        grid = np.unique(np.concatenate([np.asarray(s.tube_t, float) for s in results]))
+        grid = grid[grid <= t_reached]
+    else:
+        grid = np.asarray([float(t0)])
+    steps = grid.size - 1
+    if steps > 0:
+        C = len(results)
+        lo = np.empty((steps, C, n))
+        hi = np.empty((steps, C, n))
+        mids = 0.5 * (grid[:-1] + grid[1:])
+        for c, s in enumerate(results):
+            tl, th = _chunk_tube_hulls(s)
+            j = np.searchsorted(np.asarray(s.tube_t, float), mids, side="right") - 1
+            lo[:, c, :], hi[:, c, :] = tl[j], th[j]
+        tube = [Interval._from_bounds(lo[j], hi[j]) for j in range(steps)]
+        tube_hull = Interval._from_bounds(lo.min(axis=1), hi.max(axis=1))
+    else:
+        tube = []
+        tube_hull = Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n)))
+    # statistics
+    stats = {}
+    for s in done:
+        for key, v in s.stats.items():
+            if key in ("order", "wall_s", "worker_pid", "chunk_task_s") or isinstance(v, bool):
+                continue
+            if isinstance(v, (int, float, np.integer, np.floating)):
+                stats[key] = stats.get(key, 0) + v
+    if done:
+        stats["order"] = done[0].stats.get("order")
+        stats["steps_max"] = max(s.stats.get("steps", 0) for s in done)
+    stats["boxes"] = int(initial.shape[0])
+    stats["chunk_wall_s"] = [None if s is None else s.stats.get("wall_s") for s in results]
+    stats["chunk_steps"] = [None if s is None else s.stats.get("steps") for s in results]
+    hull_k = stack([hull(b, axis=0) for b in out_boxes], axis=0)
+    sol = Solution(t=out_t, boxes=out_boxes, hull=hull_k, tube_t=grid, tube=tube, tube_hull=tube_hull,
+                   t_reached=float(grid[-1]), status=worst,
+                   reason="" if worst == "completed" else reason, stats=stats, state_names=state_names,
+                   consistency=_merge_records([s.consistency for s in done]))
+    sol.chunks = [dict(boxes=(a, b), status=None if s is None else s.status,
+                       t_reached=None if s is None else float(s.t_reached),
+                       reason=None if s is None else s.reason,
+                       steps=None if s is None else s.stats.get("steps"),
+                       wall_s=None if s is None else s.stats.get("wall_s"),
+                       worker_pid=None if s is None else s.stats.get("worker_pid"),
+                       tube_t=None if s is None else s.tube_t, tube=None if s is None else s.tube,
+                       consistency=None if s is None else s.consistency)
+                  for s, (a, b) in zip(results, ranges)]
+    return sol
+
+
+def _merge_records(records):
+    """The chunks' consistency records interleaved by time (None without a test)."""
+    records = [r for r in records if r is not None]
+    if not records:
+        return None
+    if len(records) == 1:
+        return records[0]
+    from .consistency import ConsistencyRecord
+    ra_t = np.concatenate([np.asarray(r.ra_t, float) for r in records])
+    order = np.argsort(ra_t, kind="stable")
+
+    def cat(name):
+        parts = [getattr(r, name) for r in records]
+        if any(p is None for p in parts):
+            return None
+        try:
+            return concatenate(parts, axis=0)[order]
+        except Exception:  # noqa: BLE001 - shapes that do not line up: leave it out
+            return None
+
+    tests = sorted((t for r in records for t in r.tests), key=lambda t: t.t)
+    ra = np.concatenate([np.asarray(r.ra, float) for r in records])[order]
+    h_h, h_v = cat("h_h"), cat("h_v")
+    rec = ConsistencyRecord(ra_t=ra_t[order], ra=ra, h_h=h_h if h_h is not None else records[0].h_h,
+                            h_v=h_v if h_v is not None else records[0].h_v, tests=tests,
+                            h_h_set=cat("h_h_set"), h_v_set=cat("h_v_set"))
+    return rec
