@@ -109,6 +109,25 @@ class LohnerStepper:
         mags = np.maximum(cX[:, self.order, :components].mag(), 1e-300)
         return float(0.9 * np.min((tol / mags) ** (1.0 / self.order)))
 
+    def set_jacobian(self, sets, X: Interval, h) -> Interval:
+        """Enclosure (B, n, n) of the Jacobian of the Taylor polynomial map on every
+        segment from the centre ``c`` to a point of the set (what the mean value form
+        needs): over the set's own affine forms (``sets.affine_forms``) when the
+        variational evaluator takes them, else over the hull ``X`` joined with ``c``
+        (c lies in X whenever r0 and r contain 0, the hull makes it unconditional)."""
+        K, n, nb = self.order, self.n, sets.n_sets
+        if self.jacobian_over_set:
+            # affine forms over the set's own parameters: the set (a parallelepiped
+            # plus an error box, often flat in the state space) instead of its hull
+            forms = sets.affine_forms(extra=n * n)
+            forms[n:, :, 0] = np.eye(n).reshape(-1)[:, None]
+            vc = self.variational.series(forms, K - 1, self._params(nb))
+        else:
+            Xc = X.hull(point(sets.c))
+            v0 = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
+            vc = self.variational.coefficients(concatenate([Xc, v0], axis=1), K - 1, self._params(nb))
+        return horner(vc[:, :, n:].reshape((nb, K, n, n)), h)
+
     def step(self, sets: DoubletonSets, h, X: Interval, E: Interval, cE: Interval) -> StepResult:
         """Advance all sets by ``h`` (float, or an Interval enclosing the exact step; s)
         given the hull ``X`` (B, N) of the sets, its a-priori enclosure ``E`` (B, N) over
@@ -122,21 +141,8 @@ class LohnerStepper:
         # 3. centre polynomial plus remainder
         cP = self.coefficients(point(sets.c))
         y = horner(cP[:, :K], h) + cE[:, K] * (Interval(h) ** K)
-        # 4. Jacobian of the Taylor map over X. The mean value form needs it on every
-        # segment from c to a point of the set; c lies in X whenever r0 and r contain
-        # 0 (they do by construction), and the hull below makes that unconditional.
-        if self.jacobian_over_set:
-            # affine forms over the set's own parameters: the set (a parallelepiped
-            # plus an error box, often flat in the state space) instead of its hull
-            forms = sets.affine_forms(extra=n * n)
-            forms[n:, :, 0] = np.eye(n).reshape(-1)[:, None]
-            vc = self.variational.series(forms, K - 1, self._params(nb))
-        else:
-            Xc = X.hull(point(sets.c))
-            v0 = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
-            vc = self.variational.coefficients(concatenate([Xc, v0], axis=1), K - 1, self._params(nb))
-        V = vc[:, :, n:].reshape((nb, K, n, n))
-        J = horner(V, h)
+        # 4. Jacobian of the Taylor map over the set
+        J = self.set_jacobian(sets, X, h)
         # 5. doubleton update
         c_new = y.mid()
         s = y - c_new

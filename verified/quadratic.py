@@ -259,15 +259,7 @@ class QuadraticStepper(LohnerStepper):
         else:
             _, HU = self._derivatives(X.hull(V + sets.c), h)  # X holds the set, V + c every [c, c + v]
         # Jacobian over the set for the error part (mean value in w = Q r)
-        if self.jacobian_over_set:
-            forms = sets.affine_forms(extra=n * n)  # (QuadraticSets: m + n symbols)
-            forms[n:, :, 0] = np.eye(n).reshape(-1)[:, None]
-            vc = self.variational.series(forms, K - 1, self._params(nb))
-        else:
-            Xc = X.hull(point(sets.c))
-            v0 = point(np.broadcast_to(np.eye(n).reshape(-1), (nb, n * n)))
-            vc = self.variational.coefficients(concatenate([Xc, v0], axis=1), K - 1, self._params(nb))
-        J = horner(vc[:, :, n:].reshape((nb, K, n, n)), h)
+        J = self.set_jacobian(sets, X.hull(V + sets.c), h)
         # ... and in second-order mean value form, J(x) = DP(c) + H(xi)[x - c]: its spread
         # is |H| |x - c| where the first-order enclosure's compounds through the graph
         # (3-link arm: the error part grew 2.6x per step with the first alone)
