@@ -119,12 +119,13 @@ def check_samples(sol, samples, slack=1e-9):
 
 
 def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, samples=None,
-              figures=True, log=None, progress=True, max_wall=None) -> dict:
+              figures=True, log=None, progress=True, max_wall=None, workers=None, client=None) -> dict:
     """Simulate ``scene`` and write ``out``/result.json (+ figures). Returns a report
     dict: solution, paths, sample check (``escaped``: sampled states outside).
 
     ``samples``: exactly this many sampled trajectories (default 64; 0: none).
     ``max_wall``: stop the integration after this many seconds (status "stopped").
+    ``workers``, ``client``: chunked execution (:func:`parallel_kwargs`, verified/parallel.py).
     Ctrl-C during the integration ends it with status "interrupted"; during the
     sampling it skips the rest of the sampling and the figures. Either way
     result.json is written with everything verified so far."""
@@ -179,7 +180,8 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     bar = Progress(t_end, f"mode {mode}", enabled=None if progress else False)
     try:
         x_sim = x0 if x_user is not None else x0[:len(names)]
-        sol = simulate(model, x_sim, t_end, output_dt=dt, progress=bar, max_wall=max_wall, **kw)
+        sol = simulate(model, x_sim, t_end, output_dt=dt, progress=bar, max_wall=max_wall, **kw,
+                       **parallel_kwargs(workers, client))
     except (ValueError, TypeError, ModelError) as e:  # settings the solver refuses
         raise SceneError(f"{scene.source}: cannot simulate: {e}") from None
     finally:
@@ -277,3 +279,152 @@ def _frame_samples(sol, frame, traj, names):
     q = traj[..., :n].reshape(-1, n)
     pos = np.array([np.asarray(num.frame_placement(frame, qi)[1], float) for qi in q])
     return pos.reshape(traj.shape[:-1] + (3,))
+
+
+# ---------------------------------------------------------------------- scale-out (issue 16)
+def parallel_kwargs(workers=None, client=None) -> dict:
+    """Keyword arguments of simulate for chunked execution: {} for one in-process batch
+    (``workers`` None or 1 and no client), else ``workers``/``client`` (see
+    :mod:`verified.parallel`; ``workers="auto"``: every core when worthwhile)."""
+    if client is not None:
+        return {"client": client}
+    if workers is None or workers == 1:
+        return {}
+    return {"workers": workers}
+
+
+def scheduler_client(address):
+    """A ``distributed.Client`` for ``--scheduler ADDR``; a SceneError (one line, naming
+    the address) when it cannot be reached within verified.parallel.CONNECT_TIMEOUT s."""
+    from verified.parallel import SchedulerError, connect
+    try:
+        return connect(address)
+    except (SchedulerError, ValueError) as e:
+        raise SceneError(f"--scheduler: {e}") from None
+
+
+def scenario_batch(path):
+    """The scenes of a scene file's ``[[scenarios]]`` list, or None when it has none.
+
+    Each ``[[scenarios]]`` entry has a ``name`` and tables that override the base
+    scene's tables entry by entry (``[scenarios.parameters]``, ``[scenarios.initial]``,
+    ``[scenarios.solver]``, ``[scenarios.simulation]``, ``[scenarios.consistency]``,
+    ``[scenarios.control]``)::
+
+        [[scenarios]]
+        name = "payload 0-0.5 kg"
+        parameters.payload = { link = "link2", mass = [0.0, 0.5] }
+        [[scenarios]]
+        name = "payload 0.5-1 kg"
+        parameters.payload = { link = "link2", mass = [0.5, 1.0] }
+    """
+    from .scene import load_scene, parse_scene, scene_dir
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+        import tomli as tomllib
+    p = Path(path)
+    if not p.exists() and not p.suffix and (scene_dir() / f"{p.name}.toml").is_file():
+        p = scene_dir() / f"{p.name}.toml"
+    if not p.is_file():
+        return None
+    try:
+        data = tomllib.loads(p.read_text())
+    except (tomllib.TOMLDecodeError, OSError, UnicodeDecodeError):
+        return None  # load_scene reports it
+    if "scenarios" not in data:
+        return None
+    items = data.pop("scenarios")
+    src = str(path)
+    if not isinstance(items, list) or not items or not all(isinstance(x, dict) for x in items):
+        raise SceneError(f"{src}: [[scenarios]] must be a non-empty list of tables")
+    parse_scene(dict(data), src, p.parent)  # the base scene must be valid by itself
+    scenes, seen = [], set()
+    for i, item in enumerate(items):
+        name = item.get("name", f"scenario{i + 1}")
+        if not isinstance(name, str) or not name or name in seen:
+            raise SceneError(f"{src}: [[scenarios]] {i + 1}: name must be a unique non-empty string, got {name!r}")
+        seen.add(name)
+        merged = {k: (dict(v) if isinstance(v, dict) else v) for k, v in data.items()}
+        for k, v in item.items():
+            if k == "name":
+                continue
+            if k not in merged or not isinstance(v, dict) or not isinstance(merged.get(k), dict):
+                merged[k] = v
+            else:
+                merged[k].update(v)
+        merged["name"] = f"{data.get('name', p.stem)} [{name}]"
+        scenes.append((name, parse_scene(merged, f"{src} [scenario {name!r}]", p.parent)))
+    return scenes
+
+
+def run_scenarios(scenes, out, *, log=None, workers=None, client=None, **run_kw) -> dict:
+    """Run a scenario batch (:func:`scenario_batch`) as one job: with a Dask client (or
+    ``workers`` > 1) every scenario's chunks go to the same cluster at once (one thread
+    per scenario here waits for them), else one scenario after the other. Writes
+    ``out/NAME/result.json`` per scenario (no figures: matplotlib is not thread-safe;
+    run a scenario alone for them) and ``out/scenarios.json`` (the combined result:
+    status = the worst, t_reached = the smallest, and per scenario its status,
+    t_reached, final widths, parameters, samples). Returns ``{"scenarios": [...],
+    "status": ..., "solution": None, ...}``."""
+    import json
+    from concurrent.futures import ThreadPoolExecutor
+    log = log or (lambda *a, **k: None)
+    out = Path(out)
+    t0 = time.perf_counter()
+    own = None
+    if client is None and workers not in (None, 1):
+        from verified.parallel import dask_available, default_workers, local_client
+        n = default_workers() if workers == "auto" else int(workers)
+        if dask_available() and n > 1:
+            client = own = local_client(n)
+    lines = {}
+
+    def one(item):
+        name, scene = item
+        def say(*a, **k):
+            lines.setdefault(name, []).append(" ".join(str(x) for x in a))
+        rep = run_scene(scene, out / _safe_name(name), log=say, progress=False, figures=False,
+                        client=client, workers=None if client is not None else workers, **run_kw)
+        return name, scene, rep
+
+    if client is not None:
+        with ThreadPoolExecutor(max_workers=len(scenes)) as ex:
+            reports = list(ex.map(one, scenes))
+    else:
+        reports = [one(x) for x in scenes]
+    rank = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
+    rows, worst, t_min = [], "completed", float("inf")
+    for name, scene, rep in reports:
+        sol = rep["solution"]
+        t_w, w = final_widths(sol)
+        rows.append({"name": name, "status": sol.status, "t_reached": float(sol.t_reached), "reason": sol.reason,
+                     "widths_at": t_w, "final_widths": None if w is None else [float(v) for v in w],
+                     "parameters": {k: [float(a), float(b)] for k, (a, b) in (getattr(sol, "params", {}) or {}).items()},
+                     "samples_checked": rep["checked"], "samples_escaped": rep["escaped"],
+                     "wall_s": float(sol.stats.get("wall_s", 0.0)), "chunks": sol.stats.get("chunks", 1),
+                     "result": str(Path(_safe_name(name)) / "result.json")})
+        if rank.get(sol.status, 3) > rank[worst]:
+            worst = sol.status
+        t_min = min(t_min, float(sol.t_reached))
+        for line in lines.get(name, []):
+            log(f"[{name}] {line}")
+    combined = {"scene": str(scenes[0][1].source).split(" [scenario")[0], "status": worst, "t_reached": t_min,
+                "wall_s": time.perf_counter() - t0, "scenarios": rows}
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "scenarios.json"
+    path.write_text(json.dumps(combined, indent=1))
+    log(f"{'scenario':<24} {'status':<11} {'t_reached':>9} {'wall s':>7}  final widths")
+    for r in rows:
+        ws = ", ".join(_fmt_width(v) for v in (r["final_widths"] or []))
+        log(f"{r['name']:<24} {r['status']:<11} {r['t_reached']:>9.4g} {r['wall_s']:>7.2f}  {ws}"
+            + (f"  ({r['samples_escaped']} sampled states OUTSIDE)" if r["samples_escaped"] else ""))
+    log(f"wrote {path}")
+    return {"scenarios": rows, "status": worst, "t_reached": t_min, "escaped": sum(r["samples_escaped"] for r in rows),
+            "interrupted": any(r["status"] == "interrupted" for r in rows), "paths": {"scenarios": path},
+            "solution": None}
+
+
+def _safe_name(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+

@@ -201,3 +201,55 @@ def test_ctrl_c_stops_cleanly_and_writes_result(tmp_path, monkeypatch, capsys):
     assert data["status"] == "interrupted" and 0.15 <= data["t_reached"] < 0.3
     assert [o["t"] for o in data["outputs"]][:2] == [0.0, 0.1]
     assert np.isfinite(result_boxes(data, 1).lo).all()
+
+
+# --------------------------------------------------------------------------- [control] (issue 14)
+CONTROL = """
+[model]
+name = "planar2"
+[initial]
+q1 = [0.499, 0.501]
+q2 = [-0.301, -0.299]
+qd1 = [-0.001, 0.001]
+qd2 = [-0.001, 0.001]
+[control]
+{control}
+[simulation]
+t_end = 0.3
+output_dt = 0.1
+mode = "ii"
+[solver]
+order = 10
+"""
+
+
+def test_controlled_scene_runs_with_frames_and_time_state(tmp_path, capsys):
+    scene = tmp_path / "c.toml"
+    scene.write_text(CONTROL.format(control='type = "pd"\nkp = [40, 15]\nkd = [12, 4]\ngravity_compensation = true\n'
+                                            '[control.trajectory]\nq_end = [0.9, 0.1]\nduration = 1.0\n'
+                                            '[control.disturbance]\njoint1 = [-0.1, 0.1]'))
+    out = tmp_path / "o"
+    assert main(["simulate", str(scene), "--out", str(out), "--samples", "6"]) == 0
+    d = read_result(out / "result.json")
+    assert d["state_names"] == ["q1", "q2", "qd1", "qd2", "t"]
+    assert d["parameters"] == {"disturbance.joint1": [-0.1, 0.1]}
+    assert d["control"] == ["pd", "disturbance"]
+    assert len(d["frames"]["link2"]["position"]) == len(d["outputs"])
+    assert (out / "frame_region.png").exists()
+    assert "frame 'link2'" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("control, words", [
+    ('type = "pd"\nkp = {nope = 1}\nkd = 1', "[control] pd kp: unknown joint 'nope'"),
+    ('type = "pd"\nkp = [1, 2, 3]\nkd = 1', "wrong shape (3,)"),
+    ('type = "pd"\nkp = [1, nan]\nkd = 1', "NaN"),
+    ('type = "lqr"', "unknown controller 'lqr'"),
+    ('type = "pd"\nkp = 1\nkd = 1\ngain = 2', "unknown key(s) gain"),
+    ('[control.disturbance]\nnope = [0, 1]', "unknown joint 'nope'"),
+])
+def test_bad_control_is_one_line_exit_2(tmp_path, control, words, capsys):
+    scene = tmp_path / "c.toml"
+    scene.write_text(CONTROL.format(control=control))
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--no-figures"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and len(err.splitlines()) == 1, err

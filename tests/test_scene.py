@@ -188,3 +188,19 @@ def test_solver_set_order_and_merge_slack():
     kw = loads_scene(text).simulate_kwargs(NAMES)
     assert kw["set_order"] == 2 and kw["merge_slack"] == 0.1
     _err(GOOD.replace("order = 12\n", "order = 12\nset_order = 3\n"), "set_order", "not 1 or 2")
+
+
+def test_control_scenes_parse():
+    """[control] tables are kept for simulate; structure errors name the file and key."""
+    from mbs.control import parse_control
+    for name in ("arm2_computed_torque", "ur5_pd_payload", "ur5_quintic"):
+        s = load_scene(name)
+        assert s.control is not None and parse_control(s.control)
+        assert s.simulate_kwargs()["control"] == s.control
+    base = "[model]\nname = 'planar2'\n[initial]\nbox = [0, 0, 0, 0]\n[simulation]\nt_end = 1\n"
+    with pytest.raises(SceneError, match="control.*unknown controller"):
+        loads_scene(base + "[control]\ntype = 'x'\n")
+    with pytest.raises(SceneError, match="mode i or ii"):
+        loads_scene(base.replace("t_end = 1", "t_end = 1\nmode = 'iii'") + "[control]\ntype = 'pd'\nkp = 1\nkd = 1\n")
+    with pytest.raises(SceneError, match="frames"):
+        loads_scene(base.replace("t_end = 1", "t_end = 1\nframes = 3"))
