@@ -318,7 +318,7 @@ def scenario_batch(path):
         name = "payload 0.5-1 kg"
         parameters.payload = { link = "link2", mass = [0.5, 1.0] }
     """
-    from .scene import load_scene, parse_scene, scene_dir
+    from .scene import parse_scene, scene_dir
     try:
         import tomllib
     except ModuleNotFoundError:  # pragma: no cover - Python 3.10
@@ -372,12 +372,11 @@ def run_scenarios(scenes, out, *, log=None, workers=None, client=None, **run_kw)
     log = log or (lambda *a, **k: None)
     out = Path(out)
     t0 = time.perf_counter()
-    own = None
     if client is None and workers not in (None, 1):
         from verified.parallel import dask_available, default_workers, local_client
         n = default_workers() if workers == "auto" else int(workers)
         if dask_available() and n > 1:
-            client = own = local_client(n)
+            client = local_client(n)  # one cluster for every scenario's chunks
     lines = {}
 
     def one(item):

@@ -49,7 +49,7 @@ def client():
     # the workers import this module (the slow hook below): put tests/ on their path
     here = os.path.dirname(__file__)
     os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH")) if p)
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=50)
     c = Client(cluster, set_as_default=False)
     yield c
@@ -214,3 +214,76 @@ def test_simulate_forwards_workers(client):
     assert a.status == b.status == "completed" and b.stats["chunks"] == 2
     assert b.consistency is not None and b.stats["tests"] >= a.stats["tests"]
     assert np.all(b.hull[-1].width() < 1.1 * a.hull[-1].width() + 1e-12)
+
+
+SWEEP = """
+name = "pendulum g sweep"
+[model]
+name = "pendulum_paper"
+[parameters]
+g = [9.80, 9.81]
+[initial]
+x1 = ["2.1", "2.15"]
+x2 = ["3.1", "3.15"]
+[simulation]
+t_end = 0.2
+output_dt = 0.1
+mode = "i"
+[solver]
+subdivision = [2, 2]
+
+[[scenarios]]
+name = "g low"
+
+[[scenarios]]
+name = "g high"
+parameters = { g = [9.81, 9.82] }
+"""
+
+
+def test_cli_scenarios_one_combined_result(tmp_path, capsys):
+    """[[scenarios]]: one run per scenario (here in-process, --workers 1), a combined
+    scenarios.json and a per-scenario summary; every sampled trajectory inside."""
+    import json
+    from mbs.__main__ import main
+    scene = tmp_path / "sweep.toml"
+    scene.write_text(SWEEP)
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--samples", "4", "--workers", "1"]) == 0
+    data = json.loads((tmp_path / "o" / "scenarios.json").read_text())
+    assert data["status"] == "completed" and data["t_reached"] == 0.2
+    rows = {r["name"]: r for r in data["scenarios"]}
+    assert set(rows) == {"g low", "g high"}
+    assert rows["g high"]["parameters"]["g"][0] >= 9.81 - 1e-12 and rows["g low"]["parameters"]["g"][1] <= 9.81
+    assert all(r["samples_checked"] == 4 and r["samples_escaped"] == 0 for r in rows.values())
+    assert (tmp_path / "o" / "g_low" / "result.json").is_file()
+    out = capsys.readouterr().out
+    assert "g high" in out and "scenarios.json" in out
+
+
+def test_cli_scenarios_on_a_cluster(tmp_path, client, monkeypatch, capsys):
+    import json
+    from mbs import runner
+    from mbs.__main__ import main
+    monkeypatch.setattr(runner, "scheduler_client", lambda address: client)
+    scene = tmp_path / "sweep.toml"
+    scene.write_text(SWEEP)
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--samples", "4",
+                 "--scheduler", "tcp://given"]) == 0
+    data = json.loads((tmp_path / "o" / "scenarios.json").read_text())
+    assert data["status"] == "completed" and all(r["chunks"] == 2 for r in data["scenarios"])
+
+
+def test_cli_bad_parallel_flags(tmp_path, monkeypatch, capsys):
+    from mbs.__main__ import main
+    scene = tmp_path / "s.toml"
+    scene.write_text(SWEEP.split("[[scenarios]]")[0])
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--workers", "0"]) == 2
+    assert "--workers" in capsys.readouterr().err
+    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT", 1.0)
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err
+    assert "tcp://127.0.0.1:9" in err and err.count("\n") == 1
+    bad = tmp_path / "b.toml"
+    bad.write_text(SWEEP + '\n[[scenarios]]\nname = "g low"\n')
+    assert main(["simulate", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "unique" in capsys.readouterr().err

@@ -95,6 +95,9 @@ CONNECT_TIMEOUT = 10.0
 #: step (~2-4 ms of Python per step and chunk) shows; measured on the double pendulum,
 #: T = 1, 256 boxes in 1/2/4/8/16 chunks on one core: 5.7/4.9/5.5/7.0/9.0 s
 CHUNK_TARGET = 512
+#: ``workers="auto"`` uses a cluster only from this many boxes on (and >= 2 per worker):
+#: below, starting the cluster (~2-3 s, once per process) outweighs the work
+AUTO_MIN_PIECES = 32
 #: at most this many chunks per worker by default (load balance against fixed costs)
 MAX_CHUNKS_PER_WORKER = 4
 _STATUS_RANK = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
@@ -259,7 +262,8 @@ def local_client(workers: int):
     if got is not None and got[1].status == "running":
         return got[1]
     from distributed import Client, LocalCluster
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+    # the scheduler's HTTP server on a free port (":8787" warns when another cluster runs)
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR)
     client = Client(cluster, set_as_default=False)
     client.run(_warm_kernels)
@@ -343,7 +347,6 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     client : None, a ``distributed.Client`` or a scheduler address (str)
     chunks : None (default plan, :func:`plan_chunks`) or the number of chunks
     """
-    from .graph import Graph
     from .solver import VerifiedODE, solve
     from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 
@@ -371,7 +374,8 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     params = check_params(kwargs.pop("params", None), graph, nb, None)
     progress = kwargs.pop("progress", None)
     consistency = kwargs.pop("consistency", None)
-    hooks, deadline = _split_hooks(kwargs.pop("hooks", ()), t_wall0)
+    hooks_in = kwargs.pop("hooks", ()) or ()
+    hooks, deadline = _split_hooks(hooks_in, t_wall0)
 
     # where to run
     backend, own_client = "inprocess", None
@@ -383,6 +387,8 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
     else:
         n_workers = default_workers() if workers in (None, "auto") else int(workers)
+        if workers == "auto" and nb < max(AUTO_MIN_PIECES, 2 * n_workers):
+            n_workers = 1  # not worth a cluster
         if n_workers > 1 and nb >= 2:
             if dask_available():
                 backend = "dask-local"
@@ -395,6 +401,11 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     if deadline is not None and chunks is None:
         chunks = n_workers  # with a wall-clock cap every chunk should be running when it strikes
     ranges = plan_chunks(nb, n_workers, chunks)
+    if backend == "inprocess" and len(ranges) == 1:  # one batch: exactly solve's own result
+        sol = solve(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
+                    hooks=list(hooks_in), **kwargs)
+        sol.stats.update(chunks=1, workers=1, backend="inprocess")
+        return sol
     base = dict(kwargs, t_span=(t0, t1))
     board = _Board(progress, t0, t1, [b - a for a, b in ranges])
     results: list = [None] * len(ranges)
@@ -477,27 +488,38 @@ class _SigintRaises:
         return False
 
 
+_SHIPPED: dict = {}  # (client id, token) -> (future of the scattered problem, workers warmed)
+
+
 def _run_on_dask(client, graph, arithmetic, boxes, ranges, chunk_params, base, consistency, hooks, board, deadline):
     t_setup = time.perf_counter()
     blob = pickle.dumps(graph)
     problem = _Problem(graph=graph, arithmetic=arithmetic,
                        token=hashlib.sha1(blob + arithmetic.encode()).hexdigest())
-    fut_problem = client.scatter(problem, broadcast=True, hash=False)
+    workers = set(client.scheduler_info().get("workers", {}))
+    # the graph goes to every worker once per client (a worker started later, e.g. after
+    # one was killed, fetches it from a peer); later runs reuse the scattered copy
+    got = _SHIPPED.get((id(client), problem.token))
+    sent = 0
+    if got is None or got[0].status != "finished":
+        fut_problem = client.scatter(problem, broadcast=True, hash=False)
+        got = _SHIPPED[(id(client), problem.token)] = (fut_problem, set())
+        sent += len(blob) * max(1, len(workers))
+    fut_problem, warmed = got
     topic = f"mbs-verified-progress-{uuid.uuid4().hex}"
-    client.subscribe_topic(topic, lambda event: board.update(event[1]["i"], event[1]["t"]))
+    if board.progress is not None:
+        client.subscribe_topic(topic, lambda event: board.update(event[1]["i"], event[1]["t"]))
     kw = dict(base)
     kw["consistency"] = consistency
     kw["hooks"] = hooks
-    sent = len(blob) * max(1, len(client.scheduler_info().get("workers", {})))
-    # every worker builds the tapes and runs its first step now (measured as warm_s)
+    # workers new to this problem build its tapes and take a first step before the
+    # chunks (queued first on each; their seconds come back as warm_s)
     a0, b0 = ranges[0]
     p0 = chunk_params(a0, a0 + 1)
     warm = [client.submit(_warm_problem, fut_problem, boxes.lo[a0:a0 + 1], boxes.hi[a0:a0 + 1], p0, kw,
                           workers=[addr], allow_other_workers=True, pure=False)  # a dead worker cannot block
-            for addr in client.scheduler_info().get("workers", {})]
-    t_warm = time.perf_counter()
-    client.gather(warm)
-    warm_s = time.perf_counter() - t_warm
+            for addr in sorted(workers - warmed)]
+    warmed |= workers
     futures = []
     for i, (a, b) in enumerate(ranges):
         p = chunk_params(a, b)
@@ -509,9 +531,17 @@ def _run_on_dask(client, graph, arithmetic, boxes, ranges, chunk_params, base, c
     results = [None] * len(ranges)
     interrupted = False
     try:
+        all_done, left, lock = threading.Event(), [len(futures)], threading.Lock()
+
+        def one_done(_):
+            with lock:
+                left[0] -= 1
+                if left[0] == 0:
+                    all_done.set()
+        for f in futures:
+            f.add_done_callback(one_done)
         with _SigintRaises():
-            while not all(f.done() for f in futures):
-                time.sleep(0.1)
+            while not all_done.wait(0.25):
                 board.emit()
         for i, f in enumerate(futures):
             results[i] = f.result()
@@ -524,10 +554,12 @@ def _run_on_dask(client, graph, arithmetic, boxes, ranges, chunk_params, base, c
                 results[i] = f.result()
         client.cancel(futures)
     finally:
-        try:
-            client.unsubscribe_topic(topic)
-        except Exception:  # noqa: BLE001
-            pass
+        if board.progress is not None:
+            try:
+                client.unsubscribe_topic(topic)
+            except Exception:  # noqa: BLE001
+                pass
+    warm_s = [f.result() if f.status == "finished" else None for f in warm]
     received = sum(len(pickle.dumps(r)) for r in results if r is not None)
     return results, interrupted, {"sent_bytes": sent, "received_bytes": received, "setup_s": setup_s,
                                   "warm_s": warm_s}

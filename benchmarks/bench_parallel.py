@@ -1,0 +1,236 @@
+"""Chunked execution (verified/parallel.py, issue 16): speed-up, per-chunk step sizes,
+overhead, scaling, and a paper estimate for a 64-worker cluster.
+
+    python benchmarks/bench_parallel.py                 # everything (~6 min on 2 cores)
+    python benchmarks/bench_parallel.py --only speedup --repeat 2
+    python benchmarks/bench_parallel.py --quick         # small sizes (smoke test)
+
+Every timing is printed with the load averages of /proc/loadavg at that moment (other
+jobs on the machine distort the ratios: read them next to the load). Sections:
+
+speedup   double pendulum (trace(dp.rhs, 4), box dp.initial_box()), x1(0) in N pieces,
+          T = 2: one in-process batch against a local Dask cluster of 2 workers (1 thread
+          each), interleaved, each pair --repeat times; worst ratio = max over states of
+          width(x(T)) / width of the true hull (DESIGN.md: 0.14254, 0.04562, 0.36946, 0.18162)
+mixed     per-chunk step sizes, one core: pieces of the paper's box together with pieces
+          10x wider, T = 0.5: one batch (one step size for all) against the same boxes in
+          two in-process chunks (narrow, wide)
+overhead  16 pieces, T = 0.5: in-process against the parallel path with a warm local
+          cluster of 1 and of 2 workers
+scaling   local clusters of 1, 2, 4 workers (processes, 1 thread each) on the speedup run,
+          and from the measured per-chunk costs and message sizes an estimate for 64
+          workers and 65,536 pieces
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+TRUE_T2 = np.array([0.14254, 0.04562, 0.36946, 0.18162])  # true hull widths at T = 2 (DESIGN.md)
+
+
+def load() -> str:
+    with open("/proc/loadavg") as f:
+        return "load " + " ".join(f.read().split()[:3])
+
+
+def worst_ratio(sol, true=TRUE_T2):
+    return float(np.max(np.asarray(sol.hull[-1].width(), float) / true))
+
+
+def setup():
+    from models import double_pendulum as dp
+    from verified.graph import trace
+    from verified.interval import Interval
+    from verified.solver import VerifiedODE
+    lo, hi = dp.initial_box()
+    return VerifiedODE(trace(dp.rhs, 4)), Interval(lo, hi)
+
+
+def timed(fn):
+    t = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t, out
+
+
+def section_speedup(ode, box, pieces, T, repeat, log):
+    from verified.parallel import local_client
+    from verified.solver import solve
+    log(f"\n## speedup: double pendulum, {pieces} pieces, T = {T}")
+    t, _ = timed(lambda: local_client(2))
+    log(f"local cluster of 2 workers started in {t:.1f} s (once per process; {load()})")
+    solve(ode, box, (0, 0.05), subdivision=[pieces, 1, 1, 1], workers=2)  # ship the graph, first steps
+    rows = []
+    for r in range(repeat):
+        l1 = load()
+        w1, s1 = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1]))
+        l2 = load()
+        w2, s2 = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], workers=2))
+        q1, q2 = (worst_ratio(s1), worst_ratio(s2)) if T == 2 else (np.nan, np.nan)
+        rows.append(dict(run=r + 1, one_batch_s=w1, two_workers_s=w2, speedup=w1 / w2, ratio_1=q1, ratio_2=q2,
+                         ratio_diff=abs(q2 / q1 - 1), status=(s1.status, s2.status), steps=(s1.stats["steps"],
+                         s2.stats["chunk_steps"]), load_1=l1, load_2=l2, chunk_wall_s=s2.stats["chunk_wall_s"],
+                         received_bytes=s2.stats["received_bytes"], sent_bytes=s2.stats["sent_bytes"]))
+        log(f"run {r + 1}: one batch {w1:6.2f} s ({l1}) | 2 workers {w2:6.2f} s ({l2}) | speed-up {w1 / w2:.2f}x | "
+            f"worst ratio {q1:.5f} / {q2:.5f} (diff {100 * abs(q2 / q1 - 1):.3f}%) | {s1.status}/{s2.status}, "
+            f"steps {s1.stats['steps']} / chunks {s2.stats['chunk_steps']}, chunk walls "
+            f"{', '.join(f'{x:.2f}' for x in s2.stats['chunk_wall_s'])} s")
+    return rows
+
+
+def mixed_boxes(box, n_each):
+    from verified.interval import Interval, concatenate
+    lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
+    narrow = box.subdivide([n_each, 1, 1, 1]).reshape(-1, 4)
+    c, r = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    wlo, whi = lo.copy(), hi.copy()
+    wlo[0], whi[0] = c[0] - 10 * r[0], c[0] + 10 * r[0]
+    wide = Interval(wlo, whi).subdivide([n_each, 1, 1, 1]).reshape(-1, 4)  # each piece 10x wider
+    return concatenate([narrow, wide], axis=0)
+
+
+def section_mixed(ode, box, n_each, T, repeat, log):
+    from verified.solver import solve
+    boxes = mixed_boxes(box, n_each)
+    log(f"\n## per-chunk step sizes: {n_each} pieces of the paper's box + {n_each} pieces 10x wider, T = {T}, "
+        "one core")
+    rows = []
+    for r in range(repeat):
+        l1 = load()
+        w1, s1 = timed(lambda: solve(ode, boxes, (0, T)))
+        l2 = load()
+        w2, s2 = timed(lambda: solve(ode, boxes, (0, T), workers=1, chunks=2))
+        wn = [np.asarray(s.hull[-1].width(), float) for s in (s1, s2)]
+        rows.append(dict(run=r + 1, one_batch_s=w1, chunked_s=w2, drop=1 - w2 / w1, steps_batch=s1.stats["steps"],
+                         chunk_steps=s2.stats["chunk_steps"], status=(s1.status, s2.status),
+                         width_ratio=float(np.max(wn[1] / wn[0])), load_1=l1, load_2=l2))
+        log(f"run {r + 1}: one batch {w1:6.2f} s, {s1.stats['steps']} steps ({l1}) | 2 chunks {w2:6.2f} s, steps "
+            f"{s2.stats['chunk_steps']} ({l2}) | wall -{100 * (1 - w2 / w1):.0f}% | widths chunked/batch max "
+            f"{np.max(wn[1] / wn[0]):.4f} | {s1.status}/{s2.status}")
+    return rows
+
+
+def section_overhead(ode, box, T, repeat, log):
+    from verified.parallel import local_client
+    from verified.solver import solve
+    log(f"\n## overhead: 16 pieces, T = {T}, warm clusters")
+    clients = {w: local_client(w) for w in (1, 2)}
+    for w in (1, 2):
+        solve(ode, box, (0, 0.05), subdivision=[16, 1, 1, 1], client=clients[w], chunks=w)
+    solve(ode, box, (0, 0.05), subdivision=[16, 1, 1, 1])
+    rows = []
+    for r in range(repeat):
+        l0 = load()
+        w0, s0 = timed(lambda: solve(ode, box, (0, T), subdivision=[16, 1, 1, 1]))
+        out = dict(run=r + 1, inprocess_s=w0, load=l0, status=s0.status)
+        msg = f"run {r + 1}: in-process {w0:.3f} s ({l0})"
+        for w in (1, 2):
+            lw = load()
+            ww, sw = timed(lambda: solve(ode, box, (0, T), subdivision=[16, 1, 1, 1], client=clients[w], chunks=w))
+            out[f"workers{w}_s"] = ww
+            out[f"workers{w}_ratio"] = ww / w0
+            out[f"workers{w}_setup_s"] = sw.stats.get("setup_s")
+            msg += f" | {w} worker{'s' if w > 1 else ''} {ww:.3f} s = {ww / w0:.2f}x ({lw}; setup " \
+                   f"{sw.stats.get('setup_s', 0):.3f} s)"
+        rows.append(out)
+        log(msg)
+    return rows
+
+
+def section_scaling(ode, box, pieces, T, log, workers=(1, 2, 4)):
+    from verified.parallel import close_local_clients, local_client
+    from verified.solver import solve
+    log(f"\n## scaling: {pieces} pieces, T = {T}, local clusters of 1-thread processes")
+    rows = []
+    for w in workers:
+        close_local_clients()
+        tc, client = timed(lambda: local_client(w))
+        solve(ode, box, (0, 0.05), subdivision=[pieces, 1, 1, 1], client=client)  # graph shipped, first steps
+        lw = load()
+        ww, sw = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], client=client))
+        rows.append(dict(workers=w, wall_s=ww, cluster_start_s=tc, chunks=sw.stats["chunks"],
+                         chunk_wall_s=sw.stats["chunk_wall_s"], chunk_steps=sw.stats["chunk_steps"],
+                         received_bytes=sw.stats["received_bytes"], sent_bytes=sw.stats["sent_bytes"],
+                         setup_s=sw.stats.get("setup_s"), load=lw, status=sw.status,
+                         ratio=worst_ratio(sw) if T == 2 else None))
+        log(f"{w} worker(s): {ww:6.2f} s ({lw}), {sw.stats['chunks']} chunks, chunk walls "
+            f"{', '.join(f'{x:.2f}' for x in sw.stats['chunk_wall_s'])} s, cluster start {tc:.1f} s, "
+            f"sent {sw.stats['sent_bytes'] / 1e3:.0f} kB, received {sw.stats['received_bytes'] / 1e6:.1f} MB, "
+            f"{sw.status}")
+    close_local_clients()
+    return rows
+
+
+def estimate(scaling, pieces, log, target_pieces=65536, target_workers=64, bandwidth=100e6, task_overhead=0.005):
+    """A paper estimate for ``target_workers`` workers on ``target_pieces`` pieces from the
+    measured per-chunk costs: a chunk of the planned size costs what the measured chunk
+    nearest in size cost (scaled linearly in boxes), every chunk the same number of steps
+    (pieces 64x narrower take no more steps: the step size is set by the order-K term,
+    not the width); the chunk results (outputs and the tube of every step) go to the
+    client at ``bandwidth`` bytes/s; ``task_overhead`` s of scheduling per chunk."""
+    from verified.parallel import plan_chunks
+    ranges = plan_chunks(target_pieces, target_workers)
+    per_chunk = target_pieces / len(ranges)
+    best = min(scaling, key=lambda r: abs(pieces / r["chunks"] - per_chunk))
+    size = pieces / best["chunks"]
+    chunk_s = float(np.mean(best["chunk_wall_s"])) * per_chunk / size
+    rounds = int(np.ceil(len(ranges) / target_workers))
+    bytes_per_box = float(np.mean([r["received_bytes"] / pieces for r in scaling]))
+    recv = bytes_per_box * target_pieces
+    compute = rounds * chunk_s + len(ranges) * task_overhead / target_workers
+    total = compute + recv / bandwidth
+    one = min(scaling, key=lambda r: r["workers"])
+    one_core = float(one["wall_s"]) * target_pieces / pieces
+    log(f"\n## estimate: {target_workers} workers, {target_pieces} pieces (paper)")
+    log(f"measured: chunks of {size:.0f} boxes cost {np.mean(best['chunk_wall_s']):.2f} s each "
+        f"({best['workers']} workers); {bytes_per_box / 1e3:.1f} kB of result per box")
+    log(f"plan: {len(ranges)} chunks of {per_chunk:.0f} boxes, {rounds} per worker: {rounds} x {chunk_s:.1f} s "
+        f"+ scheduling {len(ranges)} x {1e3 * task_overhead:.0f} ms / {target_workers} = {compute:.1f} s compute")
+    log(f"results: {recv / 1e9:.2f} GB to the client = {recv / bandwidth:.1f} s at {bandwidth / 1e6:.0f} MB/s "
+        f"(the per-chunk tubes; hulls only would be ~{len(ranges)}x smaller); total ~{total:.0f} s against "
+        f"~{one_core:.0f} s (~{one_core / 3600:.1f} h) on one core ({one['workers']} worker scaled by pieces): "
+        f"{one_core / total:.0f}x")
+    return dict(chunks=len(ranges), chunk_boxes=per_chunk, chunk_s=chunk_s, rounds=rounds, compute_s=compute,
+                received_gb=recv / 1e9, transfer_s=recv / bandwidth, total_s=total, one_core_s=one_core)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--only", default="speedup,mixed,overhead,scaling")
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
+    ap.add_argument("--json", default=None, help="write the measurements here")
+    args = ap.parse_args(argv)
+    only = set(args.only.split(","))
+    pieces, T = (64, 0.5) if args.quick else (1024, 2.0)
+    n_mixed, t_mixed = (16, 0.3) if args.quick else (128, 0.5)
+    log = print
+    log(f"bench_parallel: {os.cpu_count()} CPUs, {load()}, {time.strftime('%H:%M:%S UTC', time.gmtime())}")
+    ode, box = setup()
+    from verified.solver import solve
+    solve(ode, box, (0, 0.05), subdivision=[4, 1, 1, 1])  # numba caches of this process
+    res = {}
+    if "speedup" in only:
+        res["speedup"] = section_speedup(ode, box, pieces, T, args.repeat, log)
+    if "mixed" in only:
+        res["mixed"] = section_mixed(ode, box, n_mixed, t_mixed, args.repeat, log)
+    if "overhead" in only:
+        res["overhead"] = section_overhead(ode, box, 0.5, args.repeat, log)
+    if "scaling" in only:
+        res["scaling"] = section_scaling(ode, box, pieces, T, log)
+        res["estimate"] = estimate(res["scaling"], pieces, log)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(res, f, indent=1, default=str)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
