@@ -55,13 +55,15 @@
     order = 12
     tol = 1e-10
     subdivision = [64, 1, 1, 1]   # per state (list in state order or {x1 = 64}), or one int
+    param_subdivision = { "payload.mass" = 4 }   # or split uncertain parameters (one box)
     h_max = 0.05
     max_boxes = 4096
 
     [control]               # optional: joint torques (modes i, ii; see mbs.control)
     type = "pd"             # "pd" or "computed_torque"
     kp = [100, 100]         # N m/rad per joint (or one number, or {joint = number}); or
-    kd = [20, 20]           # bandwidth = 4.0 (rad/s) and damping_ratio = 1.0 instead
+    kd = [20, 20]           # bandwidth = 4.0 (rad/s) and damping_ratio = 1.0 instead:
+                            # Kp = w^2 M(q_ref), Kd = 2 zeta w M(q_ref) (gains = "diagonal": diag M)
     q_ref = [0.5, -0.3]     # default: the centre of the initial q box
     gravity_compensation = true           # pd: add g(q) of the nominal model
     nominal = { mass_scale = 1.1 }        # the controller's model: point parameters
@@ -125,7 +127,7 @@ _SIMULATION = {"t_end", "output_dt", "mode", "frames"}
 _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_min": float,
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
            "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
-           "set_order": int, "merge_slack": float}
+           "set_order": int, "merge_slack": float, "param_subdivision": None}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str}
 _ENERGY_RATES = ("unsimplified", "simplified")
@@ -551,6 +553,11 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
             _unknown({k: v}, _SOLVER, where)
         if k == "subdivision":
             solver[k] = _subdivision(v, f"{where} subdivision")
+        elif k == "param_subdivision":
+            if not isinstance(v, dict) or not all(isinstance(m, int) and not isinstance(m, bool) and m >= 1
+                                                  for m in v.values()):
+                raise SceneError(f"{where} param_subdivision: expected a table parameter = pieces (integers >= 1)")
+            solver[k] = dict(v)
         else:
             solver[k] = _typed(v, _SOLVER[k], f"{where} {k}", positive=True)
     if "error_basis" in solver and solver["error_basis"] not in ("qr", "auto"):

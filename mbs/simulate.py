@@ -351,7 +351,7 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
              backward_depth: int = 0,
              constraints=(), progress=None, max_wall: float | None = None, control=None,
-             **solver_kwargs) -> Solution:
+             param_subdivision: dict | None = None, **solver_kwargs) -> Solution:
     """Verified enclosure of ``model`` from the initial box ``x0`` in simulation ``mode``.
 
     Parameters
@@ -402,6 +402,12 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
         point ``t0``) after ``(q, qd)``: ``sol.state_names`` ends with ``"t"``. ``x0``
         is still the ``(q, qd)`` box. A PD controller without ``q_ref`` holds the
         centre of the initial q box.
+    param_subdivision : {parameter name: pieces} or None
+        Split uncertain parameters (e.g. ``{"payload.mass": 4}``) into equal pieces,
+        one initial set per piece (a single initial box, no ``subdivision``).
+        Measured (UR5 under PD, payload 1 kg +- 10%, T = 5, 60 s): 1 piece reaches
+        0.96 s (steps ~3 ms: the affine remainder grows with the parameter's width),
+        4 pieces 1.9 s (steps ~30 ms).
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
         an unknown keyword raises ``TypeError`` naming ``simulate()``
 
@@ -456,6 +462,8 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
         raise ValueError("mode i runs without consistency tests; use mode ii or iii for constraints")
     ode_params = _system_params(system, None if ((masses is not None and system.params) or loop is not None)
                                 else params)
+    if param_subdivision:
+        box, ode_params = _split_params(box, ode_params, system, param_subdivision, subdivision)
     if "error_basis" not in solver_kwargs and ode_params is not None:
         # measured: with parameters the "qr" error basis breaks down early (paper URDF
         # double pendulum, payload mass [0.2, 0.3]: 0.27 s against completed to 0.3 s
@@ -543,6 +551,39 @@ class _CtrlC:
 
     def after_run(self, solution):
         return None
+
+
+def _split_params(box, ode_params, system, pieces: dict, subdivision):
+    """(boxes (K, n), params (K, p)): the parameter box cut into a grid of ``pieces``."""
+    import itertools
+    names = list(system.rhs.param_names)
+    if not isinstance(pieces, dict):
+        raise ValueError(f"param_subdivision must be a dict {{parameter name: pieces}}, got {pieces!r}")
+    if subdivision is not None:
+        raise ValueError("param_subdivision cannot be combined with subdivision (one initial box per parameter piece)")
+    if ode_params is None or ode_params.ndim != 1:
+        raise ValueError("param_subdivision needs uncertain parameters (one parameter box)")
+    if box.ndim != 1:
+        raise ValueError("param_subdivision needs a single initial box")
+    cuts = []
+    for j, k in enumerate(names):
+        m = pieces.get(k, 1)
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
+            raise ValueError(f"param_subdivision[{k!r}]: expected a positive integer, got {m!r}")
+        lo, hi = float(ode_params.lo[j]), float(ode_params.hi[j])
+        e = np.linspace(lo, hi, int(m) + 1)
+        e[0], e[-1] = lo, hi
+        cuts.append(list(zip(e[:-1], e[1:])))
+    unknown = [k for k in pieces if k not in names]
+    if unknown:
+        raise ValueError(f"param_subdivision: unknown parameter(s) {', '.join(map(repr, unknown))}; "
+                         f"parameters: {', '.join(names)}")
+    rows = list(itertools.product(*cuts))
+    plo = np.array([[a for a, _ in r] for r in rows])
+    phi = np.array([[b for _, b in r] for r in rows])
+    K = len(rows)
+    X = Interval(np.tile(np.asarray(box.lo, float), (K, 1)), np.tile(np.asarray(box.hi, float), (K, 1)))
+    return X, Interval(plo, phi)
 
 
 def _params_record(system: System, ode_params) -> dict:

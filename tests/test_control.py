@@ -249,3 +249,39 @@ def test_bare_system_and_mode_iii_refuse_controllers():
     sysm = system_for("planar2", "ii")
     with pytest.raises(Exception, match="chain model"):
         simulate(sysm, box(Q0), 0.1, mode="ii", control=PD(1.0, 1.0), progress=False)
+
+
+def test_bandwidth_gains_are_the_nominal_mass_matrix_at_the_reference():
+    chain = get("planar2")
+    M = pin.crba(pin_model(chain, 1.1), pin_model(chain, 1.1).createData(), Q0)
+    for gains, K in (("mass_matrix", M), ("diagonal", np.diag(np.diag(M)))):
+        loop = closed_loop(chain, PD(bandwidth=3.0, damping_ratio=0.5, q_ref=Q0, gains=gains,
+                                     nominal={"mass_scale": 1.1}), q_init=Q0)
+        assert np.allclose(loop.controllers[0].Kp, 9.0 * K, rtol=1e-12)
+        assert np.allclose(loop.controllers[0].Kd, 3.0 * K, rtol=1e-12)
+    with pytest.raises(ControlError, match="gains"):
+        closed_loop(chain, PD(bandwidth=3.0, gains="full"), q_init=Q0)
+
+
+def test_param_subdivision_splits_the_parameter_box_and_stays_sound():
+    chain = get("planar2")
+    x0 = box(Q0)
+    ctl = [PD(bandwidth=4.0, q_ref=Q0, gravity_compensation=True), Disturbance({"joint2": [-0.4, 0.4]})]
+    sol = simulate("planar2", x0, 0.4, mode="i", output_dt=0.2, order=10, progress=False, control=ctl,
+                   param_subdivision={"disturbance.joint2": 3})
+    assert sol.status == "completed", sol.reason
+    assert sol.boxes[0].shape == (3, 4) and sol.params == {"disturbance.joint2": (-0.4, 0.4)}
+    loop = sol.control
+    plant = pin_model(chain)
+    trajs = []
+    for w in (-0.4, -0.13, 0.4):
+        def law(t, q, qd, w=w):
+            return np.array([float(v) for v in loop.torque(list(q) + list(qd), [w])])
+        trajs += [closed_loop_trajectory(plant, law, x, 0.4) for x in corners(x0.lo, x0.hi, 1)]
+    assert not misses(sol, trajs, 4)
+    for bad, match in [({"nope": 2}, "unknown parameter"), ({"disturbance.joint2": 0}, "positive integer")]:
+        with pytest.raises(ValueError, match=match):
+            simulate("planar2", x0, 0.1, mode="i", progress=False, control=ctl, param_subdivision=bad)
+    with pytest.raises(ValueError, match="cannot be combined"):
+        simulate("planar2", x0, 0.1, mode="i", progress=False, control=ctl, param_subdivision={"disturbance.joint2": 2},
+                 subdivision=2)

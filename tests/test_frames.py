@@ -95,8 +95,8 @@ def test_ur5_tool0_with_payload_contains_pinocchio_frames():
     assert np.all(np.asarray(enc.position.width())[-1] < 0.01)
     nominal = pin_model(chain, payloads=[("tool0", 1.0, [0, 0, 0])])
     nd = nominal.createData()
-    Md = np.diag(pin.crba(nominal, nd, q0))
-    kp, kd = 9.0 * Md, 6.0 * Md
+    M0 = pin.crba(nominal, nd, q0)          # bandwidth gains: w^2 M(q_ref), 2 w M(q_ref)
+    kp, kd = 9.0 * M0, 6.0 * M0
     model = pin.Model(chain.to_pinocchio())
     data = model.createData()
     fid = model.getFrameId("tool0")
@@ -109,7 +109,7 @@ def test_ur5_tool0_with_payload_contains_pinocchio_frames():
         plant = pin_model(chain, payloads=[("tool0", m, [0, 0, 0])])
 
         def law(t, q, qd):
-            return kp * (q0 - q) - kd * qd + pin.computeGeneralizedGravity(nominal, nd, q)
+            return kp @ (q0 - q) - kd @ qd + pin.computeGeneralizedGravity(nominal, nd, q)
         trajs += [closed_loop_trajectory(plant, law, x, T) for x in corners(x0.lo, x0.hi, 2, seed=k)]
     assert not frame_misses(enc, trajs, fk, per_step=2)
     # orientation too: Pinocchio's rotation inside the rotation enclosure at the end
