@@ -287,3 +287,14 @@ def test_cli_bad_parallel_flags(tmp_path, monkeypatch, capsys):
     bad.write_text(SWEEP + '\n[[scenarios]]\nname = "g low"\n')
     assert main(["simulate", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "unique" in capsys.readouterr().err
+
+
+def test_ctrl_c_while_waiting_returns_what_is_verified(ode, box, client):
+    """SIGINT while the workers run: the chunks are cancelled and the Solution says
+    "interrupted" with everything verified (here: only t0, no chunk finished)."""
+    timer = threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    sol = solve(ode, box, (0.0, T), subdivision=SUB, client=client, chunks=2, hooks=[SlowSteps(0.2)])
+    timer.join()
+    assert sol.status == "interrupted" and sol.t_reached == 0.0
+    assert len(sol.t) == 1 and sol.boxes[0].shape == (16, 4) and not sol.tube
