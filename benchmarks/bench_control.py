@@ -7,7 +7,9 @@ arm2_computed_torque}.toml, run through mbs.simulate exactly as the CLI does):
    mrad/s, payload 1 kg +- 10% on tool0; target T = 5 s in <= 60 s, tool enclosed;
 2. the same UR5 tracking a quintic joint trajectory in 2 s;
 3. a 2-link arm under computed torque with a 10% mass error in the nominal model
-   (set_order 1 and 2).
+   (set_order 1 and 2);
+4. case 1 in mode ii (the energy test's cost with inputs);
+5. case 1 without the payload (modes i and ii).
 
 Oracle: Pinocchio ``aba`` with the sampled payload on the plant, the controller
 evaluated in floats (the same control law objects over floats), DOP853 at rtol =
@@ -17,7 +19,7 @@ reached, wall time, the worst ratio (enclosure width / sampled spread) over the
 states at the last output time, the tool position widths and their ratio, and the
 energy test's cost (mode ii against mode i on the same case).
 
-    python benchmarks/bench_control.py            # all cases (~6 min on 2 cores)
+    python benchmarks/bench_control.py            # all cases (~8 min on 2 cores)
     python benchmarks/bench_control.py --only 3   # one case
     python benchmarks/bench_control.py --cap 60   # wall-clock cap per run (s, default 60)
 """
@@ -96,10 +98,14 @@ def sample_oracle(sol, count=24, seed=0, frame=None, payload_link=None):
     return np.array(states), (np.array(frames) if frames else None)
 
 
-def run_case(label, scene_name, cap, mode=None, extra=None, samples=24, frame="tool0"):
+def run_case(label, scene_name, cap, mode=None, extra=None, samples=24, frame="tool0", drop_payload=False):
+    import dataclasses
     from mbs.scene import load_scene
     from mbs.simulate import simulate
     scene = load_scene(scene_name)
+    if drop_payload:   # the same scene without its payload (and without splitting it)
+        solver = {k: v for k, v in scene.solver.items() if k != "param_subdivision"}
+        scene = dataclasses.replace(scene, physical={}, solver=solver)
     model = scene.build_model()
     from mbs.runner import reference_system
     sysm = reference_system(model, "ii", params=scene.simulate_kwargs().get("params"))
@@ -154,7 +160,7 @@ def fmt(row):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--only", default="1,2,3,4", help="cases, e.g. 1,3")
+    ap.add_argument("--only", default="1,2,3,4,5", help="cases, e.g. 1,3")
     ap.add_argument("--cap", type=float, default=60.0, help="wall-clock cap per run [s]")
     ap.add_argument("--samples", type=int, default=24)
     a = ap.parse_args(argv)
@@ -172,11 +178,14 @@ def main(argv=None):
         cases += [("2-link arm, computed torque, 10% mass error", "arm2_computed_torque", "i", None),
                   ("2-link arm, computed torque, 10% mass error", "arm2_computed_torque", "ii", None),
                   ("2-link arm, computed torque, set_order 2", "arm2_computed_torque", "i", {"set_order": 2})]
-    if 4 in only:  # the energy test's cost on the UR5 (short horizon)
+    if 4 in only:  # the energy test's cost on the UR5
         cases += [("UR5 PD hold, payload, T = 5 (energy test)", "ur5_pd_payload", "ii", None)]
+    if 5 in only:  # the payload is what is hard: the same scene without it
+        cases += [("UR5 PD hold, no payload, T = 5", "ur5_pd_payload", "i", {"error_basis": "auto"}),
+                  ("UR5 PD hold, no payload, T = 5 (energy test)", "ur5_pd_payload", "ii", {"error_basis": "auto"})]
     for label, scene, mode, extra in cases:
         frame = "link2" if scene.startswith("arm2") else "tool0"
-        row = run_case(label, scene, a.cap, mode, extra, a.samples, frame)
+        row = run_case(label, scene, a.cap, mode, extra, a.samples, frame, drop_payload="no payload" in label)
         rows.append(row)
         print(fmt(row), flush=True)
     return rows
