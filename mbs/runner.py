@@ -224,7 +224,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
         t_fr = time.perf_counter()
         for f in frames:
             enc = sol.frame(f)
-            log(f"frame {f!r} at t = {enc.t[-1]:g} s: position widths "
+            log(f"frame {f!r} at t = {enc.t[-1]:g} s: position enclosed to "
                 + ", ".join(_fmt_width(v) for v in np.asarray(enc.position.width()[-1], float)) + " m")
         extra["frames_s"] = time.perf_counter() - t_fr
     path = write_result(out / "result.json", sol, scene=scene.source, mode=mode,
