@@ -150,7 +150,16 @@ def test_ctrl_c_signal_stops_after_the_step_without_an_exception(capsys):
     the run after that step: status "interrupted", everything verified so far kept."""
     import os
     import signal
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # a job started in the background (nohup, CI runners) inherits SIGINT ignored:
+    # install Python's default handler for this test, as an interactive session has it
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _ctrl_c_run(capsys, os, signal)
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _ctrl_c_run(capsys, os, signal):
     sent = []
 
     def progress(t, t_end):
