@@ -142,11 +142,36 @@ def test_interval_solve_encloses_exact_solutions(seed, n, rel):
     _check_solve_encloses(preconditioned.solve, seed, n, rel)
 
 
+def _inverse_spd(A):
+    """Inverse of a symmetric positive definite matrix (list of rows) by LDL^T: the
+    midpoint-inverse preconditioner of the broken solve below (no longer in the library)."""
+    n = len(A)
+    L, D = preconditioned._ldl(A)
+    inv = [[0] * n for _ in range(n)]
+    for c in range(n):
+        # L y = e_c, then D z = y, then L^T x = z
+        y = [0] * n
+        for i in range(n):
+            s = 1 if i == c else 0
+            for k in range(i):
+                s = preconditioned._sub(s, preconditioned._mul(L[i][k], y[k]))
+            y[i] = s
+        x = [0] * n
+        for i in reversed(range(n)):
+            s = 0 if preconditioned._is_zero(y[i]) else y[i] / D[i]
+            for k in range(i + 1, n):
+                s = preconditioned._sub(s, preconditioned._mul(L[k][i], x[k]))
+            x[i] = s
+        for i in range(n):
+            inv[i][c] = x[i]
+    return inv
+
+
 def test_oracle_bites_a_solve_without_preconditioned_rhs(monkeypatch):
     """A broken solve that preconditions M but not b ((C M)^-1 b) must be caught."""
     def broken(M, b, spd=True):
         n = len(b)
-        C = preconditioned.inverse_spd([[preconditioned.frozen_point(v) for v in row] for row in M])
+        C = _inverse_spd([[preconditioned.frozen_point(v) for v in row] for row in M])
         A = [[sum((C[i][k] * M[k][j] for k in range(n)), Interval(0.0)) for j in range(n)] for i in range(n)]
         return preconditioned.solve(A, list(b))
     with pytest.raises(AssertionError):

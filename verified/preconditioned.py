@@ -36,7 +36,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["frozen_point", "solve", "inverse_spd", "congruence_pivots"]
+__all__ = ["frozen_point", "solve", "congruence_pivots"]
 
 
 def _is_zero(x) -> bool:
@@ -193,32 +193,6 @@ def _ldl_substitute(U, D, b):
             s = _sub(s, _mul(U[i][j], x[j]))
         x[i] = s / D[i]
     return x
-
-
-def inverse_spd(A: Sequence[Sequence]) -> list[list]:
-    """Inverse of a symmetric positive definite matrix (list of rows) over the generic
-    scalar, by LDL^T without pivoting (``A = L D L^T``): columns of ``L^-T D^-1 L^-1``.
-    Used on the frozen point ``mid(M)``, where every operation is exact up to rounding."""
-    n = len(A)
-    L, D = _ldl(A)
-    inv = [[0] * n for _ in range(n)]
-    for c in range(n):
-        # L y = e_c, then D z = y, then L^T x = z
-        y = [0] * n
-        for i in range(n):
-            s = 1 if i == c else 0
-            for k in range(i):
-                s = _sub(s, _mul(L[i][k], y[k]))
-            y[i] = s
-        x = [0] * n
-        for i in reversed(range(n)):
-            s = 0 if _is_zero(y[i]) else y[i] / D[i]
-            for k in range(i + 1, n):
-                s = _sub(s, _mul(L[k][i], x[k]))
-            x[i] = s
-        for i in range(n):
-            inv[i][c] = x[i]
-    return inv
 
 
 def solve(M: Sequence[Sequence], b: Sequence, *, spd: bool = True) -> list:

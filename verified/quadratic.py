@@ -62,13 +62,13 @@ __all__ = ["QuadraticSets", "QuadraticStepper", "quadratic_range"]
 
 
 def quadratic_range(S, u: Interval) -> Interval:
-    """Enclosure of ``q_i(u) = u^T S_i u`` over the boxes ``u`` (B, n): shape (B, n).
+    """Enclosure of ``q_i(u) = u^T S_i u`` over the boxes ``u`` (B, m): shape (B, n).
 
-    ``S`` (B, n, n, n), float or Interval, symmetric in its last two axes (only
+    ``S`` (B, n, m, m), float or Interval, symmetric in its last two axes (only
     ``S_ijj`` and ``S_ijk + S_ikj`` for ``j < k`` are used). Diagonal terms use the
     square ``u_j^2`` (never negative), the others the products ``u_j u_k``."""
     S = S if isinstance(S, Interval) else point(np.asarray(S, dtype=float))
-    B, n = u.shape
+    B, n = u.shape  # (n here counts the parameters u, m in the docstring)
     jj = np.arange(n)
     sq = sqr(u)  # the square: never below 0 (a product u_j u_j would reach -rad^2)
     diag = Interval._from_bounds(S.lo[:, :, jj, jj], S.hi[:, :, jj, jj])  # (B, n_i, n_j)
