@@ -127,7 +127,7 @@ _SIMULATION = {"t_end", "output_dt", "mode", "frames"}
 _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_min": float,
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
            "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
-           "set_order": int, "merge_slack": float, "param_subdivision": None}
+           "set_order": int, "merge_slack": float, "param_subdivision": None, "absorb": bool}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str}
 _ENERGY_RATES = ("unsimplified", "simplified")

@@ -62,8 +62,18 @@ class LohnerStepper:
     :class:`verified.stepper.Stepper`). ``error_basis``: "qr", "auto" or a policy
     object of :mod:`verified.policies` (the basis of the error part ``Q r``)."""
 
-    def __init__(self, taylor, variational, order: int, params=None, error_basis="qr"):
+    #: absorb the error part into parameters once it is this fraction of the carried part
+    ABSORB_RATIO = 0.1
+    #: ... up to this many parameters per state (then the error part stays in r)
+    PARAMS_PER_STATE = 8
+
+    def __init__(self, taylor, variational, order: int, params=None, error_basis="qr", absorb: bool = False):
         self.basis = error_basis_policy(error_basis)  # QRBasis / AutoBasis (verified.policies)
+        # absorb: turn the error part into parameters (DoubletonSets.absorb_error) when it
+        # exceeds ABSORB_RATIO of the carried part in some component. Measured (3-link
+        # arm, q +- 1e-6, affine, T = 2): worst ratio 16.97 -> 1.19 at the same cost.
+        self.absorb = bool(absorb)
+        self.absorbed = 0
         self.error_basis = self.basis.name if hasattr(self.basis, "name") else error_basis
         self.taylor = taylor
         self.variational = variational
@@ -154,6 +164,26 @@ class LohnerStepper:
         incoming = nonlinear + s
         Q_out, r_new = self.basis.update(sets.Q, sets.r, JQ, incoming)
         new = DoubletonSets(c=c_new, C=C_new, r0=sets.r0, Q=Q_out, r=r_new)
+        if self.absorb:
+            new = self.absorb_error(new)
         return StepResult(sets=new, previous=sets, h=h, hull=X, tube=E, nonlinear_width=nonlinear.width())
+
+    def absorb_error(self, sets: DoubletonSets) -> DoubletonSets:
+        """``sets`` with the error part absorbed into parameters where it has grown to
+        ``ABSORB_RATIO`` of the carried part (per batch: all sets or none, so that the
+        batch keeps one parameter count), up to ``PARAMS_PER_STATE * n`` parameters
+        (then the error stays in ``r``). Measured (3-link arm, q +- 1e-4, affine):
+        break-down 0.73 s -> 0.96 s at 8 per state; 1.02 s at 16 with 20 % more cost."""
+        carried = sets.linear_width()
+        err = linalg.matvec(sets.Q, sets.r).width()
+        # (an error at the rounding level does not count: an exact state such as the
+        # time t of a controller has no carried width, and must not decide anything)
+        floor = 1e-12 * (1.0 + np.abs(sets.c))
+        if not (err > self.ABSORB_RATIO * carried + floor).any():
+            return sets
+        if sets.C.shape[2] + self.n > self.PARAMS_PER_STATE * self.n:
+            return sets
+        self.absorbed += 1
+        return sets.absorb_error()
 
     _orthonormal_basis = staticmethod(orthonormal_basis)  # (its home is verified.policies)
