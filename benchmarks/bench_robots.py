@@ -523,7 +523,8 @@ class Bench:
         """Settings tried on the robot cases (the same for both arithmetics)."""
         if self.quick:
             return {a: [dict(order=8, tol=1e-10)] for a in ARITHMETICS}
-        base = [dict(order=8, tol=1e-10), dict(order=12, tol=1e-10), dict(order=12, tol=1e-12)]
+        base = [dict(order=8, tol=1e-10), dict(order=12, tol=1e-10), dict(order=12, tol=1e-12),
+                dict(order=8, tol=1e-10, absorb=True), dict(order=12, tol=1e-12, absorb=True)]
         return {a: base + list(extra) for a in ARITHMETICS}
 
     def _chain_case(self, label, chain, q0, eps, T, mode="i", subdivision=None, oracle=None, settings=None,
@@ -638,13 +639,14 @@ class Bench:
                           dict(order=12, tol=1e-10, error_basis="auto"),
                           dict(order=12, tol=1e-10, error_basis="auto", set_order=2))),
                     ("T = 1, 256 pieces", 1.0, 256, [1.0], True,
-                     both(dict(order=12, tol=1e-10), dict(order=8, tol=1e-9))),
+                     both(dict(order=12, tol=1e-10), dict(order=8, tol=1e-9), dict(order=12, tol=1e-10, absorb=True))),
                     # second-order sets (verified/quadratic.py): far fewer pieces for the same width
                     ("T = 1, 64 pieces, set_order 2", 1.0, 64, [1.0], True,
                      {"interval": [dict(order=12, tol=1e-10, set_order=2)], "affine": []}),
                     # affine at 1024 pieces costs ~4 min per setting: one setting, cap 300 s
                     ("T = 3, 1024 pieces", 3.0, 1024, [3.0], True,
-                     {"interval": [dict(order=12, tol=1e-10), dict(order=12, tol=1e-12)],
+                     {"interval": [dict(order=12, tol=1e-10), dict(order=12, tol=1e-12),
+                                   dict(order=12, tol=1e-10, absorb=True)],
                       "affine": [dict(order=12, tol=1e-10, cap=300.0)]}),
                     ("T = 3, 128 pieces, set_order 2", 3.0, 128, [3.0], True,
                      {"interval": [dict(order=12, tol=1e-10, set_order=2)], "affine": []})]
