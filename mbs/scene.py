@@ -129,7 +129,8 @@ _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_m
            "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
            "set_order": int, "merge_slack": float, "param_subdivision": None, "absorb": bool}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
-                "backward_depth": int, "energy_rate": str}
+                "backward_depth": int, "energy_rate": str, "contract": str, "prune": bool}
+_CONTRACTS = ("step", "test", "off")
 _ENERGY_RATES = ("unsimplified", "simplified")
 
 
@@ -578,6 +579,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         cons[k] = _typed(v, _CONSISTENCY[k], f"{where} {k}", positive=(k != "backward_depth"))
     if cons.get("backward_depth", 0) < 0:
         raise SceneError(f"{where} backward_depth: must be >= 0")
+    if "contract" in cons and cons["contract"] not in _CONTRACTS:
+        raise SceneError(f"{where} contract: {cons['contract']!r} is not one of {', '.join(_CONTRACTS)}")
     if "energy_rate" in cons and cons["energy_rate"] not in _ENERGY_RATES:
         raise SceneError(f"{where} energy_rate: {cons['energy_rate']!r} is not one of "
                          f"{', '.join(_ENERGY_RATES)}")

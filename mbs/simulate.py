@@ -349,7 +349,7 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
              params=None, order: int = 12, tol: float = 1e-10, subdivision=None,
              energy_rate: str = "unsimplified", test_interval: float | None = None, test_splits: int | None = None,
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
-             backward_depth: int = 0,
+             backward_depth: int = 0, contract: str = "step", prune: bool = True,
              constraints=(), progress=None, max_wall: float | None = None, control=None,
              param_subdivision: dict | None = None, **solver_kwargs) -> Solution:
     """Verified enclosure of ``model`` from the initial box ``x0`` in simulation ``mode``.
@@ -383,6 +383,11 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
     refine, min_gain : "pruned" (replace a set by its surviving parts only when that
         narrows its hull by ``min_gain``, default 0.1) or "always"
     backward_depth : backward consistency test depth (0 = off)
+    contract : "step" (default), "test" or "off": where the energy relation ``H(x) = h``
+        contracts the sets (modes ii, iii; :class:`verified.consistency.EnergyTest`):
+        after every step, only at the tests, or never
+    prune : bool (default True): branch and prune at the tests (the paper's test); with
+        ``False`` only the contraction narrows the sets
     constraints : further :class:`verified.consistency.Constraint` objects (modes ii, iii)
     progress : None, bool or callable(t, t_end)
         Called after every step. ``None`` (default): a tqdm progress bar over simulated
@@ -457,7 +462,7 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
                           max_interval=defaults["test_interval"] if test_interval is None else test_interval,
                           splits=defaults["test_splits"] if test_splits is None else test_splits,
                           strategy=split_strategy, refine=refine, min_gain=min_gain, backward_depth=backward_depth,
-                          max_boxes=solver_kwargs.get("max_boxes", 4096))
+                          max_boxes=solver_kwargs.get("max_boxes", 4096), contract=contract, prune=prune)
     elif constraints:
         raise ValueError("mode i runs without consistency tests; use mode ii or iii for constraints")
     ode_params = _system_params(system, None if ((masses is not None and system.params) or loop is not None)
