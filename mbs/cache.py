@@ -16,7 +16,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import pickle
 import tempfile
 from contextlib import contextmanager
 from functools import lru_cache
@@ -130,23 +129,6 @@ def put_json(k: str, obj) -> None:
         _write(p, json.dumps(obj).encode())
 
 
-def get_pickle(k: str):
-    p = _path(k, "pkl")
-    if p is None or not p.is_file():
-        return None
-    try:
-        with open(p, "rb") as f:
-            return pickle.load(f)
-    except Exception:
-        return None
-
-
-def put_pickle(k: str, obj) -> None:
-    p = _path(k, "pkl")
-    if p is not None:
-        _write(p, pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL))
-
-
 def clear() -> int:
     """Delete all cache entries; returns how many files were removed."""
     d = cache_dir()
@@ -154,7 +136,7 @@ def clear() -> int:
         return 0
     n = 0
     for p in d.iterdir():
-        if p.suffix in (".json", ".pkl"):
+        if p.suffix in (".json", ".pkl"):  # .pkl: entries of older versions
             try:
                 p.unlink(); n += 1
             except OSError:

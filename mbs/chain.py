@@ -281,11 +281,6 @@ class Chain:
                      name=self.name, frames=frames, source=src if src.get("kind") != "dh" else
                      {**src, "kind": "tree"})
 
-    def with_gravity(self, gravity) -> "Chain":
-        c = Chain(self.bodies, base_name=self.base_name, base_inertia=self.base_inertia,
-                  gravity=tuple(gravity), name=self.name, frames=self.frames, source=self.source)
-        return c
-
     def lock(self, joints: Mapping[str, float]) -> "Chain":
         """A copy in which the given joints are fixed at the given positions (their
         bodies are merged into the parents).  E.g. panda's fingers:

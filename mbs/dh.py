@@ -164,10 +164,7 @@ def chain_from_dh(rows, convention="standard", *, gravity=(0.0, 0.0, -9.81), bas
         where = f"link {lname!r} (DH row {i}, joint {r['name']!r})"
         if convention == "standard":
             # motion about/along z_{i-1} first, then the constant part
-            if kind == "revolute":
-                post = chain_product(Rz(r["theta"]), Tz(r["d"]), Tx(r["a"]), Rx(r["alpha"]))
-            else:
-                post = chain_product(Rz(r["theta"]), Tz(r["d"]), Tx(r["a"]), Rx(r["alpha"]))
+            post = chain_product(Rz(r["theta"]), Tz(r["d"]), Tx(r["a"]), Rx(r["alpha"]))
             placement = prev_T
             inertia = RigidInertia(r["mass"], r["com"], r["inertia"])
             inertia.validate(where)
@@ -175,10 +172,7 @@ def chain_from_dh(rows, convention="standard", *, gravity=(0.0, 0.0, -9.81), bas
             frames[lname] = (i, post)
             prev_T = post
         else:
-            if kind == "revolute":
-                pre = chain_product(Rx(r["alpha"]), Tx(r["a"]), Rz(r["theta"]), Tz(r["d"]))
-            else:
-                pre = chain_product(Rx(r["alpha"]), Tx(r["a"]), Rz(r["theta"]), Tz(r["d"]))
+            pre = chain_product(Rx(r["alpha"]), Tx(r["a"]), Rz(r["theta"]), Tz(r["d"]))
             placement = sp3.compose(prev_T, pre)
             inertia = RigidInertia(r["mass"], r["com"], r["inertia"])
             frames[lname] = (i, IDENTITY)

@@ -301,10 +301,6 @@ class NumericModel:
         Jacobian-transpose gravity term, whose rotation products lose correlation.)"""
         return self.rnea(q, qd, [0] * self.n)
 
-    def coriolis(self, q, qd):
-        """Coriolis/centrifugal forces c(q, qd) = rnea(q, qd, 0) without gravity."""
-        return self.rnea(q, qd, [0] * self.n, gravity=False)
-
     def gravity_torque(self, q):
         """g(q) = dP/dq = rnea(q, 0, 0) (Pinocchio ``computeGeneralizedGravity``)."""
         return self.rnea(q, [0] * self.n, [0] * self.n)
@@ -539,6 +535,7 @@ def ldl_factor(M, check=True):
     return U, D
 
 
+# Kept apart from verified.preconditioned._ldl_substitute: 0 / D[k] terms stay (mbs.scalar.div), so every pivot enters x.
 def ldl_substitute(U, D, b):
     """Solve with the factors of :func:`ldl_factor`: x = M^{-1} b.  Every pivot enters
     the result (``x[i] = s / D[i]`` is kept even for a constant 0 numerator ``s`` when

@@ -88,8 +88,6 @@ def final_widths(sol):
     if len(sol.tube):
         a, b = float(sol.tube_t[-2]), float(sol.tube_t[-1])
         return f"over the last step [{a:g}, {b:g}] s", np.asarray(sol.tube_hull.width()[-1], float)
-    if len(t):
-        return f"t = {t[-1]:g} s", np.asarray(sol.hull.width()[-1], float)
     return None, None
 
 
@@ -143,7 +141,6 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
 
     t0 = time.perf_counter()
     model = scene.build_model()
-    names = None
     kw = scene.simulate_kwargs()
     try:
         system = reference_system(model, mode, scene.consistency.get("energy_rate", "unsimplified"),

@@ -218,10 +218,6 @@ class SymbolicModel:
         """Gravity torque g(q) = dP/dq (n x 1)."""
         return sympy.Matrix([sympy.diff(self.P, qi) for qi in self.q])
 
-    @property
-    def dPdq(self):
-        return self.gravity
-
     @cached_property
     def bias(self):
         """c(q, qd) + g(q)."""

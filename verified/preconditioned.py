@@ -176,6 +176,7 @@ def _ldl_tight(A):
     return U, D
 
 
+# Kept apart from mbs.numeric.ldl_substitute: skips y[k] = 0 terms (the caller proves these pivots), no +-1 folding.
 def _ldl_substitute(U, D, b):
     """``x = A^-1 b`` from :func:`_ldl_tight`'s factors."""
     n = len(b)
