@@ -294,14 +294,19 @@ class PD(Controller):
         self.nominal = nominal
         self.bandwidth, self.damping_ratio = bandwidth, damping_ratio
 
+    def _bandwidth(self, where):
+        """``(w, zeta)`` of a bandwidth specification, checked (1/s, 1)."""
+        if self.kp is not None or self.kd is not None:
+            raise ControlError(f"{where}: give either kp and kd or bandwidth, not both")
+        w = _number(self.bandwidth, f"{where} bandwidth")
+        z = _number(self.damping_ratio, f"{where} damping_ratio")
+        if not (w > 0 and z >= 0):
+            raise ControlError(f"{where}: bandwidth must be > 0 and damping_ratio >= 0, got {w!r}, {z!r}")
+        return w, z
+
     def _gains(self, ctx, where, nominal_model, ref):
         if self.bandwidth is not None:
-            if self.kp is not None or self.kd is not None:
-                raise ControlError(f"{where}: give either kp and kd or bandwidth, not both")
-            w = _number(self.bandwidth, f"{where} bandwidth")
-            z = _number(self.damping_ratio, f"{where} damping_ratio")
-            if not (w > 0 and z >= 0):
-                raise ControlError(f"{where}: bandwidth must be > 0 and damping_ratio >= 0, got {w!r}, {z!r}")
+            w, z = self._bandwidth(where)
             q0 = [float(v) for v in ref(ref.t0 if isinstance(ref, Quintic) else 0.0)[0]]
             M = np.asarray(nominal_model.mass_matrix(np.array(q0)), float) \
                 * float(getattr(nominal_model, "energy_scale", 1))
@@ -356,12 +361,7 @@ class ComputedTorque(PD):
 
     def _gains(self, ctx, where, nominal_model, ref):
         if self.bandwidth is not None:
-            if self.kp is not None or self.kd is not None:
-                raise ControlError(f"{where}: give either kp and kd or bandwidth, not both")
-            w = _number(self.bandwidth, f"{where} bandwidth")
-            z = _number(self.damping_ratio, f"{where} damping_ratio")
-            if not (w > 0 and z >= 0):
-                raise ControlError(f"{where}: bandwidth must be > 0 and damping_ratio >= 0, got {w!r}, {z!r}")
+            w, z = self._bandwidth(where)
             return np.full(ctx.n, w * w), np.full(ctx.n, 2 * z * w)
         return super()._gains(ctx, where, nominal_model, ref)
 

@@ -53,3 +53,19 @@ def misses(solution, sols, per_step=4):
                 if not in_union(x, tube_boxes):
                     bad.append((t, x))
     return bad
+
+
+def pinocchio_with(chain, payloads=(), scale=1.0):
+    """Pinocchio's model of ``chain`` (its own URDF parser and frames) with every joint's
+    inertia scaled by ``scale`` and point-mass payloads [(link, mass, com in the link
+    frame)] added to the joint that carries the link: the oracle's plant."""
+    import pinocchio as pin
+    model = pin.Model(chain.to_pinocchio())
+    for j in range(1, model.njoints):
+        I = model.inertias[j]
+        model.inertias[j] = pin.Inertia(I.mass * scale, I.lever, I.inertia * scale)
+    for link, m, com in payloads:
+        fr = model.frames[model.getFrameId(link)]
+        model.inertias[fr.parentJoint] = model.inertias[fr.parentJoint] + fr.placement.act(
+            pin.Inertia(m, np.asarray(com, float), np.zeros((3, 3))))
+    return model

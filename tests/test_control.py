@@ -6,7 +6,7 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from sampling import in_union
+from sampling import in_union, pinocchio_with
 from mbs.control import (PD, ClosedLoop, ComputedTorque, ControlError, Disturbance, FunctionController, Quintic,
                          closed_loop, parse_control)
 from mbs.simulate import simulate
@@ -23,15 +23,7 @@ def box(q0, e=E, ed=E):
 
 
 def pin_model(chain, scale=1.0, payloads=()):
-    model = pin.Model(chain.to_pinocchio())
-    for j in range(1, model.njoints):
-        I = model.inertias[j]
-        model.inertias[j] = pin.Inertia(I.mass * scale, I.lever, I.inertia * scale)
-    for link, m, com in payloads:
-        fr = model.frames[model.getFrameId(link)]
-        model.inertias[fr.parentJoint] = model.inertias[fr.parentJoint] + fr.placement.act(
-            pin.Inertia(m, np.asarray(com, float), np.zeros((3, 3))))
-    return model
+    return pinocchio_with(chain, payloads, scale)
 
 
 def quintic(q0, q1, T, t):

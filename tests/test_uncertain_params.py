@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from sampling import in_union
+from sampling import in_union, pinocchio_with
 from mbs.scene import SceneError, loads_scene
 from mbs.simulate import simulate, system_for
 from mbs.uncertain import ChainParameters, ParameterError
@@ -19,21 +19,6 @@ from verified.interval import Interval
 
 
 # --------------------------------------------------------------------------- oracle
-def pinocchio_with(chain, payloads=(), scale=1.0):
-    """Pinocchio's model of ``chain`` (its own URDF parser and frames) with every joint's
-    inertia scaled by ``scale`` and point-mass payloads [(link, mass, com in the link
-    frame)] added to the joint that carries the link."""
-    model = pin.Model(chain.to_pinocchio())
-    for j in range(1, model.njoints):
-        I = model.inertias[j]
-        model.inertias[j] = pin.Inertia(I.mass * scale, I.lever, I.inertia * scale)
-    for link, m, com in payloads:
-        fr = model.frames[model.getFrameId(link)]
-        model.inertias[fr.parentJoint] = model.inertias[fr.parentJoint] + fr.placement.act(
-            pin.Inertia(m, np.asarray(com, float), np.zeros((3, 3))))
-    return model
-
-
 def aba_trajectory(model, damping, x0, times):
     """States at ``times`` of qdd = aba(q, qd, -D qd) (DOP853, rtol = atol = 1e-12)."""
     data = model.createData()
