@@ -173,6 +173,7 @@ def test_a_contraction_that_cuts_too_far_is_caught_by_the_sampling_oracle(monkey
     assert misses(sol, sols, per_step=2)
 
 
+@pytest.mark.slow  # ~11 s: the default run's largest (keeps it under 3 min on CI's 2 cores)
 def test_contraction_with_pruning_and_the_backward_test_is_sound():
     rhs, H = _pendulum()
     lo, hi = pd.initial_box()
