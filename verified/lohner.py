@@ -69,16 +69,19 @@ class LohnerStepper:
 
     def __init__(self, taylor, variational, order: int, params=None, error_basis="qr", absorb: bool = False):
         self.basis = error_basis_policy(error_basis)  # QRBasis / AutoBasis (verified.policies)
-        # absorb: turn the error part into parameters (DoubletonSets.absorb_error) when it
-        # exceeds ABSORB_RATIO of the carried part in some component. Measured (3-link
-        # arm, q +- 1e-6, affine, T = 2): worst ratio 16.97 -> 1.19 at the same cost.
-        self.absorb = bool(absorb)
-        self.absorbed = 0
         self.error_basis = self.basis.name if hasattr(self.basis, "name") else error_basis
         self.taylor = taylor
         self.variational = variational
         self.order = int(order)
         self.n = taylor.n
+        # absorb: turn the error part into parameters (DoubletonSets.absorb_error) when it
+        # exceeds absorb_ratio of the carried part in some component, up to max_params.
+        # Measured (3-link arm, q +- 1e-6, affine, T = 2): worst ratio 16.97 -> 1.19 at
+        # the same cost.
+        self.absorb = bool(absorb)
+        self.absorb_ratio = self.ABSORB_RATIO
+        self.max_params = self.PARAMS_PER_STATE * self.n
+        self.absorbed = 0
         self.params = params
         # an affine Jacobian evaluator can take the set's own forms (see step)
         self.jacobian_over_set = hasattr(variational, "series")
@@ -168,20 +171,21 @@ class LohnerStepper:
             new = self.absorb_error(new)
         return StepResult(sets=new, previous=sets, h=h, hull=X, tube=E, nonlinear_width=nonlinear.width())
 
-    def absorb_error(self, sets: DoubletonSets) -> DoubletonSets:
-        """``sets`` with the error part absorbed into parameters where it has grown to
-        ``ABSORB_RATIO`` of the carried part (per batch: all sets or none, so that the
-        batch keeps one parameter count), up to ``PARAMS_PER_STATE * n`` parameters
-        (then the error stays in ``r``). Measured (3-link arm, q +- 1e-4, affine):
-        break-down 0.73 s -> 0.96 s at 8 per state; 1.02 s at 16 with 20 % more cost."""
+    def absorb_error(self, sets):
+        """``sets`` (doubleton or second-order, anything with ``absorb_error``) with the
+        error part absorbed into parameters where it has grown to ``absorb_ratio`` of the
+        carried part (per batch: all sets or none, so that the batch keeps one parameter
+        count), up to ``max_params`` parameters (then the error stays in ``r``).
+        Measured (3-link arm, q +- 1e-4, affine): break-down 0.73 s -> 0.96 s at 8 per
+        state; 1.02 s at 16 with 20 % more cost."""
+        if sets.C.shape[2] + self.n > self.max_params:
+            return sets
         carried = sets.linear_width()
         err = linalg.matvec(sets.Q, sets.r).width()
         # (an error at the rounding level does not count: an exact state such as the
         # time t of a controller has no carried width, and must not decide anything)
         floor = 1e-12 * (1.0 + np.abs(sets.c))
-        if not (err > self.ABSORB_RATIO * carried + floor).any():
-            return sets
-        if sets.C.shape[2] + self.n > self.PARAMS_PER_STATE * self.n:
+        if not (err > self.absorb_ratio * carried + floor).any():
             return sets
         self.absorbed += 1
         return sets.absorb_error()

@@ -198,7 +198,7 @@ class QuadraticStepper(LohnerStepper):
 
     def __init__(self, taylor, variational, second, order: int, params=None, error_basis="qr", second_over_set=None,
                  absorb_ratio: float = 0.1, max_params: int | None = None):
-        super().__init__(taylor, variational, order, params, error_basis)
+        super().__init__(taylor, variational, order, params, error_basis, absorb=bool(np.isfinite(absorb_ratio)))
         # the error part becomes parameters (QuadraticSets.absorb_error) once it is
         # absorb_ratio times the carried part in some component, up to max_params
         # parameters (default 4n). Why: an interval error vector is multiplied by |J|
@@ -209,7 +209,6 @@ class QuadraticStepper(LohnerStepper):
         # same cost; one box (error_basis="auto") 0.77 -> 0.83 s.
         self.absorb_ratio = float(absorb_ratio)
         self.max_params = 4 * self.n if max_params is None else int(max_params)
-        self.absorbed = 0
         self.second = second
         # an affine evaluator of the second variational equations takes the set's own
         # forms for the Hessian in the Lagrange term (over the hull box, interval
@@ -290,10 +289,6 @@ class QuadraticStepper(LohnerStepper):
         JQ = linalg.matmul(J, sets.Q)
         Q_out, r_new = self.basis.update(sets.Q, sets.r, JQ, incoming)
         new = QuadraticSets(c=c_new, C=C_new, r0=sets.r0, S=S_new, Q=Q_out, r=r_new)
-        if np.isfinite(self.absorb_ratio) and m + n <= self.max_params:
-            carried = new.linear_width()
-            err = linalg.matvec(new.Q, new.r).width()
-            if (err > self.absorb_ratio * carried).any():
-                new = new.absorb_error()
-                self.absorbed += 1
+        if self.absorb:
+            new = self.absorb_error(new)
         return StepResult(sets=new, previous=sets, h=h, hull=X, tube=E, nonlinear_width=nonlinear.width())

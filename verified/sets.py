@@ -102,7 +102,7 @@ class DoubletonSets:
         """
         nb, n = self.c.shape
         m = self.C.shape[2]
-        if own_symbols is None:  # 3n; states of no width (an exact time state) count for none
+        if own_symbols is None:  # n + 2w: initial parameters of no width (an exact time state) count for none
             live = int((self.r0.width()[:, :n] > 0).any(axis=0).sum()) if m > n else n
             own_symbols = n + 2 * live
         own = max(n, int(own_symbols))

@@ -313,9 +313,11 @@ def solve(
                          "use set_order=1 for those")
     if not isinstance(absorb, (bool, np.bool_)):
         raise ValueError(f"absorb must be True or False, got {absorb!r}")
-    if absorb and consistency is not None:
-        raise ValueError("absorb=True is not supported with a consistency test (its contraction works "
-                         "on sets with one parameter per state)")
+    if absorb and (set_order != 1 or adaptive or consistency is not None):
+        # (a consistency test's contraction works on sets with one parameter per state;
+        # adaptive splitting would split along absorbed errors without end)
+        raise ValueError("absorb=True needs set_order=1, adaptive=False, no consistency test and no "
+                         "states appended by a hook")
     hook_list = ([ProgressHook(progress, t1)] if progress is not None else []) \
         + check_hooks([] if consistency is None else [consistency]) + check_hooks(hooks)
     setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, set_order)
@@ -328,10 +330,10 @@ def solve(
             # appended states keep a box of their own in the error basis: rotated into the
             # states' basis, h's error widened the states (docs/energy_contraction.md)
             error_basis = BlockBasis(error_basis, setup.n_steer)
-    absorbing = bool(absorb) and set_order == 1 and consistency is None and not appended and not adaptive
-    if absorb and not absorbing:
-        raise ValueError("absorb=True needs set_order=1, adaptive=False and no states appended by a hook")
-    stepper = _stepper(prob, order, setup.params, error_basis, set_order, absorbing)
+    if absorb and appended:
+        raise ValueError("absorb=True needs set_order=1, adaptive=False, no consistency test and no "
+                         "states appended by a hook")
+    stepper = _stepper(prob, order, setup.params, error_basis, set_order, bool(absorb))
     control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
     wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
     split = SplitPolicy(split_ratio, max_boxes, tol) if adaptive else None
