@@ -51,7 +51,7 @@ def sample_oracle(sol, count=24, seed=0, frame=None, payload_link=None):
     Pinocchio aba + the float controller of sol.control, DOP853."""
     import pinocchio as pin
     from scipy.integrate import solve_ivp
-    from mbs.runner import sample_points
+    from mbs.app.runner import sample_points
     loop = sol.control
     chain = loop.chain
     n = chain.n
@@ -104,14 +104,14 @@ TARGET_T = {"ur5_pd_payload": 5.0, "ur5_quintic": 2.0}
 
 def run_case(label, scene_name, cap, mode=None, extra=None, samples=24, frame="tool0", drop_payload=False):
     import dataclasses
-    from mbs.scene import load_scene
+    from mbs.app.scene import load_scene
     from mbs.simulate import simulate
     scene = load_scene(scene_name)
     if drop_payload:   # the same scene without its payload (and without splitting it)
         solver = {k: v for k, v in scene.solver.items() if k != "param_subdivision"}
         scene = dataclasses.replace(scene, physical={}, solver=solver)
     model = scene.build_model()
-    from mbs.runner import reference_system
+    from mbs.app.runner import reference_system
     sysm = reference_system(model, "ii", params=scene.simulate_kwargs().get("params"))
     names = sysm.state_names
     x0 = scene.initial_box(names)

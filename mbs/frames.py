@@ -81,17 +81,6 @@ class FrameEnclosure:
         x = np.asarray(point, float)
         return bool(np.any(np.all((b.lo - slack <= x) & (x <= b.hi + slack), axis=-1)))
 
-    def to_json(self) -> dict:
-        """result.json's ``frames.<name>`` entry: per output time the position hull
-        ``[[lo, hi]] x 3`` (m) and the rotation matrix entries (row-major, 9 pairs), per
-        step the tube's position hull; bounds as in :mod:`mbs.results` (exact doubles)."""
-        from .results import _pairs
-        return {"method": self.method, "t": [float(x) for x in self.t],
-                "position": [_pairs(p.lo, p.hi) for p in self.position],
-                "rotation": [_pairs(r.lo, r.hi) for r in self.rotation],
-                "tube_t": [float(x) for x in self.tube_t],
-                "tube": [_pairs(p.lo, p.hi) for p in self.tube]}
-
     def __repr__(self):
         w = np.asarray(self.position.width()[-1]) if len(self.t) else np.zeros(3)
         return (f"FrameEnclosure({self.name!r}, {len(self.t)} output times, {len(self.tube_boxes)} steps, "

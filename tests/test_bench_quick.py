@@ -1,7 +1,7 @@
 """python -m mbs bench --quick: every part of the benchmark and every stress case, small."""
 from pathlib import Path
 
-from mbs import bench
+from mbs.app import bench
 
 
 def test_bench_quick(tmp_path):

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mbs.__main__ import main
-from mbs.results import read_result, result_boxes
-from mbs.scene import scene_dir
+from mbs.app.cli import main
+from mbs.app.results import read_result, result_boxes
+from mbs.app.scene import scene_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -121,14 +121,14 @@ def test_check_unknown_model_is_one_line(capsys):
 
 
 def test_console_script_mbs_is_declared_and_runs_main():
-    """pyproject's [project.scripts] mbs = mbs.__main__:main, installed as an entry point."""
+    """pyproject's [project.scripts] mbs = mbs.app.cli:main, installed as an entry point."""
     import importlib.metadata as md
     try:
         import tomllib
     except ModuleNotFoundError:  # Python 3.10
         import tomli as tomllib
     data = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    assert data["project"]["scripts"]["mbs"] == "mbs.__main__:main"
+    assert data["project"]["scripts"]["mbs"] == "mbs.app.cli:main"
     eps = [e for e in md.entry_points(group="console_scripts") if e.name == "mbs"]
     assert eps and eps[0].load() is main
 

@@ -1,16 +1,16 @@
 """The README's main job and the shipped scenes reach their own end time.
 
 ``python -m mbs demo`` runs the paper's double pendulum in modes i, ii, iii with
-:func:`mbs.demo.settings`; every shipped scene (``models/scenes/*.toml``) runs in its own
+:func:`mbs.app.demo.settings`; every shipped scene (``models/scenes/*.toml``) runs in its own
 mode. A break-down before the end time fails (status "completed" and
 ``t_reached == t_end``), and so does a sampled trajectory outside a scene's enclosure.
 Slow (about 15-50 s each here): ``python -m pytest -m slow``.
 """
 import pytest
 
-from mbs import demo
-from mbs.runner import run_scene
-from mbs.scene import load_scene, scene_dir
+from mbs.app import demo
+from mbs.app.runner import run_scene
+from mbs.app.scene import load_scene, scene_dir
 from mbs.simulate import MODES, simulate
 
 SCENES = sorted(p.stem for p in scene_dir().glob("*.toml"))

@@ -1,4 +1,4 @@
-"""Figures (mbs.figures): Figs. 2, 3, 5 are written; Fig. 3's shaded cells are truly
+"""Figures (mbs.app.figures): Figs. 2, 3, 5 are written; Fig. 3's shaded cells are truly
 inconsistent; sampled trajectories agree with an independent integration."""
 import sys
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from models import pendulum
-from mbs import figures
+from mbs.app import figures
 from verified.graph import trace
 from verified.interval import Interval
 

@@ -120,7 +120,7 @@ def test_ur5_tool0_with_payload_contains_pinocchio_frames():
 
 
 def test_frames_in_result_json_and_errors(tmp_path, arm_run):
-    from mbs.results import write_result
+    from mbs.app.results import write_result
     sol, _ = arm_run
     p = write_result(tmp_path / "r.json", sol, frames=["link2"])
     d = json.loads(p.read_text())

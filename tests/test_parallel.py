@@ -245,7 +245,7 @@ def test_cli_scenarios_one_combined_result(tmp_path, capsys):
     """[[scenarios]]: one run per scenario (here in-process, --workers 1), a combined
     scenarios.json and a per-scenario summary; every sampled trajectory inside."""
     import json
-    from mbs.__main__ import main
+    from mbs.app.cli import main
     scene = tmp_path / "sweep.toml"
     scene.write_text(SWEEP)
     assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--samples", "4", "--workers", "1"]) == 0
@@ -262,8 +262,8 @@ def test_cli_scenarios_one_combined_result(tmp_path, capsys):
 
 def test_cli_scenarios_on_a_cluster(tmp_path, client, monkeypatch, capsys):
     import json
-    from mbs import runner
-    from mbs.__main__ import main
+    from mbs.app import runner
+    from mbs.app.cli import main
     monkeypatch.setattr(runner, "scheduler_client", lambda address: client)
     scene = tmp_path / "sweep.toml"
     scene.write_text(SWEEP)
@@ -274,7 +274,7 @@ def test_cli_scenarios_on_a_cluster(tmp_path, client, monkeypatch, capsys):
 
 
 def test_cli_bad_parallel_flags(tmp_path, monkeypatch, capsys):
-    from mbs.__main__ import main
+    from mbs.app.cli import main
     scene = tmp_path / "s.toml"
     scene.write_text(SWEEP.split("[[scenarios]]")[0])
     assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--workers", "0"]) == 2

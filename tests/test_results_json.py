@@ -1,4 +1,4 @@
-"""result.json (mbs.results): bounds read back exactly (never narrowed), NaN refused."""
+"""result.json (mbs.app.results): bounds read back exactly (never narrowed), NaN refused."""
 import json
 import math
 import struct
@@ -6,7 +6,7 @@ import struct
 import numpy as np
 import pytest
 
-from mbs.results import (ResultError, bound_from_json, bound_to_json, read_result, result_boxes,
+from mbs.app.results import (ResultError, bound_from_json, bound_to_json, read_result, result_boxes,
                          solution_to_dict, write_result)
 from verified.interval import Interval
 from verified.solver import Solution

@@ -1,11 +1,11 @@
-"""Scene files (mbs.scene): parsing, rigorous enclosure of numbers, clear errors."""
+"""Scene files (mbs.app.scene): parsing, rigorous enclosure of numbers, clear errors."""
 import math
 from fractions import Fraction
 
 import numpy as np
 import pytest
 
-from mbs.scene import SceneError, enclose_number, load_scene, loads_scene, output_times, scene_dir
+from mbs.app.scene import SceneError, enclose_number, load_scene, loads_scene, output_times, scene_dir
 
 GOOD = """
 name = "t"
@@ -175,7 +175,7 @@ t_end = 0.5
 def test_scene_model_names_users_type():
     """[model] name accepts the aliases of mbs.robots (panda -> panda_arm), like check."""
     from mbs.robots import load_model
-    from mbs.scene import loads_scene
+    from mbs.app.scene import loads_scene
     scene = loads_scene('[model]\nname = "panda"\n[initial]\nbox = ' + str([0.0] * 14) + '\n[simulation]\nt_end = 0.1\n')
     assert scene.build_model() == "panda"
     assert load_model("panda").n == 7 and load_model("panda").joint_names == load_model("panda_arm").joint_names

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mbs.scene import SceneError, loads_scene
+from mbs.app.scene import SceneError, loads_scene
 from mbs.simulate import simulate
 from models import pendulum as pd
 from verified.interval import Interval

@@ -165,8 +165,8 @@ def test_simulate_passes_the_solver_error_through(no_work):
 def test_scene_runner_reports_the_solver_error(no_work, tmp_path):
     """Settings each valid on their own but refused together reach the user of a
     scene as a one-line SceneError carrying the solver's message."""
-    from mbs.runner import run_scene
-    from mbs.scene import SceneError, load_scene, scene_dir
+    from mbs.app.runner import run_scene
+    from mbs.app.scene import SceneError, load_scene, scene_dir
     text = (scene_dir() / "pendulum_paper.toml").read_text()
     text = text.replace("tol = 1e-10", "tol = 1e-10\nh_min = 0.5\nh_max = 0.1").replace('mode = "ii"', 'mode = "i"')
     path = tmp_path / "bad.toml"

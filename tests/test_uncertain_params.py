@@ -10,7 +10,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from sampling import in_union, pinocchio_with
-from mbs.scene import SceneError, loads_scene
+from mbs.app.scene import SceneError, loads_scene
 from mbs.simulate import simulate, system_for
 from mbs.uncertain import ChainParameters, ParameterError
 from models import double_pendulum as dp
@@ -103,8 +103,8 @@ mode = "ii"
 def test_scene_with_parameter_interval_runs(tmp_path):
     """[parameters] m1 = [0.9, 1.1] used to crash (AttributeError: 'dict' object has no
     attribute 'width'); now it runs, samples the parameter and writes it out."""
-    from mbs.results import read_result
-    from mbs.runner import run_scene
+    from mbs.app.results import read_result
+    from mbs.app.runner import run_scene
     rep = run_scene(loads_scene(SCENE_M1), tmp_path, samples=12, figures=False)
     sol = rep["solution"]
     assert sol.status == "completed", sol.reason
@@ -311,7 +311,7 @@ t_end = 0.1
 
 
 def test_scene_unknown_payload_link_exits_2(tmp_path, capsys):
-    from mbs.__main__ import main
+    from mbs.app.cli import main
     p = tmp_path / "s.toml"
     p.write_text("""
 [model]
@@ -353,8 +353,8 @@ def test_system_parameters_by_name():
 def test_shipped_payload_scene_runs_from_the_cli(tmp_path, capsys):
     """models/scenes/double_pendulum_payload.toml (to 0.1 s here; its full 0.5 s run is
     in the slow test of every shipped scene): parameters sampled, figures with them."""
-    from mbs.__main__ import main
-    from mbs.results import read_result
+    from mbs.app.cli import main
+    from mbs.app.results import read_result
     assert main(["simulate", "double_pendulum_payload", "--out", str(tmp_path), "--t-end", "0.1",
                  "--samples", "8"]) == 0
     data = read_result(tmp_path / "result.json")

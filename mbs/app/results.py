@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["ResultError", "solution_to_dict", "write_result", "read_result", "bound_to_json",
-           "bound_from_json", "result_boxes"]
+           "bound_from_json", "result_boxes", "frame_to_json"]
 
 
 class ResultError(ValueError):
@@ -71,6 +71,18 @@ def bound_from_json(v) -> float:
 def _pairs(lo, hi):
     """[[lo, hi], ...] for 1-d bound arrays."""
     return [[bound_to_json(a), bound_to_json(b)] for a, b in zip(np.ravel(lo), np.ravel(hi))]
+
+
+def frame_to_json(frame) -> dict:
+    """result.json's ``frames.<name>`` entry of a :class:`mbs.frames.FrameEnclosure`:
+    per output time the position hull ``[[lo, hi]] x 3`` (m) and the rotation matrix
+    entries (row-major, 9 pairs), per step the tube's position hull; bounds as above
+    (exact doubles)."""
+    return {"method": frame.method, "t": [float(x) for x in frame.t],
+            "position": [_pairs(p.lo, p.hi) for p in frame.position],
+            "rotation": [_pairs(r.lo, r.hi) for r in frame.rotation],
+            "tube_t": [float(x) for x in frame.tube_t],
+            "tube": [_pairs(p.lo, p.hi) for p in frame.tube]}
 
 
 def _jsonable(v):
@@ -131,7 +143,7 @@ def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=
                              for k, (lo, hi) in params.items()}
     fr = getattr(sol, "frame", None)
     if frames and fr is not None:
-        out["frames"] = {str(k): fr(k).to_json() for k in frames}
+        out["frames"] = {str(k): frame_to_json(fr(k)) for k in frames}
     control = getattr(sol, "control", None)
     if control is not None:
         out["control"] = [c.name for c in control.controllers]

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ModelError
+from ..errors import ModelError
 from .scene import Scene, SceneError, output_times
-from .uncertain import ParameterError
+from ..uncertain import ParameterError
 
 __all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "sample_states", "final_widths"]
 
@@ -21,7 +21,7 @@ def reference_system(model, mode="ii", energy_rate="unsimplified", params=None, 
     under ``control`` the closed loop, with the state ``t`` for time-dependent
     references). Uses :func:`mbs.simulate.system_for` (the system the simulation
     integrates)."""
-    from .simulate import system_for
+    from ..simulate import system_for
     return system_for(model, "ii" if mode == "i" else mode, energy_rate=energy_rate, params=params,
                       control=control, q_init=q_init)
 
@@ -128,9 +128,9 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     sampling it skips the rest of the sampling and the figures. Either way
     result.json is written with everything verified so far."""
     from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
-    from .progress import Progress
+    from ..progress import Progress
     from .results import write_result
-    from .simulate import simulate
+    from ..simulate import simulate
 
     log = log or (lambda *a, **k: None)
     out = Path(out)
@@ -154,7 +154,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     x0 = scene.initial_box(names)
     kw = scene.simulate_kwargs(names)
     if scene.control is not None:
-        from .control import ControlError
+        from ..control import ControlError
         try:
             system = reference_system(model, mode, params=kw.get("params"), control=scene.control,
                                       q_init=np.asarray(x0.mid(), float)[:len(names) // 2])
@@ -212,7 +212,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
              "samples_escaped": report["escaped"], "output_times_requested": len(want) + 1}
     frames = []
     if getattr(sol, "frame", None) is not None and len(sol.t):
-        from .frames import default_frame
+        from ..frames import default_frame
         frames = list(scene.frames) if scene.frames else [default_frame(sol.frame.chain)]
         bad = [f for f in frames if f not in sol.frame.chain.frames]
         if bad:

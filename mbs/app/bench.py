@@ -32,11 +32,11 @@ from verified.interval import Interval
 
 __all__ = ["run", "work_precision", "stress_cases", "startup", "run_case"]
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]  # the directory holding the mbs package
 
 
 def _simulate():
-    from .simulate import simulate
+    from ..simulate import simulate
     return simulate
 
 

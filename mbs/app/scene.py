@@ -110,7 +110,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 import numpy as np
 
-from .errors import ModelError
+from ..errors import ModelError
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "enclose_number", "PAPER_MODELS",
            "MODES", "scene_dir"]
@@ -390,13 +390,13 @@ def output_times(t_end: float, output_dt: float | None) -> list:
     """The output times of a run: ``k * output_dt`` (one float product each, never
     accumulated) for k = 1, 2, ... up to t_end, plus t_end (see
     :func:`mbs.simulate.output_times`)."""
-    from .simulate import output_times as _times
+    from ..simulate import output_times as _times
     return [float(t) for t in _times(0.0, float(t_end), output_dt)]
 
 
 def _resolve_urdf(spec: str, base: Path | None, where: str) -> str:
     if spec.startswith(ERD_PREFIX):
-        from . import robots
+        from .. import robots
         name = spec[len(ERD_PREFIX):]
         try:
             return str(robots.urdf_path(name))
@@ -420,7 +420,7 @@ def _build_model(scene: Scene):
     where = f"{scene.source}: [model]"
     if "name" in spec:
         return spec["name"]
-    from .chain import Chain
+    from ..chain import Chain
     try:
         if "urdf" in spec:
             chain = Chain.from_urdf(spec["urdf"], lock=spec.get("lock"),
@@ -479,7 +479,7 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     spec = dict(model)
     if "name" in model:
         from models.registry import NAMES
-        from .robots import ALIASES
+        from ..robots import ALIASES
         known = tuple(NAMES) + PAPER_MODELS + tuple(sorted(set(ALIASES) - set(NAMES)))
         if model["name"] not in known:
             raise SceneError(f"{where} name: unknown model {model['name']!r}; choose one of "
@@ -588,7 +588,7 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     # [control]
     control = data.get("control")
     if control is not None:
-        from .control import ControlError, parse_control
+        from ..control import ControlError, parse_control
         try:
             parse_control(control)   # structure now; joints and gains against the model when it runs
         except ControlError as e:
@@ -613,7 +613,7 @@ def _table_of_intervals(value, where: str, what: str) -> dict:
 
 
 def _payload(item, where: str) -> dict:
-    from .uncertain import _PAYLOAD_KEYS
+    from ..uncertain import _PAYLOAD_KEYS
     if not isinstance(item, dict):
         raise SceneError(f"{where}: expected a table with link, mass and com, got {item!r}")
     allowed = tuple(k for k in _PAYLOAD_KEYS if k != "inertia")
@@ -637,7 +637,7 @@ def _payload(item, where: str) -> dict:
 def _parameters(table: dict, spec: dict, where: str):
     """[parameters]: (named parameters {name: (lo, hi)}, physical parameters in the
     form of :mod:`mbs.uncertain`, every number enclosed)."""
-    from .uncertain import PHYSICAL_KEYS
+    from ..uncertain import PHYSICAL_KEYS
     params, physical = {}, {}
     for k, v in table.items():
         w = f"{where} {k}"
@@ -668,7 +668,7 @@ def _parameters(table: dict, spec: dict, where: str):
         if "urdf" in spec:
             allowed = ()
         elif spec.get("name") in PAPER_MODELS:
-            from .simulate import _paper_param_names
+            from ..simulate import _paper_param_names
             from models import double_pendulum, pendulum
             allowed = tuple(_paper_param_names(pendulum if spec["name"] == "pendulum_paper" else double_pendulum))
         elif "name" in spec:

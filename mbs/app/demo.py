@@ -34,7 +34,7 @@ def settings(pieces=None):
     ``DEMO["pieces"]``); ``simulate("double_pendulum_paper", x0, T, mode=m,
     output_dt=DEMO["output_dt"], **kwargs)`` is what the demo runs for mode ``m``."""
     from .scene import load_scene
-    from .simulate import system_for
+    from ..simulate import system_for
 
     scene = load_scene("double_pendulum_paper")
     names = system_for("double_pendulum_paper", "ii").state_names
@@ -56,7 +56,7 @@ def _table(rows, header):
 def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int:
     from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
     from .runner import check_samples
-    from .simulate import MODES, simulate, system_for
+    from ..simulate import MODES, simulate, system_for
 
     t_all = time.perf_counter()
     t_end = DEMO["t_end"] if t_end is None else t_end
