@@ -2,6 +2,7 @@
 
     python benchmarks/bench_consistency.py            # full (a few minutes on 2 cores)
     python benchmarks/bench_consistency.py --quick    # seconds; run by the tests
+    python benchmarks/bench_consistency.py --only 7 --out docs   # docs/work_precision.{png,json}
 
 Tables:
 1. the paper's double pendulum (eq. 22, box 25): widths over time per mode, worst
@@ -13,7 +14,8 @@ Tables:
 6. the damped URDF double pendulum (example-robot-data) with an uncertain angle;
 7. work-precision (issue 13): the same solver without the test, with the energy
    contraction, with contraction + pruning, with pruning only, over piece counts
-   (docs/work_precision.png, docs/work_precision.json).
+   (work_precision.png, work_precision.json in ``--out DIR``, default the current
+   working directory; the docs' copies: ``--out docs``).
 Ratios are measured side by side in one run (the machine is shared and noisy).
 """
 from __future__ import annotations
@@ -167,12 +169,13 @@ def _test_for(system, **kw):
     return EnergyTest(system.energy, rate, **kw)
 
 
-def work_precision(out_json="docs/work_precision.json", plot="docs/work_precision.png", quick=False,
-                   full_variants=False):
+def work_precision(out_json="work_precision.json", plot="work_precision.png", quick=False,
+                   full_variants=False, out="."):
     """Worst ratio (widest state / sampled true hull) against wall time over piece
     counts, the same solver with and without the test: mode (iii)'s graphs (eq. 22 / 18)
     without a test, with the energy contraction every step only, and with contraction +
-    branch and prune at the per-set RA maxima (modes ii/iii's default)."""
+    branch and prune at the per-set RA maxima (modes ii/iii's default). ``out_json`` and
+    ``plot`` are relative to the directory ``out`` (None: not written)."""
     import json
     from mbs.simulate import system_for
     from verified.policies import BlockBasis
@@ -212,11 +215,13 @@ def work_precision(out_json="docs/work_precision.json", plot="docs/work_precisio
                                     t_reached=s.t_reached, ratio=ratio, wall_s=s.stats["wall_s"]))
                 print(f"{label:<22} {pieces:>6} {vname:<22} {s.status:<10} {s.t_reached:6.3f} {ratio:8.4f} "
                       f"{s.stats['wall_s']:7.2f}", flush=True)
+    if out_json or plot:
+        os.makedirs(out, exist_ok=True)
     if out_json:
-        with open(out_json, "w") as fh:
+        with open(os.path.join(out, out_json), "w") as fh:
             json.dump(results, fh, indent=1)
     if plot:
-        _plot_work_precision(results, plot)
+        _plot_work_precision(results, os.path.join(out, plot))
     return results
 
 
@@ -268,6 +273,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (seconds)")
     ap.add_argument("--only", type=int, nargs="*", help="run only these sections (1-7)")
+    ap.add_argument("--out", default=".", metavar="DIR",
+                    help="section 7 writes work_precision.json and .png here (default: the current "
+                         "directory; docs/work_precision.*: --out docs)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     if args.quick:
@@ -276,7 +284,7 @@ def main(argv=None):
     else:
         sections = {1: lambda: double_pendulum_modes(1.0, 64, False), 2: lambda: single_box_breakdown(1.2),
                     3: lambda: strategies(0.8, 16), 4: lambda: simplified_vs_not(0.8, 16), 5: pendulum_ra,
-                    6: lambda: urdf_robot(0.3), 7: work_precision}
+                    6: lambda: urdf_robot(0.3), 7: lambda: work_precision(out=args.out)}
         for k in args.only or sorted(sections):
             sections[k]()
     print(f"\ntotal {time.perf_counter() - t0:.1f} s")

@@ -23,3 +23,17 @@ def test_stress_case_never_raises():
     from verified.interval import Interval
     row = bench.run_case("bad", "pendulum_paper", Interval([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]), 0.1)
     assert row["status"] == "crash" and "states" in row["reason"]
+
+
+def test_bench_writes_into_out_bench_of_the_working_directory(tmp_path, monkeypatch):
+    """Without --out the full run writes out/bench/ under the current directory, not the
+    installed package's docs (issue 15); the measurements are stubbed out here."""
+    from mbs.app import figures
+    monkeypatch.setattr(bench, "work_precision", lambda *a, **k: [])
+    monkeypatch.setattr(bench, "stress_cases", lambda *a, **k: [])
+    monkeypatch.setattr(bench, "startup", lambda *a, **k: [])
+    monkeypatch.setattr(figures, "fig_work_precision", lambda rows, path, title=None: Path(path).write_bytes(b""))
+    monkeypatch.chdir(tmp_path)
+    assert bench.run(log=lambda *_: None) == 0
+    assert (tmp_path / "out" / "bench" / "benchmarks.md").is_file()
+    assert (tmp_path / "out" / "bench" / "work_precision.png").is_file()

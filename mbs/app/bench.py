@@ -1,4 +1,8 @@
-"""``python -m mbs bench``: work-precision table and stress tests (docs/benchmarks.md).
+"""``python -m mbs bench [--out DIR]``: work-precision table and stress tests.
+
+Writes ``DIR/benchmarks.md`` and ``DIR/work_precision.png``; ``DIR`` defaults to
+``out/bench`` under the current working directory (never into the installed package).
+The report in a checkout's docs is ``python -m mbs bench --out docs``.
 
 1. Work-precision on the paper's double pendulum (eq. 22, box 25): for each mode
    (i, ii, iii), Taylor order and subdivision of x1(0), the final widths, their
@@ -32,7 +36,11 @@ from verified.interval import Interval
 
 __all__ = ["run", "work_precision", "stress_cases", "startup", "run_case"]
 
-REPO = Path(__file__).resolve().parents[2]  # the directory holding the mbs package
+#: the directory holding the mbs package (put on the start-up subprocesses' PYTHONPATH)
+REPO = Path(__file__).resolve().parents[2]
+
+#: where ``run`` writes without ``out`` (relative to the current working directory)
+DEFAULT_OUT = Path("out") / "bench"
 
 
 def _simulate():
@@ -300,11 +308,12 @@ def report_markdown(wp, stress, start, command, wall, t_end) -> str:
 
 def run(quick=False, out=None, log=print) -> int:
     """Run the benchmarks; write ``out``/benchmarks.md and work_precision.png (default
-    out: docs/ for the full run, a temporary directory for --quick). Returns 1 if a
-    case crashed, produced a NaN or missed a sampled trajectory."""
+    out: :data:`DEFAULT_OUT`, ``out/bench`` in the current working directory, for the
+    full run, a temporary directory for --quick). Returns 1 if a case crashed, produced
+    a NaN or missed a sampled trajectory."""
     from .figures import fig_work_precision
     t0 = time.perf_counter()
-    out = Path(out) if out else (REPO / "docs" if not quick else Path(tempfile.mkdtemp(prefix="mbs-bench-")))
+    out = Path(out) if out else (DEFAULT_OUT if not quick else Path(tempfile.mkdtemp(prefix="mbs-bench-")))
     t_end = 0.3 if quick else 0.5
     log(f"work-precision (double pendulum, T = {t_end:g})")
     if quick:

@@ -159,9 +159,11 @@ def main(argv=None):
                                  "or a URDF file path (what a scene's [model] accepts)")
     p.add_argument("--tol", type=float, default=1e-9)
     p.add_argument("--numeric-only", action="store_true", help="skip the symbolic model")
-    p = sub.add_parser("bench", help="work-precision table and stress tests (docs/benchmarks.md)")
+    p = sub.add_parser("bench", help="work-precision table and stress tests (benchmarks.md in --out)")
     p.add_argument("--quick", action="store_true", help="small fast version (used by the tests)")
-    p.add_argument("--out", default=None, help="write the report and the plot here")
+    p.add_argument("--out", default=None, help="write benchmarks.md and work_precision.png here (default "
+                                               "out/bench; --quick: a temporary directory; a checkout's "
+                                               "docs/benchmarks.md: --out docs)")
     args = parser.parse_args(argv)
     if args.command == "simulate":
         return cmd_simulate(args)
