@@ -82,6 +82,10 @@ ALIASES = {"panda": "panda_arm", "franka": "panda_arm", "ur5_robot": "ur5",
            "double_pendulum": "double_pendulum_urdf"}
 ERD_PREFIX = "example-robot-data:"
 
+#: the paper's models (sec. 5.1, 5.2), names :func:`mbs.simulate.simulate` builds itself:
+#: a DH chain in modes i/ii, the hand-written eqs. (18)/(19), (22)/(24) in mode iii
+PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
+
 
 def model_names() -> list:
     """Every model name :func:`load_model` accepts besides paths and

@@ -32,18 +32,18 @@ from verified.interval import Interval, _as_interval
 from verified.solver import Solution, solve
 
 from .errors import ModelError
+from .modes import ALL_MODES, MODES, Mode, get_mode
 from .numeric import PIVOT_TOL
+from .robots import PAPER_MODELS
 from .system import System
 
-__all__ = ["MODES", "PAPER_MODELS", "simulate", "compare_modes", "system_for", "width_deviations",
+__all__ = ["MODES", "Mode", "PAPER_MODELS", "simulate", "compare_modes", "system_for", "width_deviations",
            "WidthDeviations", "output_times"]
 
-MODES = ("i", "ii", "iii")
-PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
-
 #: consistency-test settings per mode (the paper's: 0.1 s / 10 parts in mode (ii),
-#: 0.01 s / 50 parts in mode (iii))
-TEST_DEFAULTS = {"ii": dict(test_interval=0.1, test_splits=10), "iii": dict(test_interval=0.01, test_splits=50)}
+#: 0.01 s / 50 parts in mode (iii)); the fields of :mod:`mbs.modes`
+TEST_DEFAULTS = {m.name: dict(test_interval=m.test_interval, test_splits=m.test_splits)
+                 for m in ALL_MODES if m.energy_test}
 
 
 def _paper_param_names(mod) -> list:
@@ -65,13 +65,13 @@ def _paper_chain(name: str, params: dict | None):
     return mod.chain(**kw) if mod is pd else mod.dh_chain(**kw)
 
 
-def _paper_system(name: str, mode: str, energy_rate: str, cparams=None) -> System:
+def _paper_system(name: str, mode: Mode, energy_rate: str, cparams=None) -> System:
     from verified.graph import from_sympy, trace
 
     from models import double_pendulum as dp
     from models import pendulum as pd
 
-    if mode != "iii":
+    if not mode.symbolic:
         if cparams is not None:
             return _chain_system(cparams.chain, mode, energy_rate, name=name, cparams=cparams)
         chain = pd.chain() if name == "pendulum_paper" else dp.dh_chain()
@@ -141,22 +141,22 @@ def _prove_conservative(mod, n: int):
         raise ModelError(f"{mod.__name__}: dH/dt does not simplify to 0 ({rate})")
 
 
-def _chain_system(chain, mode: str, energy_rate: str, name: str | None = None, cparams=None) -> System:
+def _chain_system(chain, mode: Mode, energy_rate: str, name: str | None = None, cparams=None) -> System:
     name = name or getattr(chain, "name", "chain")
     if cparams is not None:
-        if mode == "iii":
+        if mode.symbolic:
             raise ValueError(f"{name}: uncertain parameters of a chain ({', '.join(cparams.names)}) are "
                              "supported in modes i and ii (the symbolic model of mode iii takes none)")
         rhs = cparams.rhs_graph()
-        if mode == "i":
+        if not mode.energy_test:
             return System(name=name, rhs=rhs, params=cparams.as_dict(),
                           description="numeric model (crba/rnea) with parameters, no test")
         return System(name=name, rhs=rhs, energy=cparams.energy_graph(), energy_rate=None, params=cparams.as_dict(),
                       description="numeric model with parameters; dH/dt by forward-mode AD of H along the ODE")
-    if mode in ("i", "ii"):
+    if not mode.symbolic:
         num = chain.numeric()
         rhs = num.rhs_graph()
-        if mode == "i":
+        if not mode.energy_test:
             return System(name=name, rhs=rhs, description="numeric model (crba/rnea), no test")
         return System(name=name, rhs=rhs, energy=num.energy_graph(), energy_rate=None,
                       description="numeric model; dH/dt by forward-mode AD of H along the ODE")
@@ -186,7 +186,7 @@ class _MassMatrix:
         self.n = chain.n
 
 
-def system_for(model, mode: str = "ii", *, energy_rate: str = "unsimplified", params=None, control=None,
+def system_for(model, mode: str | Mode = "ii", *, energy_rate: str = "unsimplified", params=None, control=None,
                q_init=None) -> System:
     """The :class:`System` that ``mode`` integrates for ``model`` (see module docstring);
     ``params`` and ``control`` as for :func:`simulate` (``q_init``: the pose a PD
@@ -225,9 +225,8 @@ def _model_chain(model, params):
 def _controlled_system(model, mode, params, control, q_init):
     """(System, _MassMatrix, ClosedLoop) of ``model`` under ``control`` (modes i, ii)."""
     from .control import closed_loop
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-    if mode == "iii":
+    mode = get_mode(mode)
+    if mode.symbolic:
         raise ValueError("controllers are supported in modes i and ii (the numeric model); "
                          "mode iii's symbolic models take no torque inputs")
     chain, cp, name = _model_chain(model, params)
@@ -235,7 +234,7 @@ def _controlled_system(model, mode, params, control, q_init):
     rhs = loop.rhs_graph()
     pdict = {k: (float(a), float(b)) for k, a, b in zip(loop.param_names, loop.lo, loop.hi)}
     what = ", ".join(c.name for c in loop.controllers)
-    if mode == "i":
+    if not mode.energy_test:
         system = System(name=name, rhs=rhs, params=pdict, description=f"numeric model under control ({what}), no test")
     else:
         system = System(name=name, rhs=rhs, energy=loop.energy_graph(), energy_rate=loop.energy_rate_graph(),
@@ -244,15 +243,14 @@ def _controlled_system(model, mode, params, control, q_init):
     return system, _MassMatrix(chain, cp), loop
 
 
-def _system_and_chain(model, mode: str, energy_rate: str, params=None):
+def _system_and_chain(model, mode: str | Mode, energy_rate: str, params=None):
     """(System, _MassMatrix of the chain behind it or None) -- the chain for the
     mass-matrix checks."""
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    mode = get_mode(mode)
     if energy_rate not in ("unsimplified", "simplified"):
         raise ValueError(f"energy_rate must be 'unsimplified' or 'simplified', got {energy_rate!r}")
     if isinstance(model, System):
-        if mode == "i":
+        if not mode.energy_test:
             model = System(name=model.name, rhs=model.rhs, params=model.params, description=model.description)
         elif not model.has_energy:
             raise ModelError(f"{model.name}: mode {mode} needs an energy graph (System.energy)")
@@ -345,7 +343,7 @@ def _initial_box(x0, n: int, name: str) -> Interval:
     return box
 
 
-def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, output_dt: float | None = None,
+def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.0, output_dt: float | None = None,
              params=None, order: int = 12, tol: float = 1e-10, subdivision=None,
              energy_rate: str = "unsimplified", test_interval: float | None = None, test_splits: int | None = None,
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
@@ -361,7 +359,7 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
         Initial state box, ``x = (q, qd)`` in rad and rad/s (m, m/s for prismatic).
     t_end : float
         Final time (s).
-    mode : "i", "ii" or "iii"
+    mode : "i", "ii" or "iii" (or a :class:`mbs.modes.Mode`)
     output_dt : float or None
         Output every ``output_dt`` seconds (at exactly ``k * output_dt``); default: ``t_end`` only.
     params : dict or None
@@ -454,13 +452,13 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
         _check_initial_mass_matrix(masses, box)
     if split_strategy not in STRATEGIES:
         raise ValueError(f"split_strategy must be one of {STRATEGIES}, got {split_strategy!r}")
+    mode = get_mode(mode)  # validated above (_system_and_chain, _controlled_system)
     test = None
-    if mode != "i":
-        defaults = TEST_DEFAULTS[mode]
+    if mode.energy_test:
         rate = "zero" if system.conservative else ("derive" if system.energy_rate is None else system.energy_rate)
         test = EnergyTest(system.energy, rate, constraints,
-                          max_interval=defaults["test_interval"] if test_interval is None else test_interval,
-                          splits=defaults["test_splits"] if test_splits is None else test_splits,
+                          max_interval=mode.test_interval if test_interval is None else test_interval,
+                          splits=mode.test_splits if test_splits is None else test_splits,
                           strategy=split_strategy, refine=refine, min_gain=min_gain, backward_depth=backward_depth,
                           max_boxes=solver_kwargs.get("max_boxes", 4096), contract=contract, prune=prune)
     elif constraints:
@@ -499,7 +497,7 @@ def simulate(model, x0, t_end: float, *, mode: str = "ii", t0: float = 0.0, outp
             bar.close()
     if masses is not None:
         _prove_mass_matrix(masses, sol)
-    sol.mode = mode
+    sol.mode = mode.name
     sol.state_names = system.state_names
     sol.params = _params_record(system, ode_params)
     sol.control = loop

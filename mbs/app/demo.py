@@ -56,7 +56,8 @@ def _table(rows, header):
 def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int:
     from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
     from .runner import check_samples
-    from ..simulate import MODES, simulate, system_for
+    from ..modes import ALL_MODES, MODE_I, MODE_II, MODES
+    from ..simulate import simulate, system_for
 
     t_all = time.perf_counter()
     t_end = DEMO["t_end"] if t_end is None else t_end
@@ -65,8 +66,9 @@ def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int
     x0, kw = settings(pieces)
     log(f"Double pendulum of the paper (eq. 22, box 25), x1(0) split into {pieces} pieces "
         f"(error basis {kw.get('error_basis', 'qr')!r}), T = {t_end:g} s,")
-    log(f"energy test every {kw.get('test_interval', 0.1):g} s with {kw.get('test_splits', 10)} splits "
-        f"(modes ii and iii).\n")
+    tested = [m.name for m in ALL_MODES if m.energy_test]
+    log(f"energy test every {kw.get('test_interval', MODE_II.test_interval):g} s with "
+        f"{kw.get('test_splits', MODE_II.test_splits)} splits (modes {' and '.join(tested)}).\n")
     sols, walls = {}, {}
     for mode in MODES:
         t0 = time.perf_counter()
@@ -81,7 +83,7 @@ def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int
     pts[:, 0] = np.linspace(lo[0], hi[0], samples)
     t_out = max((s.t for s in sols.values()), key=len)
     dense = np.unique(np.concatenate([t_out, np.linspace(0, t_end, 201)]))
-    traj = sample_trajectories(system_for("double_pendulum_paper", "i").rhs, pts, dense)
+    traj = sample_trajectories(system_for("double_pendulum_paper", MODE_I).rhs, pts, dense)
     escaped = 0
     for mode, s in sols.items():
         at = traj[:, np.searchsorted(dense, np.asarray(s.t, float)), :]
@@ -116,11 +118,11 @@ def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int
     out = Path(out)
     paths = [fig_enclosures(sols, out / "fig5_enclosures.png", samples=traj, sample_times=dense,
                             title="Double pendulum (paper Fig. 5): (i) black, (ii) grey, (iii) dashed")]
-    s2 = sols["ii"]
+    s2 = sols[MODE_II.name]  # Figs. 2 and 3: mode ii, as in the paper
     if s2.consistency is not None and len(s2.consistency.ra_t) > 1:
         paths.append(fig_reduction_area(s2, out / "fig2_reduction_area.png"))
     if s2.consistency is not None and s2.consistency.tests:
-        paths.append(fig_consistency_plane(s2, system_for("double_pendulum_paper", "ii").energy,
+        paths.append(fig_consistency_plane(s2, system_for("double_pendulum_paper", MODE_II).energy,
                                            out / "fig3_consistency_plane.png"))
     log("\nFigures: " + ", ".join(str(p) for p in paths))
     verdict = "every enclosure contains all" if not escaped else f"{escaped} sampled states OUTSIDE the enclosures of"

@@ -18,12 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..modes import MODE_I, MODE_II, MODE_III
+
 __all__ = ["fig_reduction_area", "fig_consistency_plane", "fig_enclosures", "fig_work_precision",
            "sample_trajectories", "sample_initial_points", "inconsistent_cells"]
 
-MODE_STYLE = {"i": dict(color="black", ls="-", lw=1.2, label="(i) numeric, no test"),
-              "ii": dict(color="0.55", ls="-", lw=2.2, label="(ii) numeric + energy test"),
-              "iii": dict(color="tab:blue", ls="--", lw=1.2, label="(iii) symbolic + energy test")}
+MODE_STYLE = {MODE_I.name: dict(color="black", ls="-", lw=1.2, label=MODE_I.label),
+              MODE_II.name: dict(color="0.55", ls="-", lw=2.2, label=MODE_II.label),
+              MODE_III.name: dict(color="tab:blue", ls="--", lw=1.2, label=MODE_III.label)}
 
 
 def _plt():
@@ -305,7 +307,7 @@ def fig_work_precision(rows, path, title=None):
     """rows: dicts with "mode", "order", "pieces", "wall_s", "worst_ratio" (None = breakdown)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 5))
-    markers = {"i": "o", "ii": "s", "iii": "^"}
+    markers = dict(zip((MODE_I.name, MODE_II.name, MODE_III.name), "os^"))
     orders = sorted({r["order"] for r in rows})
     cmap = plt.get_cmap("viridis")
     for r in rows:

@@ -15,14 +15,16 @@ __all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "s
 
 
 def reference_system(model, mode="ii", energy_rate="unsimplified", params=None, control=None, q_init=None):
-    """The :class:`mbs.system.System` of a model (a name or a Chain) in ``mode``: the
+    """The :class:`mbs.system.System` of a model (a name or a Chain) in ``mode`` (mode i:
+    the same numeric model with its energy, as in mode ii): the
     float right-hand side for sampling and the energy graph for Fig. 3 (with the
     uncertain ``params`` as graph parameters, see :func:`mbs.simulate.simulate`;
     under ``control`` the closed loop, with the state ``t`` for time-dependent
     references). Uses :func:`mbs.simulate.system_for` (the system the simulation
     integrates)."""
+    from ..modes import get_mode
     from ..simulate import system_for
-    return system_for(model, "ii" if mode == "i" else mode, energy_rate=energy_rate, params=params,
+    return system_for(model, get_mode(mode).with_energy_test, energy_rate=energy_rate, params=params,
                       control=control, q_init=q_init)
 
 

@@ -111,13 +111,12 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 import numpy as np
 
 from ..errors import ModelError
+from ..modes import MODES, get_mode
+from ..robots import PAPER_MODELS
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "enclose_number", "PAPER_MODELS",
            "MODES", "scene_dir"]
 
-#: models built by mbs.simulate in addition to models.registry.NAMES
-PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
-MODES = ("i", "ii", "iii")
 ERD_PREFIX = "example-robot-data:"
 
 _TOP = {"name", "description", "model", "parameters", "initial", "simulation", "solver", "consistency", "control"}
@@ -593,7 +592,7 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
             parse_control(control)   # structure now; joints and gains against the model when it runs
         except ControlError as e:
             raise SceneError(f"{source}: {e}") from None
-        if mode == "iii":
+        if get_mode(mode).symbolic:
             raise SceneError(f"{source}: [control] needs mode i or ii (the numeric model), not iii")
 
     scene = Scene(source=source, name=name, description=description, model_spec=spec,
