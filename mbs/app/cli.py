@@ -8,10 +8,10 @@
                                  # a URDF path)
     python -m mbs bench [--quick] [--out DIR]
 
-``simulate`` writes DIR/result.json (see :mod:`mbs.results`) and the figures
-(:mod:`mbs.figures`): enclosures.png (Fig. 5), and in modes ii/iii
+``simulate`` writes DIR/result.json (see :mod:`mbs.app.results`) and the figures
+(:mod:`mbs.app.figures`): enclosures.png (Fig. 5), and in modes ii/iii
 reduction_area.png (Fig. 2) and consistency_plane.png (Fig. 3). SCENE is a TOML file
-(:mod:`mbs.scene`) or the name of a shipped scene (``double_pendulum_paper``).
+(:mod:`mbs.app.scene`) or the name of a shipped scene (``double_pendulum_paper``).
 The console script ``mbs`` is the same command (``mbs simulate SCENE --out DIR``).
 
 Exit codes of ``simulate``: 0 completed (every enclosure verified up to t_end, every
