@@ -60,7 +60,8 @@ def _check(sol, f, lo, hi, t_end, n_random=40):
     assert not bad, f"{len(bad)} sampled states outside, first at t = {bad[0][0]}"
 
 
-@pytest.mark.parametrize("strategy", ["gradient", "widest", "grid"])
+# ("grid": 10 s, behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.parametrize("strategy", ["gradient", "widest", pytest.param("grid", marks=pytest.mark.slow)])
 def test_pendulum_pruning_keeps_every_sampled_trajectory(strategy):
     """Sec. 5.1's pendulum: the parts kept after each test hold every sampled state."""
     rhs, H = _pendulum_graphs()

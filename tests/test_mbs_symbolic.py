@@ -128,7 +128,9 @@ def test_coriolis_equals_christoffel_form():
     assert np.allclose(_subs(s.coriolis, s, q, qd), _subs(expected, s, q, qd), atol=1e-12)
 
 
-@pytest.mark.parametrize("make", [lambda: planar.planar_chain(2, damping=0.05), robots.ur5])
+# (UR5: 10 s, behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.parametrize("make", [lambda: planar.planar_chain(2, damping=0.05),
+                                  pytest.param(robots.ur5, marks=pytest.mark.slow, id="ur5")])
 def test_graphs_match_numeric(make):
     from verified.interval import Interval
     chain = make()

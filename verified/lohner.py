@@ -82,6 +82,9 @@ class LohnerStepper:
         self.absorb_ratio = self.ABSORB_RATIO
         self.max_params = self.PARAMS_PER_STATE * self.n
         self.absorbed = 0
+        # at the cap, merge the least wide absorbed parameters to make room (doubletons)
+        self.merge = True
+        self.merged = 0
         self.params = params
         # an affine Jacobian evaluator can take the set's own forms (see step)
         self.jacobian_over_set = hasattr(variational, "series")
@@ -132,7 +135,8 @@ class LohnerStepper:
         if self.jacobian_over_set:
             # affine forms over the set's own parameters: the set (a parallelepiped
             # plus an error box, often flat in the state space) instead of its hull
-            forms = sets.affine_forms(extra=n * n)
+            own = sets.C.shape[2] if getattr(self.variational, "all_symbols", False) else None
+            forms = sets.affine_forms(extra=n * n, own_symbols=own)
             forms[n:, :, 0] = np.eye(n).reshape(-1)[:, None]
             vc = self.variational.series(forms, K - 1, self._params(nb))
         else:
@@ -178,7 +182,9 @@ class LohnerStepper:
         count), up to ``max_params`` parameters (then the error stays in ``r``).
         Measured (3-link arm, q +- 1e-4, affine): break-down 0.73 s -> 0.96 s at 8 per
         state; 1.02 s at 16 with 20 % more cost."""
-        if sets.C.shape[2] + self.n > self.max_params:
+        m = sets.C.shape[2]
+        at_cap = m + self.n > self.max_params
+        if at_cap and not (self.merge and hasattr(sets, "merge_params")):
             return sets
         carried = sets.linear_width()
         err = linalg.matvec(sets.Q, sets.r).width()
@@ -187,6 +193,15 @@ class LohnerStepper:
         floor = 1e-12 * (1.0 + np.abs(sets.c))
         if not (err > self.absorb_ratio * carried + floor).any():
             return sets
+        if at_cap:
+            # make room: the least wide absorbed parameters become n covering ones
+            # (DoubletonSets.merge_params), so the error part keeps being absorbed
+            # instead of wrapping at the rate of ||J|| from here on
+            merged = sets.merge_params(m + 2 * self.n - self.max_params, keep_first=self.n)
+            if merged.C.shape[2] + self.n > self.max_params:
+                return sets
+            sets = merged
+            self.merged += 1
         self.absorbed += 1
         return sets.absorb_error()
 

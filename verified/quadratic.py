@@ -125,8 +125,9 @@ class QuadraticSets:
     def hull(self) -> Interval:
         return self.doubleton().hull() + self.q_range()
 
-    def affine_forms(self, extra: int = 0) -> np.ndarray:
-        """Affine forms of the sets over their own ``m + n`` parameters, shape
+    def affine_forms(self, extra: int = 0, own_symbols: int | None = None) -> np.ndarray:
+        """Affine forms of the sets over their own ``m + n`` parameters (each its own
+        symbol: ``own_symbols`` is accepted for the doubleton's signature), shape
         (n + extra, B, m + n + 2), as :meth:`DoubletonSets.affine_forms`: ``x = c + C a +
         Q b + e`` with ``a`` over ``hull(r0, 0)``, ``b`` over ``hull(r, 0)`` and the range of
         ``q`` (with 0) in the error term ``e``. The forms cover the set and every segment

@@ -390,6 +390,7 @@ def solve(
         run.stop(f"interrupted (KeyboardInterrupt) after t = {run.tube_t[-1]:g}", "interrupted")
     result = run.solution(setup.n_state, order, boxes.shape[0], steps, tuple(prob.graph.input_names[:setup.n_state]))
     result.stats["absorbed"] = getattr(stepper, "absorbed", 0)
+    result.stats["merged"] = getattr(stepper, "merged", 0)
     result.stats["wall_s"] = time.perf_counter() - wall0
     for hook in hook_list:
         hook.after_run(result)  # records and statistics of the hooks
