@@ -190,6 +190,13 @@ def test_solver_set_order_and_merge_slack():
     _err(GOOD.replace("order = 12\n", "order = 12\nset_order = 3\n"), "set_order", "not 1 or 2")
 
 
+def test_solver_arithmetic():
+    for name in ("interval", "affine", "taylor_model"):
+        kw = loads_scene(GOOD.replace("order = 12\n", f"order = 12\narithmetic = '{name}'\n")).simulate_kwargs(NAMES)
+        assert kw["arithmetic"] == name
+    _err(GOOD.replace("order = 12\n", "order = 12\narithmetic = 'taylor'\n"), "arithmetic", "'taylor_model'")
+
+
 def test_control_scenes_parse():
     """[control] tables are kept for simulate; structure errors name the file and key."""
     from mbs.control import parse_control

@@ -21,7 +21,7 @@ __all__ = ["check_graph", "check_settings", "initial_boxes", "check_params", "ch
            "ERROR_BASES", "ARITHMETICS"]
 
 ERROR_BASES = ("qr", "auto")
-ARITHMETICS = ("interval", "affine")
+ARITHMETICS = ("interval", "affine", "taylor_model")
 
 
 def check_arithmetic(arithmetic) -> str:

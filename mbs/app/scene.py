@@ -562,8 +562,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
             solver[k] = _typed(v, _SOLVER[k], f"{where} {k}", positive=True)
     if "error_basis" in solver and solver["error_basis"] not in ("qr", "auto"):
         raise SceneError(f"{where} error_basis: {solver['error_basis']!r} is not 'qr' or 'auto'")
-    if "arithmetic" in solver and solver["arithmetic"] not in ("interval", "affine"):
-        raise SceneError(f"{where} arithmetic: {solver['arithmetic']!r} is not 'interval' or 'affine'")
+    if "arithmetic" in solver and solver["arithmetic"] not in ("interval", "affine", "taylor_model"):
+        raise SceneError(f"{where} arithmetic: {solver['arithmetic']!r} is not 'interval', 'affine' or 'taylor_model'")
     if "order" in solver and solver["order"] < 2:
         raise SceneError(f"{where} order: must be >= 2")
     if "set_order" in solver and solver["set_order"] not in (1, 2):
