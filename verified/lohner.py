@@ -85,6 +85,7 @@ class LohnerStepper:
         # at the cap, merge the least wide absorbed parameters to make room (doubletons)
         self.merge = True
         self.merged = 0
+        self.recentre = True
         self.params = params
         # an affine Jacobian evaluator can take the set's own forms (see step)
         self.jacobian_over_set = hasattr(variational, "series")
@@ -203,6 +204,7 @@ class LohnerStepper:
             sets = merged
             self.merged += 1
         self.absorbed += 1
-        return sets.absorb_error()
+        new = sets.absorb_error()
+        return new.recentred() if self.recentre and hasattr(new, "recentred") else new
 
     _orthonormal_basis = staticmethod(orthonormal_basis)  # (its home is verified.policies)

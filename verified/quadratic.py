@@ -163,6 +163,72 @@ class QuadraticSets:
                              r0=concatenate([self.r0, self.r], axis=1), S=S,
                              Q=np.broadcast_to(np.eye(n), (nb, n, n)).copy(), r=point(np.zeros((nb, n))))
 
+    def recentred(self) -> "QuadraticSets":
+        """The same sets with the parameter box and the error vector centred on 0, as
+        :meth:`verified.sets.DoubletonSets.recentred`. With ``u = mu + delta``:
+        ``q_i(u) = q_i(mu) + 2 mu^T S_i delta + q_i(delta)``, so ``c += C mu + q(mu) + Q
+        mid(r)``, ``C += 2 (S mu)`` per state, ``S`` unchanged; the rounding of the new
+        float ``c`` and ``C`` (times ``delta``) is enclosed and folded into ``r``.
+
+        Why: a quadratic term over a box away from 0 (absorbed errors, merged
+        parameters) is bounded by its size there, not by its variation over the box."""
+        mu, mid_r = self.r0.mid(), self.r.mid()
+        if not (mu.any() or mid_r.any()):
+            return self
+        nb, n = self.c.shape
+        mu_i = point(mu)
+        exact_c = (point(self.c) + linalg.matvec(self.C, mu_i) + quadratic_range(self.S, mu_i)
+                   + linalg.matvec(self.Q, point(mid_r)))
+        Smu = linalg.matvec(point(self.S.reshape(nb, n * self.S.shape[2], self.S.shape[3])), mu_i)
+        C_exact = point(self.C) + Smu.reshape(self.C.shape) * 2.0
+        C_new = C_exact.mid()
+        delta = self.r0 - mu
+        c_new = exact_c.mid()
+        d = (exact_c - c_new) + linalg.matvec(C_exact - C_new, delta)
+        r = (self.r - mid_r) + linalg.solve(self.Q, d)
+        if not (np.isfinite(r.lo).all() and np.isfinite(r.hi).all() and np.isfinite(c_new).all()
+                and np.isfinite(C_new).all()):
+            return self
+        return QuadraticSets(c=c_new, C=C_new, r0=delta, S=self.S, Q=self.Q, r=r)
+
+    def merge_params(self, count: int, keep_first: int) -> "QuadraticSets":
+        """The same sets with their ``count`` least wide parameters past the first
+        ``keep_first`` replaced by ``n`` covering ones, as
+        :meth:`verified.sets.DoubletonSets.merge_params`; here the merged part is
+        ``C_S u_S`` plus every quadratic term with a merged parameter in it (their
+        range over ``r0``), enclosed in ``B b`` with ``B`` the orthonormal basis of the
+        merged columns. The quadratic terms among the kept parameters stay; the new
+        parameters start without any. Returns ``m - count + n`` parameters per set."""
+        nb, n = self.c.shape
+        m = self.C.shape[2]
+        count = int(count)
+        if count < n or keep_first + count > m:
+            return self
+        mag = self.r0.mag()
+        # the width each parameter gives: linear, and through the quadratic terms it is in
+        w = np.abs(self.C).sum(axis=1) * self.r0.width() + np.einsum("bijk,bk->bj", np.abs(self.S), mag) * mag
+        w[:, :keep_first] = np.inf
+        sel = np.sort(np.argsort(w.max(axis=0), kind="stable")[:count])
+        rest = np.setdiff1d(np.arange(m), sel)
+        CS = self.C[:, :, sel]
+        size = np.linalg.norm(CS, axis=1) * self.r0.width()[:, sel]
+        order = np.argsort(-size, axis=1, kind="stable")
+        Bq, _ = np.linalg.qr(np.take_along_axis(CS, order[:, None, :], axis=2))  # (B, n, n)
+        # every quadratic term with a merged parameter in it: S with the kept block zeroed
+        S_cross = self.S.copy()
+        S_cross[np.ix_(np.arange(nb), np.arange(n), rest, rest)] = 0.0
+        eye = point(np.broadcast_to(np.eye(n), (nb, n, n)))
+        B_inv = linalg.solve(Bq[:, None, :, :], eye).swapaxes(-1, -2)  # rigorous rows of B^-1
+        b = (linalg.matvec(linalg.matmul(B_inv, CS), self.r0[:, sel])
+             + linalg.matvec(B_inv, quadratic_range(S_cross, self.r0)))
+        if not (np.isfinite(b.lo).all() and np.isfinite(b.hi).all()):
+            return self
+        k = rest.size
+        S = np.zeros((nb, n, k + n, k + n))
+        S[:, :, :k, :k] = self.S[np.ix_(np.arange(nb), np.arange(n), rest, rest)]
+        return QuadraticSets(c=self.c, C=np.concatenate([self.C[:, :, rest], Bq], axis=2),
+                             r0=concatenate([self.r0[:, rest], b], axis=1), S=S, Q=self.Q, r=self.r)
+
     def take(self, index) -> "QuadraticSets":
         return QuadraticSets(self.c[index], self.C[index], self.r0[index], self.S[index], self.Q[index], self.r[index])
 

@@ -155,6 +155,25 @@ class DoubletonSets:
         return DoubletonSets(c=self.c, C=np.concatenate([self.C, self.Q], axis=2),
                              r0=concatenate([self.r0, self.r], axis=1), Q=eye, r=point(np.zeros((nb, n))))
 
+    def recentred(self) -> "DoubletonSets":
+        """The same sets with every parameter interval and the error vector centred on 0:
+        ``c += C mid(r0) + Q mid(r)``, ``r0 -= mid(r0)``, ``r -= mid(r)``; the float
+        centre's rounding is enclosed and folded into ``r`` (``r += Q^-1 d``).
+
+        Why: absorbed errors and merged parameters need not be centred, and the forms
+        the Jacobian is taken over (:meth:`affine_forms`) must hold the centre ``c``, so
+        they use ``hull(r0, 0)``: a parameter in [0.9, 1.1] then counts as [0, 1.1]."""
+        mid0, mid_r = self.r0.mid(), self.r.mid()
+        if not (mid0.any() or mid_r.any()):
+            return self
+        exact_c = point(self.c) + linalg.matvec(self.C, point(mid0)) + linalg.matvec(self.Q, point(mid_r))
+        c_new = exact_c.mid()
+        d = exact_c - c_new  # the float centre's rounding, enclosed
+        r = (self.r - mid_r) + linalg.solve(self.Q, d)
+        if not (np.isfinite(r.lo).all() and np.isfinite(r.hi).all() and np.isfinite(c_new).all()):
+            return self
+        return DoubletonSets(c=c_new, C=self.C, r0=self.r0 - mid0, Q=self.Q, r=r)
+
     def merge_params(self, count: int, keep_first: int) -> "DoubletonSets":
         """The same sets with their ``count`` least wide parameters past the first
         ``keep_first`` replaced by ``n`` parameters that cover them (a zonotope's order
