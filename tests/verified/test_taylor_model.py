@@ -263,7 +263,7 @@ def test_solver_taylor_model_arm_contains_pinocchio_trajectories(arm_pin):
     errors: DOP853 trajectories with Pinocchio's aba inside every output box and the tube
     (measured: T = 0.44 s reached against 0.38 s with affine Jacobians, +- 1e-4: 1.73 s
     against 1.04 s)."""
-    from sampling import misses, sample_initial_points, trajectories
+    from oracles.sampling import misses, sample_initial_points, trajectories
     from verified.solver import VerifiedODE, solve
 
     chain, g, qdd = arm_pin

@@ -9,7 +9,7 @@ import numpy as np
 from mbs import cache
 from models import planar
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench():

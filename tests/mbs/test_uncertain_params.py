@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from sampling import in_union, pinocchio_with
+from oracles.sampling import in_union, pinocchio_with
 from mbs.app.scene import SceneError, loads_scene
 from mbs.simulate import simulate, system_for
 from mbs.uncertain import ChainParameters, ParameterError

@@ -211,7 +211,7 @@ def test_system_needs_parameter_values():
 def test_recovered_double_pendulum_simulates_with_energy_test():
     """A user with only eq. (22) gets mode (iii): the recovered H and dH/dt drive the
     energy consistency test, and the final hull still holds DOP853 trajectories."""
-    from sampling import in_union, sample_initial_points, trajectories
+    from oracles.sampling import in_union, sample_initial_points, trajectories
 
     from mbs.simulate import simulate
     from verified.interval import Interval

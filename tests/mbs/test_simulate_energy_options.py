@@ -11,7 +11,7 @@ from mbs.simulate import simulate
 from models import pendulum as pd
 from verified.interval import Interval
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 
 
 def _run(**kw):

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 from mbs.errors import ModelError
 from mbs.simulate import compare_modes, output_times, simulate, system_for, width_deviations
 from verified.interval import Interval

@@ -5,7 +5,7 @@ import os
 
 import numpy as np
 
-_PATH = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "bench_graph.py")
+_PATH = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "bench_graph.py")
 
 
 def _load_bench():

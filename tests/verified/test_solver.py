@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 from verified.graph import trace
 from verified.interval import Interval
 from verified.solver import VerifiedODE, solve

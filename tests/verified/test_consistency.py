@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import sympy
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 from verified.consistency import Constraint, EnergyTest
 from verified.graph import from_sympy, trace
 from verified.graph_ops import augment_with_rate, negated, rate_along

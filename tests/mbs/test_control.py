@@ -6,7 +6,7 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from sampling import in_union, pinocchio_with
+from oracles.sampling import in_union, pinocchio_with
 from mbs.control import (PD, ClosedLoop, ComputedTorque, ControlError, Disturbance, FunctionController, Quintic,
                          closed_loop, parse_control)
 from mbs.simulate import simulate

@@ -10,7 +10,7 @@ import itertools
 import numpy as np
 import pytest
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 from verified import lohner, sets as sets_mod
 from verified.consistency import EnergyTest
 from verified.graph import trace

@@ -12,7 +12,7 @@ from mbs.app.cli import main
 from mbs.app.results import read_result, result_boxes
 from mbs.app.scene import scene_dir
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 SMALL = """

@@ -3,7 +3,7 @@
 import ast
 from pathlib import Path
 
-MBS = Path(__file__).resolve().parents[1] / "mbs"
+MBS = Path(__file__).resolve().parents[2] / "mbs"
 
 
 def _imports(path):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 from test_affine_taylor import ARM_Q0, arm_pin  # noqa: F401 (fixture)
 from verified import sets as vsets
 from verified.affine_taylor import forms_to_interval

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 import verified._kernels as _k
 import verified.interval as iv
-from arb_oracle import A, _clip_unit, check_enclosure, image_periodic
+from oracles.arb_oracle import A, _clip_unit, check_enclosure, image_periodic
 from verified.interval import Interval, IntervalError
 
 TRANS_ULPS = 24
@@ -67,7 +67,7 @@ def test_issue_reproducer_cos_contains_minus_one():
 @SETTINGS
 @given(huge_narrow())
 def test_tan_of_huge_narrow_intervals(x):
-    from arb_oracle import critical_points
+    from oracles.arb_oracle import critical_points
 
     poles = critical_points(x[0], x[1], 1, 2)
     assume(poles is not None)

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import arb_oracle  # noqa: F401  (sets flint.ctx.prec = 256)
+import oracles.arb_oracle  # noqa: F401  (sets flint.ctx.prec = 256)
 from verified import contractor
 from verified.contractor import EnergyShell, HC4, contract_linear_row, hc4, mean_value_row
 from verified.graph import GraphBuilder, trace

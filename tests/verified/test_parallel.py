@@ -18,7 +18,7 @@ from verified.hooks import Hook, StopAfterWall
 from verified.interval import Interval
 from verified.solver import VerifiedODE, solve
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 
 distributed = pytest.importorskip("distributed")
 
@@ -46,9 +46,11 @@ def oracle(box):
 @pytest.fixture(scope="module")
 def client():
     from distributed import Client, LocalCluster
-    # the workers import this module (the slow hook below): put tests/ on their path
+    # the workers import this module (the slow hook below), which imports tests/oracles:
+    # put tests/verified and tests/ on their path
     here = os.path.dirname(__file__)
-    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH")) if p)
+    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (here, os.path.dirname(here), os.environ.get("PYTHONPATH"))
+                                               if p)
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=50)
     c = Client(cluster, set_as_default=False)

@@ -9,7 +9,7 @@ whose boundary point is known exactly, 20 % on a real run by the sampling oracle
 import numpy as np
 import pytest
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 from verified import energy_contraction as ec
 from verified.consistency import EnergyClaimError, EnergyTest, prove_energy_rate
 from verified.graph import trace

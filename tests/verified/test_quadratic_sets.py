@@ -1,7 +1,7 @@
 """Second-order sets (verified.quadratic, solve(..., set_order=2)).
 
 Oracles: exact rationals for the quadratic forms' ranges; scipy DOP853 trajectories
-(tests/sampling.py) for the solver, with Pinocchio's aba as right-hand side for the arm;
+(tests/oracles/sampling.py) for the solver, with Pinocchio's aba as right-hand side for the arm;
 finite differences for the second variational equations.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sampling import misses, sample_initial_points, trajectories
+from oracles.sampling import misses, sample_initial_points, trajectories
 from test_affine_taylor import ARM_Q0, arm_pin  # noqa: F401 (fixture)
 from verified import quadratic
 from verified.graph import trace

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import verified.interval as iv
 from verified.interval import Interval
-from arb_oracle import A, check_enclosure, image_binary, image_periodic
+from oracles.arb_oracle import A, check_enclosure, image_binary, image_periodic
 
 BASIC_ULPS = 4  # + - * / sqrt results may be this many ulps outside the exact image
 TRANS_ULPS = 24  # transcendental functions: libm error plus our 8-ulp allowance
@@ -208,7 +208,7 @@ def test_tan(x):
     lo, hi = one(iv.tan, x)
     # a pole (pi/2 + k pi) inside or undecidable -> must be unbounded
     poles = None
-    from arb_oracle import critical_points
+    from oracles.arb_oracle import critical_points
 
     poles = critical_points(x[0], x[1], 1, 2)
     assume(poles is not None)

@@ -10,7 +10,7 @@ Oracles (none shares code with the affine kernel or with verified.taylor):
   constants are taken at their double value, a point of their enclosure.
 * arb evaluation of the graph (``tests/test_graph_interval.arb_eval``) for ranges;
 * Pinocchio's ``aba`` for the 3-link arm's accelerations;
-* scipy DOP853 trajectories (``tests/sampling.py``; for the arm with Pinocchio's
+* scipy DOP853 trajectories (``tests/oracles/sampling.py``; for the arm with Pinocchio's
   ``aba`` as right-hand side) for the solver-level checks.
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import verified.affine_taylor as at
-from sampling import in_union, misses, sample_initial_points, trajectories
+from oracles.sampling import in_union, misses, sample_initial_points, trajectories
 from test_graph import all_ops
 from test_graph_interval import (ArbDomain, _program, arb_eval, assert_encloses_arb, box_samples, random_boxes,
                                  run_program)
