@@ -4,26 +4,14 @@ with the control law written again in numpy floats, integrated by DOP853."""
 import numpy as np
 import pinocchio as pin
 import pytest
-from scipy.integrate import solve_ivp
 
-from oracles.sampling import in_union, pinocchio_with
+from oracles.closed_loop import Q0, box, closed_loop_trajectory, corners, ct_oracle, pin_model
+from oracles.sampling import in_union
 from mbs.control import (PD, ClosedLoop, ComputedTorque, ControlError, Disturbance, FunctionController, Quintic,
                          closed_loop, parse_control)
 from mbs.simulate import simulate
 from models.registry import get
 from verified.interval import Interval
-
-Q0 = np.array([0.5, -0.3])
-E = 1e-3
-
-
-def box(q0, e=E, ed=E):
-    n = len(q0)
-    return Interval(np.r_[q0 - e, -ed * np.ones(n)], np.r_[q0 + e, ed * np.ones(n)])
-
-
-def pin_model(chain, scale=1.0, payloads=()):
-    return pinocchio_with(chain, payloads, scale)
 
 
 def quintic(q0, q1, T, t):
@@ -32,28 +20,6 @@ def quintic(q0, q1, T, t):
     dp = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
     ddp = (60 * s - 180 * s**2 + 120 * s**3) / T**2
     return q0 + (q1 - q0) * p, (q1 - q0) * dp, (q1 - q0) * ddp
-
-
-def closed_loop_trajectory(plant, law, x0, t_end):
-    """DOP853 (rtol = atol = 1e-12) of qdd = aba(q, qd, law(t, q, qd))."""
-    data = plant.createData()
-    n = plant.nv
-
-    def f(t, x):
-        q, qd = x[:n], x[n:]
-        return np.r_[qd, pin.aba(plant, data, q, qd, law(t, q, qd))]
-    s = solve_ivp(f, (0.0, t_end), x0, method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True)
-    assert s.success
-    return s.sol
-
-
-def corners(lo, hi, k, seed=0):
-    rng = np.random.default_rng(seed)
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    pts = [lo, hi, 0.5 * (lo + hi)]
-    signs = rng.integers(0, 2, (k, lo.size)).astype(bool)
-    pts += [np.where(s, hi, lo) for s in signs]
-    return pts
 
 
 def misses(sol, trajs, n, per_step=3):
@@ -69,16 +35,6 @@ def misses(sol, trajs, n, per_step=3):
 
 
 # --------------------------------------------------------------------------- computed torque
-def ct_oracle(chain, x0s, t_end, kp=25.0, kd=10.0, scale=1.1):
-    plant, nominal = pin_model(chain), pin_model(chain, scale)
-    nd = nominal.createData()
-
-    def law(t, q, qd):
-        v = kp * (Q0 - q) + kd * (0 - qd)
-        return pin.crba(nominal, nd, q) @ v + pin.nonLinearEffects(nominal, nd, q, qd)
-    return [closed_loop_trajectory(plant, law, x0, t_end) for x0 in x0s]
-
-
 @pytest.mark.parametrize("mode", ["i", "ii"])
 def test_computed_torque_with_mass_error_encloses_pinocchio(mode):
     chain = get("planar2")

@@ -14,7 +14,7 @@ from mbs.simulate import simulate
 from models.registry import get
 from verified.interval import Interval
 
-from test_control import Q0, box, closed_loop_trajectory, corners, ct_oracle, pin_model
+from oracles.closed_loop import Q0, box, closed_loop_trajectory, corners, ct_oracle, pin_model
 
 SLACK = 1e-9
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from oracles.sampling import misses, sample_initial_points, trajectories
-from test_affine_taylor import ARM_Q0, arm_pin  # noqa: F401 (fixture)
+from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
 from verified import sets as vsets
 from verified.affine_taylor import forms_to_interval
 from verified.graph import trace

@@ -6,144 +6,38 @@ Oracles (none shares code with the affine kernel or with verified.taylor):
   through a *point* of the box by Picard iteration, ``x <- x0 + integral(f(x))`` on
   truncated power series (each pass fixes one more coefficient), with ``f`` the graph
   evaluated by ``verified.evaluate`` in an arb-series domain -- no recurrence of ours
-  is involved. Containment is decided by certain arb comparisons, no allowance;
-  constants are taken at their double value, a point of their enclosure.
-* arb evaluation of the graph (``tests/test_graph_interval.arb_eval``) for ranges;
+  is involved (``tests/oracles/arb_series.py``). Containment is decided by certain arb
+  comparisons, no allowance; constants are taken at their double value, a point of
+  their enclosure.
+* arb evaluation of the graph (``tests/oracles/arb_graph.arb_eval``) for ranges;
 * Pinocchio's ``aba`` for the 3-link arm's accelerations;
 * scipy DOP853 trajectories (``tests/oracles/sampling.py``; for the arm with Pinocchio's
   ``aba`` as right-hand side) for the solver-level checks.
 """
 from __future__ import annotations
 
-import contextlib
 import math
 
-import flint
 import numpy as np
 import pytest
-from flint import arb, arb_series
+from flint import arb
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import verified.affine_taylor as at
+from oracles.arb_graph import _program, arb_eval, assert_encloses_arb, box_samples, random_boxes, run_program
+from oracles.arb_series import affine_coefficients, arb_precision, arb_taylor, assert_inside, check_affine_taylor
+from oracles.graph_models import all_ops
 from oracles.sampling import in_union, misses, sample_initial_points, trajectories
-from test_graph import all_ops
-from test_graph_interval import (ArbDomain, _program, arb_eval, assert_encloses_arb, box_samples, random_boxes,
-                                 run_program)
-from verified import evaluate as ev
+from oracles.taylor_cases import (ARM_Q0, CASES, _arm, _dp_graph, _program_ode, _radius, assert_pin_inside,
+                                  case_graph, random_forms)
 from verified.affine_taylor import AffineTaylorODE
-from verified.graph import Op, trace
+from verified.graph import trace
 from verified.interval import Interval
 from verified.taylor import TaylorODE
 
 INF = math.inf
 FRESH = [None, 0]  # the solver uses both: fresh symbols for x, none for the variational series
-
-
-# --------------------------------------------------------------------------- exact oracle
-
-
-class ArbSeriesDomain(ArbDomain):
-    """Graph values as arb power series in t (flint.arb_series) or arb constants: the
-    reference domain of test_graph_interval with the functions applied to series."""
-
-    def sqrt(self, a):
-        return a.sqrt()
-
-    def exp(self, a):
-        return a.exp()
-
-    def log(self, a):
-        return a.log()
-
-    def sin(self, a):
-        return a.sin()
-
-    def cos(self, a):
-        return a.cos()
-
-    def tan(self, a):
-        return a.tan()
-
-    def atan(self, a):
-        return a.atan()
-
-
-@contextlib.contextmanager
-def arb_precision(bits=256, cap=None):
-    """flint's global precision (and series length cap) for a block, restored after."""
-    old = flint.ctx.prec, flint.ctx.cap
-    flint.ctx.prec = bits
-    if cap is not None:
-        flint.ctx.cap = cap
-    try:
-        yield
-    finally:
-        flint.ctx.prec, flint.ctx.cap = old
-
-
-def arb_taylor(graph, x0, p, order):
-    """Exact (arb) x_[0..order] of the solution of x' = f(x, p) through the float point x0:
-    object array (order + 1, n). Picard iteration on series truncated after t^order."""
-    with arb_precision(256, cap=order + 1):
-        c0 = [arb(float(v)) for v in x0]
-        ps = [arb(float(v)) for v in (() if p is None else p)]
-        xs = [arb_series([c]) for c in c0]
-        dom = ArbSeriesDomain()
-        for _ in range(order):
-            fs = ev.evaluate(graph, dom, xs, ps)
-            xs = [c + (f if isinstance(f, arb_series) else arb_series([f])).integral() for c, f in zip(c0, fs)]
-        out = np.empty((order + 1, len(c0)), dtype=object)
-        for i, s in enumerate(xs):
-            cs = s.coeffs()
-            for k in range(order + 1):
-                out[k, i] = cs[k] if k < len(cs) else arb(0)
-        return out
-
-
-def assert_inside(lo, hi, exact, what=""):
-    """Elementwise: certainly lo <= exact <= hi (floats lo, hi; arb exact); never NaN."""
-    for idx in np.ndindex(exact.shape):
-        l, h, e = float(lo[idx]), float(hi[idx]), exact[idx]
-        ok = not (math.isnan(l) or math.isnan(h))
-        ok = ok and (l == -INF or bool(arb(l) <= e)) and (h == INF or bool(e <= arb(h)))
-        if not ok:
-            raise AssertionError(f"{what}: exact {e.str(20, radius=True)} outside [{l!r}, {h!r}] at (k, i) = {idx}")
-
-
-def affine_coefficients(graph, lo, hi, order, plo=None, phi=None, fresh_symbols=None):
-    ode = AffineTaylorODE(graph, fresh_symbols=fresh_symbols)
-    params = None if not graph.n_params else Interval(np.asarray(plo, float), np.asarray(phi, float),
-                                                      allow_unbounded=True)
-    C = ode.coefficients(Interval(np.asarray(lo, float), np.asarray(hi, float), allow_unbounded=True), order, params)
-    assert not (np.isnan(C.lo).any() or np.isnan(C.hi).any())
-    assert (C.lo <= C.hi).all()
-    return C
-
-
-def check_affine_taylor(graph, lo, hi, order, plo=None, phi=None, *, fresh_symbols=None, n_random=4, seed=0,
-                        C=None):
-    """Assert the affine enclosures of x_[0..order] over each box [lo, hi] (B, n) (and the
-    parameter box [plo, phi]) contain the exact coefficients at the box corners (n <= 6),
-    its centre and random points (paired with corners/random points of the parameter box)."""
-    rng = np.random.default_rng(seed)
-    lo, hi = np.atleast_2d(np.asarray(lo, float)), np.atleast_2d(np.asarray(hi, float))
-    if C is None:
-        C = affine_coefficients(graph, lo, hi, order, plo, phi, fresh_symbols)
-    pts = box_samples(lo, hi, n_random, rng)  # (S, B, n)
-    if graph.n_params:
-        ppts = box_samples(np.atleast_2d(plo), np.atleast_2d(phi), n_random, rng)[:, 0]
-        ppts = ppts[rng.permutation(len(ppts))]
-    for s in range(pts.shape[0]):
-        p = ppts[s % len(ppts)] if graph.n_params else None
-        for b in range(pts.shape[1]):
-            exact = arb_taylor(graph, pts[s, b], p, order)
-            assert_inside(C.lo[b], C.hi[b], exact, f"box {b}, point {pts[s, b].tolist()}, p {p}")
-    return C
-
-
-def has_op(graph, op):
-    return any(node.op == op for node in graph.nodes)
 
 
 def test_arb_oracle_matches_closed_forms_and_point_enclosures():
@@ -165,45 +59,6 @@ def test_arb_oracle_matches_closed_forms_and_point_enclosures():
 
 # --------------------------------------------------------------------------- 1. per operation
 
-# (name, rhs, op that must be in the graph, centre range of x, max radius of x, centre range of p,
-#  max radius of p); the ranges keep every operation inside its domain over the box
-CASES = [
-    ("add", lambda x, p: [x[0] + p[0]], Op.ADD, (-2, 2), 0.5, (-1, 1), 0.3),
-    ("sub", lambda x, p: [p[0] - x[0]], Op.SUB, (-2, 2), 0.5, (-1, 1), 0.3),
-    ("neg", lambda x, p: [-np.sin(x[0] * p[0])], Op.NEG, (-2, 2), 0.5, (-1, 1), 0.3),
-    ("mul", lambda x, p: [x[0] * (p[0] - x[0])], Op.MUL, (-2, 2), 0.5, (-1, 1), 0.3),
-    ("sqr", lambda x, p: [p[0] - np.square(x[0])], Op.SQR, (-1.5, 1.5), 0.4, (-1, 1), 0.3),
-    ("pow3", lambda x, p: [p[0] * x[0] ** 3], Op.POW, (-1.2, 1.2), 0.3, (-1, 1), 0.3),
-    ("pow4", lambda x, p: [x[0] ** 4 - p[0]], Op.POW, (-1.2, 1.2), 0.3, (-1, 1), 0.3),
-    ("pow7", lambda x, p: [p[0] * x[0] ** 7], Op.POW, (-1.1, 1.1), 0.2, (-1, 1), 0.3),
-    ("div", lambda x, p: [1 / (p[0] + x[0])], Op.DIV, (-2, 2), 0.5, (3, 4), 0.3),
-    ("div_series", lambda x, p: [x[0] * p[0] / (1 + x[0] * x[0])], Op.DIV, (-2, 2), 0.5, (-1, 1), 0.3),
-    ("sqrt", lambda x, p: [np.sqrt(x[0] * p[0])], Op.SQRT, (0.6, 3), 0.4, (0.5, 2), 0.2),
-    ("exp", lambda x, p: [np.exp(p[0] * x[0])], Op.EXP, (-2, 1), 0.5, (-1, 1), 0.3),
-    ("log", lambda x, p: [p[0] * np.log(x[0])], Op.LOG, (0.6, 3), 0.4, (-1, 1), 0.3),
-    ("sin", lambda x, p: [np.sin(p[0] * x[0])], Op.SIN, (-3, 3), 0.5, (-2, 2), 0.3),
-    ("cos", lambda x, p: [np.cos(x[0]) + p[0]], Op.COS, (-3, 3), 0.5, (-1, 1), 0.3),
-    ("sin*cos", lambda x, p: [np.sin(x[0]) * np.cos(x[0]) * p[0]], Op.COS, (-3, 3), 0.5, (-2, 2), 0.3),
-    ("tan", lambda x, p: [p[0] * np.tan(x[0])], Op.TAN, (-1.1, 1.1), 0.2, (-1, 1), 0.3),
-    ("atan", lambda x, p: [np.arctan(p[0] * x[0])], Op.ATAN, (-3, 3), 0.5, (-2, 2), 0.3),
-]
-_GRAPHS = {}
-
-
-def case_graph(name):
-    if name not in _GRAPHS:
-        case = next(c for c in CASES if c[0] == name)
-        g = trace(case[1], 1, 1)
-        assert has_op(g, case[2]), f"{name}: the traced graph has no {case[2].name}"
-        _GRAPHS[name] = g
-    return _GRAPHS[name]
-
-
-def _radius(max_rad):
-    # exact points, tiny boxes and wide boxes
-    return st.one_of(st.just(0.0), st.floats(0.0, 1e-7), st.floats(0.0, max_rad))
-
-
 @pytest.mark.parametrize("name", [c[0] for c in CASES])
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
@@ -219,12 +74,6 @@ def test_each_operation_contains_exact_coefficients(name, data):
     fresh = data.draw(st.sampled_from(FRESH), "fresh_symbols")
     check_affine_taylor(g, [c - r], [c + r], order, [pc - pr], [pc + pr], fresh_symbols=fresh, n_random=3,
                         seed=data.draw(st.integers(0, 2**32 - 1)))
-
-
-def _dp_graph():
-    from models import double_pendulum as dp
-
-    return dp.rhs_graph()
 
 
 @pytest.mark.parametrize("fresh", FRESH + [2])
@@ -244,22 +93,12 @@ def test_double_pendulum_coefficients(rad, fresh):
 
 @pytest.mark.parametrize("fresh", FRESH)
 def test_all_ops_four_states_batch_with_interval_parameter(fresh):
-    """Every opcode (tests/test_graph.all_ops) as a 4-state ODE, a batch of random boxes
+    """Every opcode (tests/oracles/graph_models.all_ops) as a 4-state ODE, a batch of random boxes
     (some of them points) and an interval parameter."""
     g = trace(lambda x, p: all_ops((x[0], x[1]), p), 4, 1)
     rng = np.random.default_rng(5)
     lo, hi = random_boxes(4, 6, rng, center_scale=1.0, max_rad=0.1)
     check_affine_taylor(g, lo, hi, 6, [0.6], [0.8], fresh_symbols=fresh, n_random=2, seed=1)
-
-
-def _program_ode(program):
-    """A 2-state ODE from a random straight-line program (tests/test_graph_interval)."""
-
-    def rhs(x, p):
-        vals = run_program(program, x[0], x[1])
-        return [vals[-1], vals[len(vals) // 2] + x[0] * 0.5]
-
-    return trace(rhs, 2)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -271,16 +110,6 @@ def test_random_programs_contain_exact_coefficients(program, seed, order, fresh)
     check_affine_taylor(g, lo, hi, order, fresh_symbols=fresh, n_random=2, seed=seed)
 
 
-def _arm():
-    from models.planar import planar_chain
-
-    chain = planar_chain(3)
-    return chain, chain.numeric().rhs_graph()
-
-
-ARM_Q0 = np.array([0.5, -0.3, 0.2])
-
-
 @pytest.mark.parametrize("fresh", FRESH)
 def test_three_link_arm_coefficients(fresh):
     """The motivating deep graph (crba/rnea + elimination, 6 states), order 5, box of
@@ -289,17 +118,6 @@ def test_three_link_arm_coefficients(fresh):
     x0 = np.concatenate([ARM_Q0, [0.1, -0.2, 0.3]])
     r = np.array([0.01] * 3 + [0.05] * 3)
     check_affine_taylor(g, x0 - r, x0 + r, 5, fresh_symbols=fresh, n_random=4, seed=3)
-
-
-def random_forms(n, nb, m0, rng, scale=0.05):
-    """Input forms (n, B, m0 + 2) as the solver builds them: centre, symbol coefficients,
-    an error radius (never below 1e-12 relative, so float samples are inside the set)."""
-    X = np.zeros((n, nb, m0 + 2))
-    X[..., 0] = rng.uniform(-1.5, 1.5, (n, nb))
-    X[..., 1:-1] = rng.uniform(-scale, scale, (n, nb, m0)) * (rng.uniform(size=(n, nb, m0)) < 0.7)
-    X[..., -1] = rng.uniform(0, scale / 10, (n, nb)) * (rng.uniform(size=(n, nb)) < 0.5) + 1e-12 * (
-        1 + np.abs(X[..., 0]))
-    return X
 
 
 def check_series(graph, X, order, plo=None, phi=None, *, fresh_symbols=None, n_random=6, seed=0):
@@ -587,24 +405,6 @@ def test_wide_box_exp_of_square_not_absurdly_wider_than_interval():
     assert (Ca.width() <= 2 * Ci.width() + 1e-12).all()
 
 
-@pytest.fixture(scope="module")
-def arm_pin():
-    """(chain, graph, pinocchio qdd function) of the 3-link planar arm."""
-    from mbs.pinocchio_check import _QMap
-
-    import pinocchio as pin
-    chain, g = _arm()
-    model = chain.to_pinocchio()
-    data = model.createData()
-    qm = _QMap(chain, model)
-    zero = np.zeros(chain.n)
-
-    def qdd(q, qd):
-        return qm.back(pin.aba(model, data, qm.q(q), qm.v(qd), qm.v(zero)).copy())
-
-    return chain, g, qdd
-
-
 def test_three_link_arm_qdd_affine_much_narrower_and_contains_pinocchio(arm_pin):
     """Box +-0.01 in q about (0.5, -0.3, 0.2), qd = 0: the affine qdd enclosure is at least
     5x narrower than the interval one (measured 1.1/1.9/2.3 vs 25/35/44) and contains
@@ -619,14 +419,6 @@ def test_three_link_arm_qdd_affine_much_narrower_and_contains_pinocchio(arm_pin)
     pts = sample_initial_points(x0 - r, x0 + r, 40, seed=2)  # 64 corners (qd ones coincide), random, centre
     acc = np.array([qdd(x[:3], x[3:]) for x in pts])
     assert_pin_inside(Ca, acc)
-
-
-def assert_pin_inside(C, acc, slack=1e-9):
-    """Pinocchio's float accelerations inside the enclosure (slack: its own rounding)."""
-    ok = (C.lo - slack <= acc) & (acc <= C.hi + slack)
-    if not ok.all():
-        i = np.argwhere(~ok)[0]
-        raise AssertionError(f"pinocchio qdd {acc[tuple(i)]!r} outside [{C.lo[i[-1]]!r}, {C.hi[i[-1]]!r}]")
 
 
 # --------------------------------------------------------------------------- 5. the oracle bites
@@ -823,7 +615,7 @@ def test_mass_matrix_proof_uses_affine_pivots_for_a_five_link_arm():
     D = _check_affine_range(g, lo, hi, np.random.default_rng(5))
     assert (D.lo > 0).all()
     assert _proven(g, lo, hi, depth=0).all()
-    # the default proof (congruence pivots, tests/test_preconditioned.py) needs no affine
+    # the default proof (congruence pivots, tests/verified/test_preconditioned.py) needs no affine
     gc = chain.numeric().pivot_graph()
     assert (gc.eval_interval(Interval(lo, hi)).lo > 0).all()
     _check_affine_range(gc, lo, hi, np.random.default_rng(6))

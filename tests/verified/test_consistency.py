@@ -97,7 +97,7 @@ def test_a_false_conservation_claim_is_caught_by_the_oracle():
     test = EnergyTest(fake, "zero", max_interval=0.05, splits=16, min_gain=0.0, check_claim=False)
     sol = solve(rhs, Interval(lo, hi), (0.0, 0.4), t_eval=[0.2, 0.4], consistency=test)
     # (the claim check, on by default, refuses this claim before the first step:
-    # tests/test_energy_contraction.py)
+    # tests/verified/test_energy_contraction.py)
     if sol.status == "completed":
         sols = trajectories(lambda x: pd.rhs(x), sample_initial_points(lo, hi, 40), 0.4)
         assert misses(sol, sols, per_step=2)

@@ -1,68 +1,24 @@
 """Tests of the expression graph (IR): front ends, float evaluation, derivatives,
 constants, sharing, serialization and error messages.
 
-Interval soundness tests are in tests/test_graph_interval.py.
+Interval soundness tests are in tests/verified/test_graph_interval.py; the reference
+models (double pendulum, pendulum energy, every opcode) in tests/oracles/graph_models.py.
 """
 from __future__ import annotations
 
 import json
 import math
 from fractions import Fraction
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import sympy as sp
 
+from oracles.graph_models import (SP, all_ops, double_pendulum_matrices, double_pendulum_rhs, generic_model,
+                                  pendulum_energy)
 from verified.graph import Graph, GraphBuilder, Node, Op, Tracer, from_sympy, trace
 
 RNG_SEED = 20261122
-
-# --------------------------------------------------------------------------- models
-# Generic-scalar model code: F is a namespace of elementary functions (numpy or sympy).
-
-NP = SimpleNamespace(sin=np.sin, cos=np.cos, tan=np.tan, atan=np.arctan, exp=np.exp, log=np.log, sqrt=np.sqrt)
-SP = SimpleNamespace(sin=sp.sin, cos=sp.cos, tan=sp.tan, atan=sp.atan, exp=sp.exp, log=sp.log, sqrt=sp.sqrt)
-
-
-def double_pendulum_matrices(x, F=NP, m1=1.0, m2=1.0, l1=1.0, l2=1.0, g=9.81):
-    """A(x), b(x) of the paper's eq. (22) (lower-right 2x2 block of A, last two entries of b)."""
-    x1, x2, x3, x4 = x
-    c = F.cos(x2)
-    A = [[m1 * l1 + m2 * (l1 + l2 * c), m2 * l2 * c], [m2 * (l1 * c + l2), m2 * l2]]
-    b = [
-        -g * (m1 + m2) * F.sin(x1) + m2 * l2 * F.sin(x2) * (x3 + x4) ** 2,
-        -g * m2 * F.sin(x1 + x2) - m2 * l1 * F.sin(x2) * x3**2,
-    ]
-    return A, b
-
-
-def double_pendulum_rhs(x, F=NP, m1=1.0, m2=1.0, l1=1.0, l2=1.0, g=9.81):
-    """x_dot = A(x)^-1 b(x) of eq. (22) written out (Cramer's rule, factored determinant)."""
-    (a11, a12), (a21, a22) = double_pendulum_matrices(x, F, m1, m2, l1, l2, g)[0]
-    b1, b2 = double_pendulum_matrices(x, F, m1, m2, l1, l2, g)[1]
-    det = m2 * l1 * l2 * (m1 + m2 * F.sin(x[1]) ** 2)  # = a11 a22 - a12 a21
-    return [x[2], x[3], (a22 * b1 - a12 * b2) / det, (a11 * b2 - a21 * b1) / det]
-
-
-def pendulum_energy(x, p, F=NP):
-    """H(q, qd) = 0.5 m l^2 qd^2 + m g l (1 - cos q); p = (m, l, g)."""
-    q, qd = x
-    m, l, g = p
-    return 0.5 * m * l**2 * qd**2 + m * g * l * (1 - F.cos(q))
-
-
-def all_ops(x, p, F=NP):
-    """Exercises every opcode on domains where it is defined for all real a, b."""
-    a, b = x
-    c = p[0]
-    u = a * a + 1.0  # >= 1
-    return [
-        F.exp(0.3 * a) - F.log(u) + F.sqrt(u) * b,
-        F.tan(0.5 * F.sin(b)) + F.atan(a / u) - b**3 + c * a**4 / u**2,
-        (a - b) * (a + b) / (2 + F.cos(a)) + F.exp(-(b * b)) * c,
-        F.sqrt(u) ** 3 - 1 / F.sqrt(u) + u**-2,
-    ]
 
 
 def rand_points(n, count=200, scale=2.0, seed=RNG_SEED):
@@ -134,7 +90,7 @@ def test_all_ops_trace_sympy_numpy_agree():
     for g in (g_sym, g_tr):
         np.testing.assert_allclose(g.eval_float(X, P), want, rtol=1e-12, atol=1e-12)
     used = set(g_tr.op_counts()) | set(g_sym.op_counts())
-    # mid (a frozen point) is no function of sympy's or numpy's: tests/test_preconditioned.py
+    # mid (a frozen point) is no function of sympy's or numpy's: tests/verified/test_preconditioned.py
     every = {op.name.lower() for op in Op} - {"mid"}
     assert used >= every, f"missing opcodes: {every - used}"
 
@@ -432,11 +388,6 @@ def test_to_sympy_roundtrip(pendulum_syms):
 
 
 # --------------------------------------------------------------------------- tracer protocol
-
-
-def generic_model(q, l, m, x):
-    """Generic scalar code: runs on floats, ndarrays, Intervals and Tracers."""
-    return np.sin(q) * l + m * x
 
 
 def test_generic_model_code_runs_on_floats_arrays_and_tracers():

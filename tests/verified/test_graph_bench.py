@@ -35,7 +35,7 @@ def test_bench_graph_runs_and_reports_every_evaluator():
 def test_bench_graphs_are_correct():
     """The benchmark's double pendulum graph agrees with the test suite's reference model."""
     bench = _load_bench()
-    from test_graph import double_pendulum_rhs
+    from oracles.graph_models import double_pendulum_rhs
 
     graphs = bench.make_graphs()
     X = np.random.default_rng(0).uniform(-2, 2, size=(20, 4))

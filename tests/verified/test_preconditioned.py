@@ -1,7 +1,7 @@
 """The graph op ``mid`` and the preconditioned linear solve (verified.preconditioned).
 
 Oracles: exact rational arithmetic (fractions) for linear systems; python-flint arb
-series (tests/test_affine_taylor.arb_taylor, which evaluates ``mid`` as the identity:
+series (tests/oracles/arb_series.arb_taylor, which evaluates ``mid`` as the identity:
 the outputs must not depend on the frozen point) for Taylor coefficients; Pinocchio's
 ``aba`` for the arm's accelerations.
 """
@@ -14,7 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from test_affine_taylor import ARM_Q0, arm_pin, assert_pin_inside, check_affine_taylor  # noqa: F401 (fixture)
+from oracles.arb_series import check_affine_taylor
+from oracles.taylor_cases import ARM_Q0, assert_pin_inside  # the arm_pin fixture: tests/verified/conftest.py
 from verified import preconditioned
 from verified.affine_taylor import AffineTaylorODE
 from verified.evaluate import IntervalDomain

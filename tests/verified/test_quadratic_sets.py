@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from oracles.sampling import misses, sample_initial_points, trajectories
-from test_affine_taylor import ARM_Q0, arm_pin  # noqa: F401 (fixture)
+from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
 from verified import quadratic
 from verified.graph import trace
 from verified.interval import Interval

@@ -2,7 +2,7 @@
 
 Oracle: the exact Taylor coefficients of the solution through points of the box (or of
 the caller's forms), computed by python-flint ``arb_series`` at 256 bits with no
-recurrence of ours (tests/test_affine_taylor.arb_taylor); containment is decided by
+recurrence of ours (tests/oracles/arb_series.arb_taylor); containment is decided by
 certain arb comparisons, no allowance. Tightness against Pinocchio's derivatives on the
 3-link arm (the reason the models exist). The oracle bites: a kernel whose products
 drop their degree-3/4 truncation bound, and a conversion that drops the remainder, fail.
@@ -18,10 +18,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import verified.taylor_model as tm
-from test_affine_taylor import (ARM_Q0, CASES, _arm, _dp_graph, _program_ode, _radius, arm_pin,  # noqa: F401
-                                arb_taylor, assert_inside, case_graph, random_forms)
-from test_graph import all_ops
-from test_graph_interval import _program, box_samples, random_boxes
+from oracles.arb_graph import _program, box_samples, random_boxes
+from oracles.arb_series import arb_taylor, assert_inside
+from oracles.graph_models import all_ops
+# the arm_pin fixture: tests/verified/conftest.py
+from oracles.taylor_cases import ARM_Q0, CASES, _arm, _dp_graph, _program_ode, _radius, case_graph, random_forms
 from verified.affine_taylor import AffineTaylorODE
 from verified.graph import trace
 from verified.interval import Interval
