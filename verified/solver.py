@@ -265,14 +265,17 @@ def solve(
     absorb : False (default) or True. With
         ``set_order=1``, turn the error part ``Q r`` into new parameters of the set once
         it is 10 % of the exactly carried part (:meth:`verified.sets.DoubletonSets.absorb_error`;
-        up to 8 per state), so that
+        at 8 parameters per state the least wide are merged into n covering ones,
+        :meth:`~verified.sets.DoubletonSets.merge_params`, and absorbed parameters are
+        recentred), so that
         accumulated errors are carried by the float matrix of the set instead of being
         wrapped by the interval Jacobian every step. Measured: a 3-link arm from
-        ``q +- 1e-6`` to T = 2, worst ratio 16.97 -> 1.19; the double pendulum, 1024
-        pieces, T = 3: 1.052 -> 1.003 at the same cost. Off by default because once
-        the cap is reached the error part can grow faster than without absorbing: a
-        2-link arm under computed-torque control (tests/test_frames.py) broke down at
-        0.40 s instead of completing 0.6 s. Not supported with a consistency test,
+        ``q +- 1e-6`` to T = 2, worst ratio 16.97 -> 1.35; the double pendulum, 256
+        pieces, T = 3: break-down at 2.3 s -> ratio 1.035; 1024 pieces: 1.052 -> 1.001
+        at the same cost. Off by default because with affine Jacobians a 2-link arm
+        under computed-torque control (tests/mbs/test_frames.py) breaks down at 0.51 s
+        instead of completing 0.6 s (with ``arithmetic="taylor_model"`` it completes,
+        with or without absorbing). Not supported with a consistency test,
         states appended by a hook or adaptive splitting (which then splits along
         absorbed errors without end).
         Second-order sets absorb their own way (:mod:`verified.quadratic`).
