@@ -20,7 +20,7 @@ Cases:
   ratio against trajectories sampled with Pinocchio's ``aba`` and DOP853
   (``bench_robots.Oracle``) at the last output time reached;
 * the counter-case: the 2-link arm under computed-torque control with a 10 % mass error
-  (tests/test_frames.py), where absorbing breaks down earlier; why absorb is off by
+  (tests/mbs/test_frames.py), where absorbing breaks down earlier; why absorb is off by
   default.
 
 Columns: reached (T or the break-down time), ratio @ t, steps, wall (s), absorbed (how

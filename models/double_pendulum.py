@@ -4,7 +4,7 @@ Parameters (Rauh, Hofer, Auer, SCAN 2006): m1 = m2 = 1 kg, l1 = l2 = 1 m, g = 9.
 Coordinates (DH): x1 = phi1, x2 = phi2 - phi1 (relative angle), x3 = x1', x4 = x2'
 (angles from the downward vertical), eq. (21).
 
-Three constructions that agree (tests/test_mbs_models.py):
+Three constructions that agree (tests/mbs/test_mbs_models.py):
 
 1. :func:`rhs` / :func:`sympy_model` -- eq. (22) by hand.  The 2x2 matrix of eq. (22)
    is *not* the mass matrix (it is not symmetric) but eq. (22) is a correct equation of

@@ -306,7 +306,7 @@ def _unary_into(Z, x, m, kind, known_lo=-INF):
 # F[s, k, b, :] is the form of coefficient k of tape slot s for box b: index 0 the
 # centre, 1..m the symbol coefficients, m + 1 the error radius. The solver runs the
 # batched interpreter below (_affine_kernel), which computes the same numbers faster;
-# this one is the plain statement of the rules that tests/test_affine_taylor.py checks
+# this one is the plain statement of the rules that tests/verified/test_affine_taylor.py checks
 # it against, bit for bit. A change to a rule goes into both.
 # --------------------------------------------------------------------------
 @njit(cache=True)

@@ -10,7 +10,7 @@ figures (Fig. 5 for the three modes with the sampled trajectories overlaid, Figs
 and 3 of mode ii) into ``--out`` (default ``out/demo``).
 
 It exits with 1 when a sampled state lies outside an enclosure or when a mode breaks
-down before ``T`` (the demo must reach what it shows; ``tests/test_demo_and_scenes.py``
+down before ``T`` (the demo must reach what it shows; ``tests/app/test_demo_and_scenes.py``
 checks the same settings).
 """
 
