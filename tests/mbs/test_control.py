@@ -237,3 +237,29 @@ def test_param_subdivision_splits_the_parameter_box_and_stays_sound():
     with pytest.raises(ValueError, match="cannot be combined"):
         simulate("planar2", x0, 0.1, mode="i", progress=False, control=ctl, param_subdivision={"disturbance.joint2": 2},
                  subdivision=2)
+
+
+def test_computed_torque_with_taylor_model_jacobians_is_sound_and_much_narrower():
+    """The 2-link arm under computed torque with a 10 % mass error, q and qd +- 0.01,
+    T = 0.6: Jacobians over the set in degree-2 Taylor models (arithmetic="taylor_model")
+    let the closed loop contract as it does (measured final widths 0.0045-0.0175 in 26
+    steps, against 0.05-0.32 in 79 steps with affine Jacobians); with absorb=True too.
+    Closed-loop trajectories (Pinocchio aba, controller in floats) inside every output box
+    and the tube."""
+    chain = get("planar2")
+    x0 = box(Q0, 1e-2, 1e-2)
+    ctl = ComputedTorque(kp=25.0, kd=10.0, q_ref=Q0, nominal={"mass_scale": 1.1})
+    kw = dict(mode="i", output_dt=0.2, order=10, progress=False, control=ctl)
+    aff = simulate("planar2", x0, 0.6, arithmetic="affine", **kw)
+    trajs = ct_oracle(chain, corners(x0.lo, x0.hi, 12), 0.6)
+    for absorb in (False, True):
+        tm = simulate("planar2", x0, 0.6, arithmetic="taylor_model", absorb=absorb, **kw)
+        assert tm.status == "completed", tm.reason
+        for k, t in enumerate(tm.t):
+            for tr in trajs:
+                assert in_union(tr(t)[:4], tm.boxes[k][..., :4]), (absorb, t)
+        for j, b in enumerate(tm.tube):
+            for t in np.linspace(tm.tube_t[j], tm.tube_t[j + 1], 3):
+                for tr in trajs:
+                    assert in_union(tr(t)[:4], b[..., :4]), (absorb, t)
+        assert (np.asarray(tm.hull[-1].width())[:4] < 0.3 * np.asarray(aff.hull[-1].width())[:4]).all()

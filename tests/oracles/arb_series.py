@@ -120,5 +120,24 @@ def check_affine_taylor(graph, lo, hi, order, plo=None, phi=None, *, fresh_symbo
     return C
 
 
+def check_series_contains(graph, X, C, order, plo=None, phi=None, *, n_random=6, seed=0):
+    """Enclosures C (B, order + 1, n) of x_[0..order] from caller forms X (n, B, m0 + 2)
+    (any evaluator's ``series``), parameters as intervals without symbols: the exact
+    coefficients at points c + A eps + delta (eps in [-1, 1]^m0, |delta| <= 0.9 e,
+    extremes included) and at sampled parameters must be inside."""
+    rng = np.random.default_rng(seed)
+    n, nb, m2 = X.shape
+    assert C.shape == (nb, order + 1, n)
+    ppts = box_samples(np.atleast_2d(plo), np.atleast_2d(phi), n_random, rng)[:, 0] if graph.n_params else [None]
+    for b in range(nb):
+        for s in range(n_random):
+            eps = rng.choice([-1.0, 1.0], m2 - 2) if s % 2 else rng.uniform(-1, 1, m2 - 2)
+            delta = 0.9 * X[:, b, -1] * (rng.choice([-1.0, 1.0], n) if s % 3 == 0 else rng.uniform(-1, 1, n))
+            x = X[:, b, 0] + X[:, b, 1:-1] @ eps + delta
+            p = ppts[s % len(ppts)]
+            assert_inside(C.lo[b], C.hi[b], arb_taylor(graph, x, p, order), f"series, box {b}, x {x.tolist()}, p {p}")
+    return C
+
+
 def has_op(graph, op):
     return any(node.op == op for node in graph.nodes)

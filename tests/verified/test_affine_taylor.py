@@ -26,7 +26,8 @@ from hypothesis import strategies as st
 
 import verified.affine_taylor as at
 from oracles.arb_graph import _program, arb_eval, assert_encloses_arb, box_samples, random_boxes, run_program
-from oracles.arb_series import affine_coefficients, arb_precision, arb_taylor, assert_inside, check_affine_taylor
+from oracles.arb_series import (affine_coefficients, arb_precision, arb_taylor, assert_inside, check_affine_taylor,
+                                check_series_contains)
 from oracles.graph_models import all_ops
 from oracles.sampling import in_union, misses, sample_initial_points, trajectories
 from oracles.taylor_cases import (ARM_Q0, CASES, _arm, _dp_graph, _program_ode, _radius, assert_pin_inside,
@@ -122,22 +123,10 @@ def test_three_link_arm_coefficients(fresh):
 
 def check_series(graph, X, order, plo=None, phi=None, *, fresh_symbols=None, n_random=6, seed=0):
     """AffineTaylorODE.series on caller-given forms X (n, B, m0 + 2), parameters as
-    intervals without symbols: the exact coefficients at points c + A eps + delta (eps in
-    [-1, 1]^m0, |delta| <= 0.9 e, extremes included) and sampled parameters must be inside."""
-    rng = np.random.default_rng(seed)
-    n, nb, m2 = X.shape
+    intervals without symbols, against the exact coefficients (oracles.arb_series)."""
     params = Interval(np.asarray(plo, float), np.asarray(phi, float)) if graph.n_params else None
     C = AffineTaylorODE(graph, fresh_symbols=fresh_symbols).series(X, order, params)
-    assert C.shape == (nb, order + 1, n)
-    ppts = box_samples(np.atleast_2d(plo), np.atleast_2d(phi), n_random, rng)[:, 0] if graph.n_params else [None]
-    for b in range(nb):
-        for s in range(n_random):
-            eps = rng.choice([-1.0, 1.0], m2 - 2) if s % 2 else rng.uniform(-1, 1, m2 - 2)
-            delta = 0.9 * X[:, b, -1] * (rng.choice([-1.0, 1.0], n) if s % 3 == 0 else rng.uniform(-1, 1, n))
-            x = X[:, b, 0] + X[:, b, 1:-1] @ eps + delta
-            p = ppts[s % len(ppts)]
-            assert_inside(C.lo[b], C.hi[b], arb_taylor(graph, x, p, order), f"series, box {b}, x {x.tolist()}, p {p}")
-    return C
+    return check_series_contains(graph, X, C, order, plo, phi, n_random=n_random, seed=seed)
 
 
 @pytest.mark.parametrize("fresh", FRESH)

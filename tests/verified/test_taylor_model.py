@@ -19,14 +19,14 @@ from hypothesis import strategies as st
 
 import verified.taylor_model as tm
 from oracles.arb_graph import _program, box_samples, random_boxes
-from oracles.arb_series import arb_taylor, assert_inside
+from oracles.arb_series import check_affine_taylor, check_series_contains
 from oracles.graph_models import all_ops
 # the arm_pin fixture: tests/verified/conftest.py
 from oracles.taylor_cases import ARM_Q0, CASES, _arm, _dp_graph, _program_ode, _radius, case_graph, random_forms
 from verified.affine_taylor import AffineTaylorODE
 from verified.graph import trace
 from verified.interval import Interval
-from verified.taylor_model import TaylorModelODE, forms_to_models, model_length, models_to_interval
+from verified.taylor_model import TaylorModelODE, model_length, models_to_interval
 
 QUAD = [0, 1, 12]  # no quadratic monomials, one symbol's, all (up to 12)
 
@@ -40,42 +40,18 @@ def tm_coefficients(graph, lo, hi, order, plo=None, phi=None, quadratic_symbols=
     return C
 
 
-def check_tm(graph, lo, hi, order, plo=None, phi=None, *, quadratic_symbols=12, n_random=4, seed=0, C=None):
+def check_tm(graph, lo, hi, order, plo=None, phi=None, *, quadratic_symbols=12, n_random=4, seed=0):
     """The model enclosures of x_[0..order] over each box contain the exact coefficients at
     its corners (n <= 6), centre and random points (with points of the parameter box)."""
-    rng = np.random.default_rng(seed)
-    lo, hi = np.atleast_2d(np.asarray(lo, float)), np.atleast_2d(np.asarray(hi, float))
-    if C is None:
-        C = tm_coefficients(graph, lo, hi, order, plo, phi, quadratic_symbols)
-    pts = box_samples(lo, hi, n_random, rng)
-    if graph.n_params:
-        ppts = box_samples(np.atleast_2d(plo), np.atleast_2d(phi), n_random, rng)[:, 0]
-        ppts = ppts[rng.permutation(len(ppts))]
-    for s in range(pts.shape[0]):
-        p = ppts[s % len(ppts)] if graph.n_params else None
-        for b in range(pts.shape[1]):
-            assert_inside(C.lo[b], C.hi[b], arb_taylor(graph, pts[s, b], p, order),
-                          f"box {b}, point {pts[s, b].tolist()}, p {p}")
-    return C
+    C = tm_coefficients(graph, np.atleast_2d(lo), np.atleast_2d(hi), order, plo, phi, quadratic_symbols)
+    return check_affine_taylor(graph, lo, hi, order, plo, phi, n_random=n_random, seed=seed, C=C)
 
 
 def check_tm_series(graph, X, order, plo=None, phi=None, *, quadratic_symbols=12, n_random=6, seed=0):
-    """TaylorModelODE.series on caller forms X (n, B, m0 + 2): exact coefficients at points
-    c + A eps + delta (eps in [-1, 1]^m0, |delta| <= 0.9 e, extremes included) inside."""
-    rng = np.random.default_rng(seed)
-    n, nb, m2 = X.shape
+    """TaylorModelODE.series on caller forms X (n, B, m0 + 2), against the exact coefficients."""
     params = Interval(np.asarray(plo, float), np.asarray(phi, float)) if graph.n_params else None
     C = TaylorModelODE(graph, quadratic_symbols).series(X, order, params)
-    assert C.shape == (nb, order + 1, n)
-    ppts = box_samples(np.atleast_2d(plo), np.atleast_2d(phi), n_random, rng)[:, 0] if graph.n_params else [None]
-    for b in range(nb):
-        for s in range(n_random):
-            eps = rng.choice([-1.0, 1.0], m2 - 2) if s % 2 else rng.uniform(-1, 1, m2 - 2)
-            delta = 0.9 * X[:, b, -1] * (rng.choice([-1.0, 1.0], n) if s % 3 == 0 else rng.uniform(-1, 1, n))
-            x = X[:, b, 0] + X[:, b, 1:-1] @ eps + delta
-            p = ppts[s % len(ppts)]
-            assert_inside(C.lo[b], C.hi[b], arb_taylor(graph, x, p, order), f"series, box {b}, x {x.tolist()}, p {p}")
-    return C
+    return check_series_contains(graph, X, C, order, plo, phi, n_random=n_random, seed=seed)
 
 
 # --------------------------------------------------------------------------- default run
