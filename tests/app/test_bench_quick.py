@@ -1,9 +1,13 @@
 """python -m mbs bench --quick: every part of the benchmark and every stress case, small."""
 from pathlib import Path
 
+import pytest
+
 from mbs.app import bench
 
 
+# (8-25 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 def test_bench_quick(tmp_path):
     lines = []
     code = bench.run(quick=True, out=tmp_path, log=lines.append)

@@ -239,6 +239,9 @@ def test_param_subdivision_splits_the_parameter_box_and_stays_sound():
                  subdivision=2)
 
 
+# (the Taylor-model kernel's first compile, ~17 s cold: in the slow step, to keep the default run
+# under 3 minutes)
+@pytest.mark.slow
 def test_computed_torque_with_taylor_model_jacobians_is_sound_and_much_narrower():
     """The 2-link arm under computed torque with a 10 % mass error, q and qd +- 0.01,
     T = 0.6: Jacobians over the set in degree-2 Taylor models (arithmetic="taylor_model")

@@ -101,6 +101,8 @@ def test_double_pendulum_eq22_numeric():
     assert r.dHdt_simplified == 0
 
 
+# (5-9 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 def test_double_pendulum_eq22_symbolic_parameters():
     m1, m2, l1, l2 = sympy.symbols("m1 m2 l1 l2", positive=True)
     f = dp.rhs(X, m1=m1, m2=m2, l1=l1, l2=l2, g=g)

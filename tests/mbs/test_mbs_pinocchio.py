@@ -109,6 +109,8 @@ _row = st.fixed_dictionaries({
 })
 
 
+# (5-11 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 @settings(max_examples=12, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(rows=st.lists(_row, min_size=1, max_size=4), convention=st.sampled_from(["standard", "modified"]),

@@ -160,6 +160,8 @@ def test_merging_covers_the_merged_parameters_exactly():
     assert (merged.hull().lo <= s.hull().lo + 1e-12).all() and (merged.hull().hi >= s.hull().hi - 1e-12).all()
 
 
+# (5-8 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 def test_arm_with_merging_contains_pinocchio_trajectories(arm_pin):
     """3-link arm, q +- 1e-4, T = 1.3, affine, absorbing with merging at the cap (it merges
     here: 3 times): DOP853 with Pinocchio's aba inside every output box."""
@@ -180,6 +182,8 @@ def test_arm_with_merging_contains_pinocchio_trajectories(arm_pin):
     assert misses(sol, sols, per_step=2) == []
 
 
+# (4-6 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 def test_oracle_bites_when_merged_parameters_are_dropped(monkeypatch):
     """A broken merge that removes the merged parameters without the n covering ones loses
     part of the set: sampled trajectories must leave it (double pendulum, quarter box,

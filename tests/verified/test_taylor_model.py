@@ -28,6 +28,10 @@ from verified.graph import trace
 from verified.interval import Interval
 from verified.taylor_model import TaylorModelODE, model_length, models_to_interval
 
+# The whole module runs in the slow CI step: the kernel's first compile costs ~17 s cold, which
+# the default run (3-minute budget) cannot carry; the tests themselves take ~6 s warm.
+pytestmark = pytest.mark.slow
+
 QUAD = [0, 1, 12]  # no quadratic monomials, one symbol's, all (up to 12)
 
 
