@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
@@ -38,6 +39,8 @@ def test_quick_qdd_enclosures_are_sound():
     assert "UNSOUND" not in text
 
 
+# (4-5 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 def test_a_too_narrow_enclosure_is_reported_unsound(monkeypatch):
     real = mbs.simulate.solve
 

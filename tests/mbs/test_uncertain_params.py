@@ -225,6 +225,8 @@ def test_payload_scale_damping_enclosures_contain_pinocchio_trajectories(mode):
     assert (sol.hull[-1].width() < 3 * spread + 1e-9).all(), sol.hull[-1].width() / spread
 
 
+# (3-4 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 def test_ur5_payload_on_tool0_is_sound():
     """UR5, payload 1 kg +- 10% on tool0 (affine arithmetic), q(0) +- 1e-3: Pinocchio
     trajectories with sampled payloads stay inside."""

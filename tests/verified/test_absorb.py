@@ -76,6 +76,8 @@ def test_solve_absorb_arguments():
         solve(g, Interval(lo, hi), (0.0, 0.1), absorb=True, set_order=2)
 
 
+# (5-9 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 def test_arm_absorbed_contains_pinocchio_trajectories_and_is_tighter(arm_pin):
     """3-link arm, q +- 1e-5, T = 1, affine: DOP853 with Pinocchio's aba inside every
     output box and the tube; absorbing the error part gives a narrower final hull

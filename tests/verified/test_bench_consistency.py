@@ -2,9 +2,13 @@
 import os
 import sys
 
+import pytest
+
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks"))
 
 
+# (4-6 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 def test_quick_consistency_benchmark(capsys):
     import bench_consistency
 

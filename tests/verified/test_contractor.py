@@ -506,6 +506,8 @@ def row_violations(rng, cases, fn=None):
     return bad, n_pts
 
 
+# (4-8 s: behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.slow
 @SETTINGS
 @given(seed=st.integers(0, 2**32 - 1))
 def test_linear_row_sound(seed):

@@ -66,7 +66,9 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("name, fsym, fnum", CASES, ids=[c[0] for c in CASES])
+# (exp: 4-8 s of sympy series, behind the slow marker to keep the default run under 3 minutes)
+@pytest.mark.parametrize("name, fsym, fnum", [pytest.param(*c, id=c[0], marks=[pytest.mark.slow] if c[0] == "exp" else [])
+                                              for c in CASES])
 def test_each_recurrence_against_sympy_series(name, fsym, fnum):
     """State (t, y) with t' = 1, y' = g(t), g = f(u(t)), u(t) = t^2 - t/2 + 1/5:
     y_[k+1] = g_[k] / (k + 1), compared with sympy's Taylor series of g at t0."""
