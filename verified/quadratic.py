@@ -54,6 +54,7 @@ import numpy as np
 from . import linalg
 from .interval import Interval, concatenate, point, sqr
 from .lohner import LohnerStepper, horner
+from .policies import orthonormal_basis
 from .sets import DoubletonSets
 from .stepper import StepResult
 from .variational import pair_index
@@ -211,9 +212,7 @@ class QuadraticSets:
         sel = np.sort(np.argsort(w.max(axis=0), kind="stable")[:count])
         rest = np.setdiff1d(np.arange(m), sel)
         CS = self.C[:, :, sel]
-        size = np.linalg.norm(CS, axis=1) * self.r0.width()[:, sel]
-        order = np.argsort(-size, axis=1, kind="stable")
-        Bq, _ = np.linalg.qr(np.take_along_axis(CS, order[:, None, :], axis=2))  # (B, n, n)
+        Bq = orthonormal_basis(CS, self.r0.width()[:, sel])  # (B, n, n): Lohner's sorted QR
         # every quadratic term with a merged parameter in it: S with the kept block zeroed
         S_cross = self.S.copy()
         S_cross[np.ix_(np.arange(nb), np.arange(n), rest, rest)] = 0.0

@@ -19,6 +19,7 @@ import numpy as np
 
 from . import linalg
 from .interval import Interval, concatenate, point
+from .policies import orthonormal_basis
 
 __all__ = ["SetBatch", "DoubletonSets"]
 
@@ -198,9 +199,7 @@ class DoubletonSets:
         sel = np.sort(np.argsort(w.max(axis=0), kind="stable")[:count])
         rest = np.setdiff1d(np.arange(m), sel)
         CS = self.C[:, :, sel]  # (B, n, count)
-        size = np.linalg.norm(CS, axis=1) * self.r0.width()[:, sel]
-        order = np.argsort(-size, axis=1, kind="stable")
-        Bq, _ = np.linalg.qr(np.take_along_axis(CS, order[:, None, :], axis=2))  # (B, n, n)
+        Bq = orthonormal_basis(CS, self.r0.width()[:, sel])  # (B, n, n): Lohner's sorted QR
         if Bq.shape[2] < n:  # fewer columns than states cannot happen (count >= n), kept safe
             return self
         eye = point(np.broadcast_to(np.eye(n), (nb, n, n)))

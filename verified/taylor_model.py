@@ -51,7 +51,7 @@ import numpy as np
 from numba import njit
 
 from . import _kernels as _k
-from .affine_taylor import _U, _UPF, _TINY, _deriv, _pm, _up, _value, _wide_symbol_forms
+from .affine_taylor import _U, _UPF, _TINY, _deriv, _pm, _up, _value, _wide_symbol_forms, box_forms
 from .interval import Interval, _as_interval
 from .taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
                      T_PARAM, T_SIN, T_SQR, T_SQRT, T_SUB, T_TAN, _Tape)
@@ -567,7 +567,6 @@ class TaylorModelODE:
         P = np.zeros((self.n_params, nb, model_length(m, mq)))
         if self.n_params:
             p = _as_interval(params).broadcast_to((nb, self.n_params))
-            from .affine_taylor import box_forms
             P = forms_to_models(box_forms(p.lo, p.hi, np.full(self.n_params, -1), m), mq)
         return self._interval(self._run(Xm, P, int(order), m, mq), m, mq)
 
