@@ -112,12 +112,11 @@ import numpy as np
 
 from ..errors import ModelError
 from ..modes import MODES, get_mode
-from ..robots import PAPER_MODELS
+from ..robots import ERD_PREFIX, PAPER_MODELS
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "enclose_number", "PAPER_MODELS",
            "MODES", "scene_dir"]
 
-ERD_PREFIX = "example-robot-data:"
 
 _TOP = {"name", "description", "model", "parameters", "initial", "simulation", "solver", "consistency", "control"}
 _MODEL = {"name", "urdf", "dh", "convention", "lock", "gravity"}
