@@ -1,13 +1,14 @@
 """``python -m mbs bench [--out DIR]``: work-precision table and stress tests.
 
-Writes ``DIR/benchmarks.md`` and ``DIR/work_precision.png``; ``DIR`` defaults to
+Writes ``DIR/benchmarks.md`` and ``DIR/bench_work_precision.png``; ``DIR`` defaults to
 ``out/bench`` under the current working directory (never into the installed package).
 The report in a checkout's docs is ``python -m mbs bench --out docs``.
 
 1. Work-precision on the paper's double pendulum (eq. 22, box 25): for each mode
    (i, ii, iii), Taylor order and subdivision of x1(0), the final widths, their
    worst ratio to the hull of densely sampled DOP853 trajectories, and the wall time;
-   plus a work-precision plot (``work_precision.png``).
+   plus a work-precision plot (``bench_work_precision.png``; not ``work_precision.png``,
+   which ``benchmarks/bench_consistency.py --only 7`` writes into the same ``docs/``).
 2. Stress cases: long horizon until break-down, growing initial boxes, masses and
    lengths from 1e-3 to 1e3, a nearly singular mass matrix (m2 << m1), high energy,
    a 6-DOF URDF arm (UR5) with uncertain joint angles. Each case must either complete
@@ -259,7 +260,7 @@ def report_markdown(wp, stress, start, command, wall, t_end) -> str:
         "hull of DOP853 trajectories (rtol = atol = 1e-12) from 2001 values of x1(0) spread over the box. "
         "Energy test (modes ii, iii) every 0.1 s with 10 splits. "
         "Modes: (i) numeric model, no test; (ii) numeric model + energy test; (iii) symbolic model + "
-        "energy test. Pieces: x1(0) split into N equal parts. `work_precision.png` plots the same rows.",
+        "energy test. Pieces: x1(0) split into N equal parts. `bench_work_precision.png` plots the same rows.",
         "",
         "| mode | order | pieces | status | widths x1..x4 at T | worst ratio | wall s | max boxes | pruned |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -309,7 +310,7 @@ def report_markdown(wp, stress, start, command, wall, t_end) -> str:
 
 
 def run(quick=False, out=None, log=print) -> int:
-    """Run the benchmarks; write ``out``/benchmarks.md and work_precision.png (default
+    """Run the benchmarks; write ``out``/benchmarks.md and bench_work_precision.png (default
     out: :data:`DEFAULT_OUT`, ``out/bench`` in the current working directory, for the
     full run, a temporary directory for --quick). Returns 1 if a case crashed, produced
     a NaN or missed a sampled trajectory."""
@@ -333,10 +334,10 @@ def run(quick=False, out=None, log=print) -> int:
     wall = time.perf_counter() - t0
     command = "python -m mbs bench" + (" --quick" if quick else "")
     out.mkdir(parents=True, exist_ok=True)
-    fig_work_precision(wp, out / "work_precision.png",
+    fig_work_precision(wp, out / "bench_work_precision.png",
                        title=f"Double pendulum, T = {t_end:g}: worst width ratio vs wall time")
     (out / "benchmarks.md").write_text(report_markdown(wp, stress, start, command, wall, t_end))
-    log(f"wrote {out / 'benchmarks.md'} and {out / 'work_precision.png'} ({wall:.0f} s)")
+    log(f"wrote {out / 'benchmarks.md'} and {out / 'bench_work_precision.png'} ({wall:.0f} s)")
     bad = [r for r in wp + stress if r["status"] == "crash" or r["nan"] or r["escaped"]]
     for r in bad:
         log(f"FAILED: {r['case']}: {_short(r)}")

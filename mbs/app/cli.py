@@ -161,9 +161,9 @@ def main(argv=None):
     p.add_argument("--numeric-only", action="store_true", help="skip the symbolic model")
     p = sub.add_parser("bench", help="work-precision table and stress tests (benchmarks.md in --out)")
     p.add_argument("--quick", action="store_true", help="small fast version (used by the tests)")
-    p.add_argument("--out", default=None, help="write benchmarks.md and work_precision.png here (default "
-                                               "out/bench; --quick: a temporary directory; a checkout's "
-                                               "docs/benchmarks.md: --out docs)")
+    p.add_argument("--out", default=None, help="write benchmarks.md and bench_work_precision.png here "
+                                               "(default out/bench; --quick: a temporary directory; a "
+                                               "checkout's docs/benchmarks.md: --out docs)")
     args = parser.parse_args(argv)
     if args.command == "simulate":
         return cmd_simulate(args)

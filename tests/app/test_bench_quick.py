@@ -19,7 +19,7 @@ def test_bench_quick(tmp_path):
     for part in ("Work-precision", "Stress tests", "Start-up", "UR5", "m2/m1", "high energy", "long horizon",
                  "pendulum box", "l = 0.001 m"):
         assert part in md, part
-    assert (tmp_path / "work_precision.png").stat().st_size > 5000
+    assert (tmp_path / "bench_work_precision.png").stat().st_size > 5000
 
 
 def test_stress_case_never_raises():
@@ -40,4 +40,4 @@ def test_bench_writes_into_out_bench_of_the_working_directory(tmp_path, monkeypa
     monkeypatch.chdir(tmp_path)
     assert bench.run(log=lambda *_: None) == 0
     assert (tmp_path / "out" / "bench" / "benchmarks.md").is_file()
-    assert (tmp_path / "out" / "bench" / "work_precision.png").is_file()
+    assert (tmp_path / "out" / "bench" / "bench_work_precision.png").is_file()
