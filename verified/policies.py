@@ -24,10 +24,13 @@ from . import linalg
 from .interval import Interval, hull, point
 
 __all__ = ["QRBasis", "AutoBasis", "EnergyAlignedBasis", "BlockBasis", "error_basis_policy", "StepControl", "Validated", "WrapControl",
-           "SplitPolicy", "MergePolicy", "REMAINDER_SLACK"]
+           "SplitPolicy", "MergePolicy", "REMAINDER_SLACK", "LANDING_STRETCH"]
 
 #: a step is retried smaller when its remainder exceeds this many times ``tol``
 REMAINDER_SLACK = 10.0
+#: a step may grow by this factor to land on an output time instead of stopping just short
+# of it (UR5 PD scene, output_dt 0.25: one step in five was a sliver of 0.002-0.02 s)
+LANDING_STRETCH = 1.2
 
 
 # ---------------------------------------------------------------------------- error basis
@@ -232,8 +235,11 @@ class StepControl:
         (the wrapping control's) and the gap to the next output time (``gap_lo <= gap
         <= gap_hi``): when it reaches the gap it becomes ``gap_hi`` (land there)."""
         h = min(stepper.suggest_step(cX, self.tol, self.steer), self.h_max, limit, gap_hi)
-        if h >= gap_lo:
-            h = gap_hi  # land on the output time; validate the enclosure up to gap_hi
+        if h * LANDING_STRETCH >= gap_lo and gap_hi <= min(self.h_max, limit * LANDING_STRETCH):
+            # land on the output time (validate the enclosure up to gap_hi); a gap a
+            # little longer than h is taken in one step rather than leaving a sliver
+            # step behind (validate still shrinks it if its remainder is too large)
+            h = gap_hi
         return h
 
     def validate(self, stepper, X: Interval, cX: Interval, h: float) -> Validated:

@@ -16,7 +16,7 @@ from verified.consistency import EnergyTest
 from verified.graph import trace
 from verified.hooks import Hook, RunSetup, SolverHook, StopAfterWall, check_hooks
 from verified.interval import Interval
-from verified.policies import AutoBasis, QRBasis, StepControl, WrapControl, error_basis_policy
+from verified.policies import LANDING_STRETCH, AutoBasis, QRBasis, StepControl, WrapControl, error_basis_policy
 from verified.sets import DoubletonSets, SetBatch
 from verified.solver import VerifiedODE, solve
 from verified.stepper import StepResult
@@ -303,6 +303,13 @@ def test_policies():
     assert c.propose(FakeStepper(), None, np.inf, 0.5, 0.5) == 0.3
     assert c.propose(FakeStepper(), None, 0.1, 0.5, 0.5) == 0.1
     assert c.propose(FakeStepper(), None, np.inf, 0.25, 0.25 + 2**-54) == 0.25 + 2**-54  # lands
+    # a gap up to LANDING_STRETCH x the step is taken in one step (no sliver left behind)
+    assert c.propose(FakeStepper(), None, np.inf, 0.35, 0.35) == 0.35
+    assert c.propose(FakeStepper(), None, np.inf, 0.3 * LANDING_STRETCH * 1.01, 0.3 * LANDING_STRETCH * 1.01) == 0.3
+    # ... but never past h_max, and past the wrapping limit only by the same factor
+    assert StepControl(tol=1e-10, h_min=1e-9, h_max=0.32, steer=2).propose(FakeStepper(), None, np.inf, 0.35, 0.35) == 0.3
+    assert c.propose(FakeStepper(), None, 0.2, 0.23, 0.23) == 0.23
+    assert c.propose(FakeStepper(), None, 0.2, 0.25, 0.25) == 0.2
 
     class FakeStep:
         def __init__(self, nl, lin):
