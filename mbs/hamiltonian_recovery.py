@@ -52,6 +52,14 @@ What is not found.  When no ``M`` in the span of the basis satisfies (a)-(b) (Va
 Pol, a non-conservative force field without declared ``tau``, a gyroscopic-looking linear
 term) or every solution fails to be positive definite, :class:`NoHamiltonianError` is
 raised, naming the reason; a wrong ``M`` is never returned.
+
+Code.  :func:`recover_hamiltonian` is a short driver; the steps are module functions
+below it, in the order it calls them: ``_setup_problem`` (rationalize, trig form) and
+``_build_ansatz``; ``_Conditions`` (the rows of (a)-(b) at one point); phase 1
+``_sample_until_rank_stable`` and ``_reduced_solution_basis``; ``_choose_definite_member``
+(with ``_DefinitenessProbe``); phase 2 ``_solution_over_parameters``; ``_mass_matrix``
+(scale); ``_potential`` (eqs. (14)-(15)); ``_verify_equations_of_motion``, ``_energies``,
+``_verify_energy_balance``; ``_check_pd``.
 """
 from __future__ import annotations
 
@@ -329,41 +337,7 @@ class RecoveredHamiltonian:
                       + (", dH/dt simplified" if simplified else ""))
 
 
-# ----------------------------------------------------------------------------- main
-def _check_inputs(f, q, qd, tau):
-    if not isinstance(q, (list, tuple)) or not isinstance(qd, (list, tuple)):
-        raise TypeError("recover_hamiltonian: q and qd must be lists of sympy Symbols")
-    q, qd = list(q), list(qd)
-    s = len(q)
-    if s == 0 or len(qd) != s:
-        raise ValueError(f"recover_hamiltonian: q and qd must have the same non-zero length, "
-                         f"got {len(q)} and {len(qd)}")
-    for v in q + qd:
-        if not isinstance(v, sympy.Symbol):
-            raise TypeError(f"recover_hamiltonian: q and qd must hold sympy Symbols, got {v!r}")
-    if len(set(q + qd)) != 2 * s:
-        raise ValueError("recover_hamiltonian: q and qd must be 2s distinct symbols")
-    f = [sympy.sympify(e) for e in f]
-    if len(f) == 2 * s:
-        for i in range(s):
-            if sympy.expand(f[i] - qd[i]) != 0:
-                raise ValueError(f"recover_hamiltonian: a state rhs of length 2s must start with "
-                                 f"qd (entry {i} is {f[i]}, expected {qd[i]})")
-        Phi = f[s:]
-    elif len(f) == s:
-        Phi = f
-    else:
-        raise ValueError(f"recover_hamiltonian: f must hold s = {s} accelerations or the 2s = "
-                         f"{2 * s} entries (qd, qdd), got {len(f)}")
-    if tau is None:
-        tau_l = [sympy.Integer(0)] * s
-    else:
-        tau_l = [sympy.sympify(t) for t in tau]
-        if len(tau_l) != s:
-            raise ValueError(f"recover_hamiltonian: tau must have s = {s} entries, got {len(tau_l)}")
-    return q, qd, Phi, tau_l
-
-
+# ----------------------------------------------------------------------------- driver
 def recover_hamiltonian(f, q, qd, *, tau=None, basis=None, degree: int = 2,
                         scale=None, scale_entry=None, rationalize: str = "exact",
                         pd_params=None, q_box=None, seed: int = 0,
@@ -424,12 +398,147 @@ def recover_hamiltonian(f, q, qd, *, tau=None, basis=None, degree: int = 2,
     """
     t_start = time.perf_counter()
     timings = {}
+    problem = _setup_problem(f, q, qd, tau, scale, rationalize)
+    ansatz = _build_ansatz(problem, basis, degree)
+    conditions = _Conditions(problem, ansatz)
+    timings["setup"] = time.perf_counter() - t_start
+
+    rng = random.Random(seed)
+    par_vals = [Fraction(rng.randint(2, 10), rng.randint(2, 4)) for _ in problem.params]
+
+    # phase 1: exact rational system at random parameter values, grown until its rank is stable
+    t0 = time.perf_counter()
+    sampled = _sample_until_rank_stable(conditions, rng, par_vals)
+    null1 = sampled.matrix().nullspace()
+    timings["phase1_solve"] = time.perf_counter() - t0
+    cols, can1, piv1 = _reduced_solution_basis(null1, ansatz)
+    # a positive definite member of the solution family (float screen, phase-1 values)
+    probe = _DefinitenessProbe(problem, ansatz, cols, par_vals, q_box, seed)
+    chosen, chosen_sign, family_dim = _choose_definite_member(
+        _domain_rows(can1), piv1, cols, probe, problem.has_tau, seed)
+
+    # phase 2: the small system on the support, over Q(params)
+    t0 = time.perf_counter()
+    rows2 = _solution_over_parameters(conditions, sampled, cols, can1, piv1, problem.params)
+    vec = _chosen_solution(rows2, chosen, chosen_sign, problem.has_tau)
+    timings["phase2_solve"] = time.perf_counter() - t0
+
+    # M(q) with its scale fixed
+    basis_q = [problem.V.q_form(b) for b in ansatz.basisT]
+    Mq, scale_note = _mass_matrix(vec, cols, ansatz, basis_q, problem, scale_entry)
+
+    # potential energy by the integrals (15), coordinate by coordinate
+    t0 = time.perf_counter()
+    MT = [[problem.V.trig_form(Mq[a, b]) for b in range(problem.s)] for a in range(problem.s)]
+    P = _potential(MT, problem, degree, par_vals, rng)
+    PT = problem.V.trig_form(P)
+    # grad P == tau - M Phi at qd = 0 is proved below as part of the full identity
+    timings["potential"] = time.perf_counter() - t0
+
+    # exact verification: M Phi - tau + C qd + dP/dq == 0 and dH/dt == qd^T tau
+    t0 = time.perf_counter()
+    _verify_equations_of_motion(MT, PT, problem)
+    Mq = Mq.applyfunc(sympy.sympify)
+    K, H, dHdt, dHdt_s = _energies(Mq, P, problem)
+    _verify_energy_balance(dHdt, dHdt_s, problem.V, rationalize)
+    timings["verify"] = time.perf_counter() - t0
+
+    # symmetry and positive definiteness (proved)
+    t0 = time.perf_counter()
+    pd_ok, pd_report = _check_pd(Mq, problem.V, problem.trig_idx, problem.poly_idx, problem.params,
+                                 par_vals, pd_params, q_box, max_boxes)
+    timings["pd_check"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_start
+    alternatives = ()
+    if family_dim > 1:
+        alternatives = _family_members(rows2[(1 if problem.has_tau else 0):], cols, ansatz, basis_q)
+    return RecoveredHamiltonian(
+        q=tuple(problem.V.q), qd=tuple(problem.V.qd), f=tuple(problem.f_given),
+        tau=tuple(problem.tau_given), M=Mq, K=K, P=P, H=H, dHdt=dHdt, dHdt_simplified=dHdt_s,
+        basis=tuple(basis_q), family_dim=family_dim, pd_report=pd_report,
+        positive_definite_proved=pd_ok, scale_note=scale_note, params=tuple(problem.params),
+        alternatives=alternatives, timings=timings)
+
+
+# ----------------------------------------------------------------------------- setup
+def _check_inputs(f, q, qd, tau):
+    """Validate the input; returns ``(q, qd, Phi, tau)`` as lists of length s (``Phi`` the
+    accelerations as given, ``tau`` zeros when not declared)."""
+    if not isinstance(q, (list, tuple)) or not isinstance(qd, (list, tuple)):
+        raise TypeError("recover_hamiltonian: q and qd must be lists of sympy Symbols")
+    q, qd = list(q), list(qd)
+    s = len(q)
+    if s == 0 or len(qd) != s:
+        raise ValueError(f"recover_hamiltonian: q and qd must have the same non-zero length, "
+                         f"got {len(q)} and {len(qd)}")
+    for v in q + qd:
+        if not isinstance(v, sympy.Symbol):
+            raise TypeError(f"recover_hamiltonian: q and qd must hold sympy Symbols, got {v!r}")
+    if len(set(q + qd)) != 2 * s:
+        raise ValueError("recover_hamiltonian: q and qd must be 2s distinct symbols")
+    f = [sympy.sympify(e) for e in f]
+    if len(f) == 2 * s:
+        for i in range(s):
+            if sympy.expand(f[i] - qd[i]) != 0:
+                raise ValueError(f"recover_hamiltonian: a state rhs of length 2s must start with "
+                                 f"qd (entry {i} is {f[i]}, expected {qd[i]})")
+        Phi = f[s:]
+    elif len(f) == s:
+        Phi = f
+    else:
+        raise ValueError(f"recover_hamiltonian: f must hold s = {s} accelerations or the 2s = "
+                         f"{2 * s} entries (qd, qdd), got {len(f)}")
+    if tau is None:
+        tau_l = [sympy.Integer(0)] * s
+    else:
+        tau_l = [sympy.sympify(t) for t in tau]
+        if len(tau_l) != s:
+            raise ValueError(f"recover_hamiltonian: tau must have s = {s} entries, got {len(tau_l)}")
+    return q, qd, Phi, tau_l
+
+
+@dataclass
+class _Problem:
+    """The ODE ``qdd = Phi(q, qd)`` with declared forces ``tau(q, qd)``, floats
+    rationalized and written in the trig form of :class:`_Vars`.
+
+    Lists have length s unless stated.  ``Phi0T``, ``tau0T`` are ``PhiT``, ``tauT`` at
+    ``qd = 0``; ``dPhi0T[l][k] = d Phi0_k / d q_l`` and ``dtau0T[l][k] = d tau0_k / d q_l``
+    (s x s, the derivatives condition (b) needs)."""
+
+    V: _Vars
+    f_given: list           # (qd, Phi) as given, floats kept (length 2s)
+    tau_given: list         # tau as given [N m or N]
+    tau_r: list             # tau with floats rationalized
+    has_tau: bool           # some declared force is non-zero
+    scale_r: object         # the scale rationalized (None: not given)
+    PhiT: list
+    tauT: list
+    Phi0T: list
+    tau0T: list
+    dPhi0T: list
+    dtau0T: list
+    trig_idx: list          # coordinates that appear inside sin / cos
+    poly_idx: list          # coordinates that appear outside them
+    gens: list              # S_i, C_i (i in trig_idx), then q_i (i in poly_idx)
+
+    @property
+    def s(self) -> int:
+        return len(self.V.q)
+
+    @property
+    def params(self) -> list:
+        return self.V.params
+
+
+def _setup_problem(f, q, qd, tau, scale, rationalize) -> _Problem:
+    """Check the input, rationalize floats (``rationalize``: "exact" or "nsimplify"; the
+    scale always "exact"), collect the free parameters (sorted by name) and write ``Phi``
+    and ``tau`` in trig form."""
     q, qd, Phi_given, tau_given = _check_inputs(f, q, qd, tau)
     s = len(q)
-    f_given = [*qd, *Phi_given]
     Phi = [_rationalize(e, rationalize) for e in Phi_given]
     tau_r = [_rationalize(e, rationalize) for e in tau_given]
-    has_tau = any(t != 0 for t in tau_r)
     scale_r = None if scale is None else _rationalize(scale, "exact")
     if scale_r is not None and scale_r.free_symbols & set(q + qd):
         raise ValueError(f"recover_hamiltonian: scale must not depend on q or qd, got {scale}")
@@ -438,21 +547,69 @@ def recover_hamiltonian(f, q, qd, *, tau=None, basis=None, degree: int = 2,
                     key=str)
     V = _Vars(q=q, qd=qd, params=params,
               S=[sympy.Dummy(f"S_{v}") for v in q], C=[sympy.Dummy(f"C_{v}") for v in q])
-
-    # --- trig form of Phi, tau and the ansatz basis
     PhiT = [V.trig_form(e) for e in Phi]
     tauT = [V.trig_form(e) for e in tau_r]
     zero_qd = {v: 0 for v in qd}
     Phi0T = [e.xreplace(zero_qd) for e in PhiT]
     tau0T = [e.xreplace(zero_qd) for e in tauT]
-    dPhi0T = [[V.d(e, l) for e in Phi0T] for l in range(s)]
-    dtau0T = [[V.d(e, l) for e in tau0T] for l in range(s)]
     used = set().union(*(e.free_symbols for e in PhiT + tauT))
     trig_idx = [i for i in range(s) if V.S[i] in used or V.C[i] in used]
     poly_idx = [i for i in range(s) if q[i] in used]
-    gens = [g for i in trig_idx for g in (V.S[i], V.C[i])] + [q[i] for i in poly_idx]
+    return _Problem(
+        V=V, f_given=[*qd, *Phi_given], tau_given=tau_given, tau_r=tau_r,
+        has_tau=any(t != 0 for t in tau_r), scale_r=scale_r, PhiT=PhiT, tauT=tauT,
+        Phi0T=Phi0T, tau0T=tau0T,
+        dPhi0T=[[V.d(e, l) for e in Phi0T] for l in range(s)],
+        dtau0T=[[V.d(e, l) for e in tau0T] for l in range(s)],
+        trig_idx=trig_idx, poly_idx=poly_idx,
+        gens=[g for i in trig_idx for g in (V.S[i], V.C[i])] + [q[i] for i in poly_idx])
+
+
+@dataclass
+class _Ansatz:
+    """``M(q)_ab = sum_j c_(e,j) basis_j(q)`` for each upper-triangle entry ``e = (a, b)``.
+
+    The unknown of column ``e * nb + j`` is ``c_(e,j)``; with declared forces, column ``N``
+    (the last) is the coefficient of ``tau``, which fixes the scale."""
+
+    basisT: list            # the nb basis functions in trig form
+    dbasisT: list           # dbasisT[l][j] = d basis_j / d q_l (s x nb)
+    entries: list           # the s(s+1)/2 entries (a, b), a <= b
+    has_tau: bool
+
+    @property
+    def nb(self) -> int:
+        return len(self.basisT)
+
+    @property
+    def N(self) -> int:
+        """Number of unknowns of ``M``; also the index of the tau column."""
+        return len(self.entries) * self.nb
+
+    @property
+    def ncol(self) -> int:
+        return self.N + (1 if self.has_tau else 0)
+
+    def assemble(self, coeff, basis_q) -> sympy.Matrix:
+        """The s x s symmetric ``M`` for the coefficients ``coeff`` (dict column -> value,
+        columns < N) and the basis ``basis_q`` (functions of q)."""
+        s = len(self.dbasisT)
+        Mm = sympy.zeros(s, s)
+        for c, v in coeff.items():
+            e, j = divmod(c, self.nb)
+            a, b = self.entries[e]
+            Mm[a, b] += v * basis_q[j]
+            if a != b:
+                Mm[b, a] += v * basis_q[j]
+        return Mm
+
+
+def _build_ansatz(problem, basis, degree) -> _Ansatz:
+    """The ansatz for ``M``: the user's ``basis`` (functions of q only) or the monomials of
+    total degree <= ``degree`` in ``problem.gens`` (module docstring, "Method")."""
+    V, q, s = problem.V, problem.V.q, problem.s
     if basis is None:
-        basisT = _monomials(gens, V.S, degree)
+        basisT = _monomials(problem.gens, V.S, degree)
     else:
         basisT = []
         for b in basis:
@@ -462,90 +619,142 @@ def recover_hamiltonian(f, q, qd, *, tau=None, basis=None, degree: int = 2,
                 raise ValueError(f"recover_hamiltonian: basis functions must depend on q only, "
                                  f"{b} has {sorted(map(str, extra))}")
             basisT.append(V.trig_form(_rationalize(b, "exact")))
-    nb = len(basisT)
-    dbasisT = [[V.d(b, l) for b in basisT] for l in range(s)]
-    entries = [(a, b) for a in range(s) for b in range(a, s)]
-    N = len(entries) * nb                   # unknowns of M; the tau column is index N
-    ncol = N + (1 if has_tau else 0)
+    return _Ansatz(basisT=basisT, dbasisT=[[V.d(b, l) for b in basisT] for l in range(s)],
+                   entries=[(a, b) for a in range(s) for b in range(a, s)],
+                   has_tau=problem.has_tau)
 
-    ev_phi = _lambdify(V.args, [*PhiT, *Phi0T, *itertools.chain(*dPhi0T)])
-    ev_tau = _lambdify(V.args, [*tauT, *tau0T, *itertools.chain(*dtau0T)])
-    ev_basis = _lambdify(V.args, [*basisT, *itertools.chain(*dbasisT)])
-    ev_phi_sym = ev_tau_sym = None
-    timings["setup"] = time.perf_counter() - t_start
 
-    rng = random.Random(seed)
-    par_vals = [Fraction(rng.randint(2, 10), rng.randint(2, 4)) for _ in params]
+# ----------------------------------------------------------------------------- conditions
+class _Conditions:
+    """Conditions (a) (eq. (10), s rows) and (b) (the symmetric gradient, s(s-1)/2 rows)
+    as rows of a linear system in the ansatz unknowns (length ``ansatz.ncol``), evaluated
+    exactly at one sample point."""
 
-    def sample_point():
-        qv, Sv, Cv = [], [], []
-        for i in range(s):
-            Si, Ci = _pythagorean(rng)
-            qv.append(Fraction(rng.randint(-30, 30), rng.randint(1, 15)))
-            Sv.append(Si)
-            Cv.append(Ci)
-        qdv = [Fraction(rng.randint(-30, 30), rng.randint(1, 10)) for _ in range(s)]
-        return qv, Sv, Cv, qdv
+    def __init__(self, problem, ansatz):
+        V, p = problem.V, problem
+        self.problem, self.ansatz = problem, ansatz
+        self._phi_exprs = [*p.PhiT, *p.Phi0T, *itertools.chain(*p.dPhi0T)]
+        self._tau_exprs = [*p.tauT, *p.tau0T, *itertools.chain(*p.dtau0T)]
+        self._ev_phi = _lambdify(V.args, self._phi_exprs)
+        self._ev_tau = _lambdify(V.args, self._tau_exprs)
+        self._ev_basis = _lambdify(V.args, [*ansatz.basisT, *itertools.chain(*ansatz.dbasisT)])
 
-    def rows_at(pt, pvals, symbolic=False):
-        """Equations (a) (s rows) and (b) (s(s-1)/2 rows) at one sample point."""
+    @cached_property
+    def _ev_symbolic(self):
+        """Evaluators of Phi and tau through which symbolic parameters propagate (phase 2)."""
+        V = self.problem.V
+        return (_lambdify(V.args, self._phi_exprs, exact_symbolic=True),
+                _lambdify(V.args, self._tau_exprs, exact_symbolic=True))
+
+    @property
+    def per_point(self) -> int:
+        s = self.problem.s
+        return s + s * (s - 1) // 2
+
+    def rows_at(self, pt, pvals, symbolic=False):
+        """The rows (a) then (b) at ``pt = (q, S, C, qd)`` (lists of s exact numbers) and
+        parameter values ``pvals`` (numbers, or with ``symbolic`` the parameter symbols).
+        Raises ZeroDivisionError where the ODE is singular."""
+        s, nb = self.problem.s, self.ansatz.nb
         qv, Sv, Cv, qdv = pt
         args = [*qv, *Sv, *Cv, *qdv, *pvals]
-        if symbolic:
-            vals = ev_phi_sym(*args)
-            tvals = ev_tau_sym(*args)
-        else:
-            vals = ev_phi(*args)
-            tvals = ev_tau(*args)
-        bvals = ev_basis(*args)
+        ev_phi, ev_tau = self._ev_symbolic if symbolic else (self._ev_phi, self._ev_tau)
+        vals = ev_phi(*args)
+        tvals = ev_tau(*args)
+        bvals = self._ev_basis(*args)
         phi, phi0 = vals[:s], vals[s:2 * s]
         dphi0 = [vals[2 * s + l * s: 2 * s + (l + 1) * s] for l in range(s)]
         tv, tv0 = tvals[:s], tvals[s:2 * s]
         dtv0 = [tvals[2 * s + l * s: 2 * s + (l + 1) * s] for l in range(s)]
         B = bvals[:nb]
         dB = [bvals[nb + l * nb: nb + (l + 1) * nb] for l in range(s)]
-        dphi = [phi[k] - phi0[k] for k in range(s)]
-        Bdot = [sum((dB[l][j] * qdv[l] for l in range(s)), 0) for j in range(nb)]
-        rows = []
-        for k in range(s):                                     # condition (a)
-            row = [0] * ncol
-            for e, (a, b) in enumerate(entries):
-                w = qdv[a] * qdv[b] * (1 if a == b else 2)
+        return (_condition_a_rows(self.ansatz, qdv, phi, phi0, B, dB, tv, tv0)
+                + _condition_b_rows(self.ansatz, phi0, dphi0, B, dB, dtv0))
+
+
+def _condition_a_rows(ansatz, qdv, phi, phi0, B, dB, tv, tv0):
+    """Condition (a), eqs. (9)-(10): for k = 1..s the row of
+    ``E_k(q, qd) - E_k(q, 0) = 0`` with ``E = M Phi - tau + C(M) qd`` and
+    ``(C qd)_k = (dM/dt qd)_k - 1/2 qd^T (dM/dq_k) qd`` (Christoffel form), at one point.
+
+    ``qdv``, ``phi``, ``phi0``, ``tv``, ``tv0``: length s (``*0`` at ``qd = 0``); ``B``:
+    the nb basis values; ``dB[l][j] = d basis_j / d q_l``."""
+    s, nb, N = len(qdv), ansatz.nb, ansatz.N
+    dphi = [phi[k] - phi0[k] for k in range(s)]
+    Bdot = [sum((dB[l][j] * qdv[l] for l in range(s)), 0) for j in range(nb)]
+    rows = []
+    for k in range(s):
+        row = [0] * ansatz.ncol
+        for e, (a, b) in enumerate(ansatz.entries):
+            w = qdv[a] * qdv[b] * (1 if a == b else 2)
+            for j in range(nb):
+                val = -dB[k][j] * w / 2
+                if k == a:
+                    val += B[j] * dphi[b] + Bdot[j] * qdv[b]
+                if k == b and a != b:
+                    val += B[j] * dphi[a] + Bdot[j] * qdv[a]
+                row[e * nb + j] = val
+        if ansatz.has_tau:
+            row[N] = -(tv[k] - tv0[k])
+        rows.append(row)
+    return rows
+
+
+def _condition_b_rows(ansatz, phi0, dphi0, B, dB, dtv0):
+    """Condition (b): ``E0 = M Phi(q, 0) - tau(q, 0) = -dP/dq`` is a gradient, so that the
+    integrals (15) do not depend on the path: for k < l the row of
+    ``d E0_k / d q_l - d E0_l / d q_k = 0`` at one point.
+
+    ``phi0``: length s; ``dphi0[l][k] = d Phi0_k / d q_l``, ``dtv0`` likewise for tau;
+    ``B``, ``dB`` as in :func:`_condition_a_rows`."""
+    s, nb, N = len(phi0), ansatz.nb, ansatz.N
+    rows = []
+    for k in range(s):
+        for l in range(k + 1, s):
+            row = [0] * ansatz.ncol
+            for e, (a, b) in enumerate(ansatz.entries):
                 for j in range(nb):
-                    val = -dB[k][j] * w / 2
-                    if k == a:
-                        val += B[j] * dphi[b] + Bdot[j] * qdv[b]
-                    if k == b and a != b:
-                        val += B[j] * dphi[a] + Bdot[j] * qdv[a]
+                    val = 0
+                    # d_l (M_j phi0)_k - d_k (M_j phi0)_l
+                    for (kk, ll, sign) in ((k, l, 1), (l, k, -1)):
+                        if kk == a:
+                            val += sign * (dB[ll][j] * phi0[b] + B[j] * dphi0[ll][b])
+                        if kk == b and a != b:
+                            val += sign * (dB[ll][j] * phi0[a] + B[j] * dphi0[ll][a])
                     row[e * nb + j] = val
-            if has_tau:
-                row[N] = -(tv[k] - tv0[k])
+            if ansatz.has_tau:
+                row[N] = -(dtv0[l][k] - dtv0[k][l])
             rows.append(row)
-        for k in range(s):                                     # condition (b)
-            for l in range(k + 1, s):
-                row = [0] * ncol
-                for e, (a, b) in enumerate(entries):
-                    for j in range(nb):
-                        val = 0
-                        # d_l (M_j phi0)_k - d_k (M_j phi0)_l
-                        for (kk, ll, sign) in ((k, l, 1), (l, k, -1)):
-                            if kk == a:
-                                val += sign * (dB[ll][j] * phi0[b] + B[j] * dphi0[ll][b])
-                            if kk == b and a != b:
-                                val += sign * (dB[ll][j] * phi0[a] + B[j] * dphi0[ll][a])
-                        row[e * nb + j] = val
-                if has_tau:
-                    row[N] = -(dtv0[l][k] - dtv0[k][l])
-                rows.append(row)
-        return rows
+    return rows
 
-    # --- phase 1: exact rational system at random parameter values, grow until rank is stable
-    t0 = time.perf_counter()
-    QQ = sympy.QQ
-    points, rows, origin = [], [], []
-    per_point = s + s * (s - 1) // 2
 
-    def add_points(n):
+# ----------------------------------------------------------------------------- phase 1
+def _sample_point(rng, s):
+    """A random rational point ``(q, S, C, qd)``, four lists of s Fractions, with
+    ``S_i^2 + C_i^2 = 1`` (``q`` independent of ``S``, ``C``: see the module docstring)."""
+    qv, Sv, Cv = [], [], []
+    for _ in range(s):
+        Si, Ci = _pythagorean(rng)
+        qv.append(Fraction(rng.randint(-30, 30), rng.randint(1, 15)))
+        Sv.append(Si)
+        Cv.append(Ci)
+    qdv = [Fraction(rng.randint(-30, 30), rng.randint(1, 10)) for _ in range(s)]
+    return qv, Sv, Cv, qdv
+
+
+class _SampledSystem:
+    """Phase 1: the rows of conditions (a)-(b) over QQ at random points, with the
+    parameters at the random rationals ``par_vals``.  ``origin[i] = (point index, row index
+    at that point)`` of row i."""
+
+    def __init__(self, conditions, rng, par_vals):
+        self.conditions, self.rng, self.par_vals = conditions, rng, par_vals
+        self.ncol = conditions.ansatz.ncol
+        self.points, self.rows, self.origin = [], [], []
+
+    def add_points(self, n):
+        """Add the rows of n more points; points where the ODE is singular are skipped."""
+        QQ = sympy.QQ
         added = 0
         tries = 0
         while added < n:
@@ -553,204 +762,267 @@ def recover_hamiltonian(f, q, qd, *, tau=None, basis=None, degree: int = 2,
             if tries > 20 * n + 50:
                 raise NoHamiltonianError("recover_hamiltonian: the ODE could not be evaluated at "
                                          "random rational points (division by zero everywhere?)")
-            pt = sample_point()
+            pt = _sample_point(self.rng, self.conditions.problem.s)
             try:
-                rs = rows_at(pt, par_vals)
+                rs = self.conditions.rows_at(pt, self.par_vals)
             except ZeroDivisionError:
                 continue
-            points.append(pt)
+            self.points.append(pt)
             for r_i, r in enumerate(rs):
-                rows.append([QQ(v.numerator, v.denominator) if isinstance(v, Fraction) else QQ(v)
-                             for v in r])
-                origin.append((len(points) - 1, r_i))
+                self.rows.append([QQ(v.numerator, v.denominator) if isinstance(v, Fraction)
+                                  else QQ(v) for v in r])
+                self.origin.append((len(self.points) - 1, r_i))
             added += 1
 
-    def rank():
-        return DomainMatrix(rows, (len(rows), ncol), QQ).rank()
+    def matrix(self) -> DomainMatrix:
+        return DomainMatrix(self.rows, (len(self.rows), self.ncol), sympy.QQ)
 
-    add_points(ncol // per_point + 3)
-    r_prev = rank()
+    def rank(self) -> int:
+        return self.matrix().rank()
+
+
+def _sample_until_rank_stable(conditions, rng, par_vals) -> _SampledSystem:
+    """Add sample points until the rank of the phase-1 system is full or has not grown
+    for two rounds."""
+    sampled = _SampledSystem(conditions, rng, par_vals)
+    ncol, per_point = sampled.ncol, conditions.per_point
+    sampled.add_points(ncol // per_point + 3)
+    r_prev = sampled.rank()
     stable = 0
     while stable < 2 and r_prev < ncol:
-        add_points(max(3, ncol // (4 * per_point)))
-        r_new = rank()
+        sampled.add_points(max(3, ncol // (4 * per_point)))
+        r_new = sampled.rank()
         stable = stable + 1 if r_new == r_prev else 0
         r_prev = r_new
-    A1 = DomainMatrix(rows, (len(rows), ncol), QQ)
-    null1 = A1.nullspace()
-    timings["phase1_solve"] = time.perf_counter() - t0
+    return sampled
+
+
+def _domain_rows(mat):
+    """The rows of a DomainMatrix as lists of domain elements."""
+    return [[mat[i, j].element for j in range(mat.shape[1])] for i in range(mat.shape[0])]
+
+
+def _reduced_solution_basis(null1, ansatz):
+    """The support of the phase-1 null space (the columns some solution uses; the tau
+    column ``N`` first, so that its pivot comes first) and the null space restricted to it
+    in reduced row echelon form -> ``(cols, can1, piv1)``.  Raises when there is no
+    solution, or none with a non-zero tau coefficient."""
+    QQ, N, ncol = sympy.QQ, ansatz.N, ansatz.ncol
     if null1.shape[0] == 0:
         raise NoHamiltonianError(
             "recover_hamiltonian: no mass matrix M(q) in the span of the basis "
-            f"({nb} functions of q per entry, {N} unknowns) satisfies eqs. (9)-(10) and the "
-            "gradient condition" + (" with the declared tau" if has_tau else
-                                     " (non-conservative forces? declare them as tau)"))
+            f"({ansatz.nb} functions of q per entry, {N} unknowns) satisfies eqs. (9)-(10) and "
+            "the gradient condition" + (" with the declared tau" if ansatz.has_tau else
+                                        " (non-conservative forces? declare them as tau)"))
     support = sorted({c for i in range(null1.shape[0]) for c in range(ncol)
                       if null1[i, c].element != 0})
-    if has_tau and N not in support:
+    if ansatz.has_tau and N not in support:
         raise NoHamiltonianError(
             "recover_hamiltonian: the declared tau is not consistent with a Lagrangian structure "
             "of the remaining terms (no solution has a non-zero tau coefficient)")
-    # column order: tau column first, so that rref puts its pivot first
-    cols = ([N] if has_tau else []) + [c for c in support if c != N]
+    cols = ([N] if ansatz.has_tau else []) + [c for c in support if c != N]
     null1_r = DomainMatrix([[null1[i, c].element for c in cols] for i in range(null1.shape[0])],
                            (null1.shape[0], len(cols)), QQ)
     can1, piv1 = _rref_basis(null1_r)
+    return cols, can1, piv1
 
-    # --- choose a positive definite member (on phase-1 values, floats)
-    fl_rng = np.random.default_rng(seed)
-    ev_basis_f = sympy.lambdify(V.args, basisT, modules="numpy")
 
-    def float_M(vec, ang, qv):
+# ----------------------------------------------------------------------------- definiteness
+class _DefinitenessProbe:
+    """A floating-point screen of ``M`` at test points, used only to *choose* a member of
+    the solution family (the result is proved positive definite by :func:`_check_pd`).
+
+    Test points: 40 random ``(angles, q)`` with angles in ``[-pi, pi]`` (for S, C) and q in
+    ``q_box`` (default ``[-1, 1]``), plus ``q = 0`` when no ``q_box`` is given."""
+
+    def __init__(self, problem, ansatz, cols, par_vals, q_box, seed):
+        s = problem.s
+        self.s, self.ansatz, self.cols, self.par_vals = s, ansatz, cols, par_vals
+        fl_rng = np.random.default_rng(seed)
+        self._ev_basis = sympy.lambdify(problem.V.args, ansatz.basisT, modules="numpy")
+        box = np.array(q_box, dtype=float) if q_box is not None else np.array([[-1.0, 1.0]] * s)
+        self.points = [(fl_rng.uniform(-np.pi, np.pi, s), fl_rng.uniform(box[:, 0], box[:, 1]))
+                       for _ in range(40)]
+        if q_box is None:
+            self.points.insert(0, (np.zeros(s), np.zeros(s)))
+
+    def matrix(self, vec, ang, qv):
+        """``M`` (s x s floats) for the coefficients ``vec`` (over ``cols``) at
+        ``S = sin(ang)``, ``C = cos(ang)``, ``q = qv``."""
+        s, ansatz = self.s, self.ansatz
         Sv, Cv = np.sin(ang), np.cos(ang)
-        Bv = ev_basis_f(*qv, *Sv, *Cv, *([0.0] * s), *[float(p) for p in par_vals])
+        Bv = self._ev_basis(*qv, *Sv, *Cv, *([0.0] * s), *[float(p) for p in self.par_vals])
         Mf = np.zeros((s, s))
-        for ci, c in enumerate(cols):
-            if c == N:
+        for ci, c in enumerate(self.cols):
+            if c == ansatz.N:
                 continue
-            e, j = divmod(c, nb)
-            a, b = entries[e]
+            e, j = divmod(c, ansatz.nb)
+            a, b = ansatz.entries[e]
             Mf[a, b] += float(vec[ci]) * float(Bv[j])
             Mf[b, a] = Mf[a, b]
         return Mf
 
-    box = np.array(q_box, dtype=float) if q_box is not None else np.array([[-1.0, 1.0]] * s)
-    test_pts = [(fl_rng.uniform(-np.pi, np.pi, s), fl_rng.uniform(box[:, 0], box[:, 1]))
-                for _ in range(40)]
-    if q_box is None:
-        test_pts.insert(0, (np.zeros(s), np.zeros(s)))
-
-    def pd_sign(vec):
+    def sign(self, vec) -> int:
+        """+1 (-1) if ``M`` is positive (negative) definite at every test point, else 0."""
         sign = 0
-        for ang, qv in test_pts:
-            ev = np.linalg.eigvalsh(float_M(vec, ang, qv))
+        for ang, qv in self.points:
+            ev = np.linalg.eigvalsh(self.matrix(vec, ang, qv))
             cur = 1 if ev.min() > 0 else (-1 if ev.max() < 0 else 0)
             if cur == 0 or (sign and cur != sign):
                 return 0
             sign = cur
         return sign
 
-    can1_rows = [[can1[i, j].element for j in range(len(cols))] for i in range(can1.shape[0])]
+
+def _candidate_combinations(d, has_tau, seed):
+    """Coefficient tuples tried on the d homogeneous solutions: with declared tau only the
+    particular solution (the tau row); otherwise each basis vector, then (for d > 1) their
+    sum and 30 random integer combinations."""
+    if has_tau:
+        return [(1,) + (0,) * d]
+    candidates = [tuple(int(i == k) for i in range(d)) for k in range(d)]
+    if d > 1:
+        candidates.append((1,) * d)
+        crng = random.Random(seed + 1)
+        candidates += [tuple(crng.randint(-3, 3) for _ in range(d)) for _ in range(30)]
+    return candidates
+
+
+def _choose_definite_member(can1_rows, piv1, cols, probe, has_tau, seed):
+    """A member of the phase-1 solution family that the probe finds definite ->
+    ``(alpha, sign, family_dim)``: the combination ``alpha`` of the homogeneous rows, the
+    sign (-1: flip it; only without tau) and the dimension of the homogeneous family."""
     if has_tau:
         part = can1_rows[0]
         if piv1[0] != 0:
             raise NoHamiltonianError("recover_hamiltonian: the declared tau is not consistent "
                                      "with a Lagrangian structure of the remaining terms")
         hom = can1_rows[1:]
-        candidates = [(1,) + (0,) * len(hom)]
     else:
         hom = can1_rows
-        d = len(hom)
-        candidates = [tuple(int(i == k) for i in range(d)) for k in range(d)]
-        if d > 1:
-            candidates.append((1,) * d)
-            crng = random.Random(seed + 1)
-            candidates += [tuple(crng.randint(-3, 3) for _ in range(d)) for _ in range(30)]
-    chosen, chosen_sign = None, 0
-    for alpha in candidates:
+    family_dim = len(hom)
+    for alpha in _candidate_combinations(family_dim, has_tau, seed):
         if has_tau:
             vec = part
         else:
             vec = [sum(al * r[i] for al, r in zip(alpha, hom)) for i in range(len(cols))]
-        sg = pd_sign(vec)
+        sg = probe.sign(vec)
         if sg > 0 or (sg < 0 and not has_tau):
-            chosen, chosen_sign = alpha, sg
-            break
-    family_dim = len(hom)
-    if chosen is None:
-        raise NoHamiltonianError(
-            "recover_hamiltonian: eqs. (9)-(10) have solutions in the basis "
-            f"(a {family_dim}-dimensional family), but none tried is positive definite"
-            + (" (with the declared tau fixing the scale)" if has_tau else "")
-            + ": the system is not a Hamiltonian system with a mass matrix in this basis")
+            return alpha, sg, family_dim
+    raise NoHamiltonianError(
+        "recover_hamiltonian: eqs. (9)-(10) have solutions in the basis "
+        f"(a {family_dim}-dimensional family), but none tried is positive definite"
+        + (" (with the declared tau fixing the scale)" if has_tau else "")
+        + ": the system is not a Hamiltonian system with a mass matrix in this basis")
 
-    # --- phase 2: the small system on the support, over Q(params)
-    t0 = time.perf_counter()
-    if params:
-        ev_phi_sym = _lambdify(V.args, [*PhiT, *Phi0T, *itertools.chain(*dPhi0T)], True)
-        ev_tau_sym = _lambdify(V.args, [*tauT, *tau0T, *itertools.chain(*dtau0T)], True)
-        need = len(cols) - can1.shape[0]
-        Asub = DomainMatrix([[r[c] for c in cols] for r in rows], (len(rows), len(cols)), QQ)
-        _, prow = Asub.transpose().rref()
-        prow = list(prow)[:need]
-        by_point = {}
-        for ri in prow:
-            pi, k = origin[ri]
-            by_point.setdefault(pi, []).append(k)
-        sym_rows = []
-        for pi, ks in by_point.items():
-            pt = points[pi]
-            rs = rows_at(tuple([sympy.Rational(v.numerator, v.denominator) for v in part_]
-                               for part_ in pt), params, symbolic=True)
-            for k in ks:
-                sym_rows.append([sympy.sympify(rs[k][c]) for c in cols])
-        A2 = DomainMatrix.from_list_sympy(len(sym_rows), len(cols), sym_rows).to_field()
-        null2 = A2.nullspace()
-        if null2.shape[0] != can1.shape[0]:
-            raise NoHamiltonianError("recover_hamiltonian: the solution space for symbolic "
-                                     "parameters differs from the generic one; give parameter "
-                                     "values")
-        can2, piv2 = _rref_basis(null2)
-        if list(piv2) != list(piv1):
-            raise NoHamiltonianError("recover_hamiltonian: inconsistent pivots between the "
-                                     "numeric and symbolic solves; give parameter values")
-        K2 = can2.domain
-        rows2 = [[K2.to_sympy(can2[i, j].element) for j in range(len(cols))]
-                 for i in range(can2.shape[0])]
-    else:
-        rows2 = [[QQ.to_sympy(x) for x in r] for r in can1_rows]
+
+# ----------------------------------------------------------------------------- phase 2
+def _independent_rows_by_point(sampled, cols, need):
+    """``need`` linearly independent phase-1 rows (restricted to ``cols``), grouped as
+    {point index: [row index at that point]}."""
+    QQ = sympy.QQ
+    Asub = DomainMatrix([[r[c] for c in cols] for r in sampled.rows],
+                        (len(sampled.rows), len(cols)), QQ)
+    _, prow = Asub.transpose().rref()
+    prow = list(prow)[:need]
+    by_point = {}
+    for ri in prow:
+        pi, k = sampled.origin[ri]
+        by_point.setdefault(pi, []).append(k)
+    return by_point
+
+
+def _solution_over_parameters(conditions, sampled, cols, can1, piv1, params):
+    """Phase 2: the solution rows (reduced row echelon form over ``cols``, as sympy
+    expressions) over the field of rational functions of the parameters, from the same
+    points as phase 1 with the parameters kept as symbols.  Without parameters these are
+    the phase-1 rows.  Raises when the symbolic solution space differs from phase 1's."""
+    QQ = sympy.QQ
+    if not params:
+        return [[QQ.to_sympy(x) for x in r] for r in _domain_rows(can1)]
+    by_point = _independent_rows_by_point(sampled, cols, len(cols) - can1.shape[0])
+    sym_rows = []
+    for pi, ks in by_point.items():
+        pt = sampled.points[pi]
+        rs = conditions.rows_at(tuple([sympy.Rational(v.numerator, v.denominator) for v in part_]
+                                      for part_ in pt), params, symbolic=True)
+        for k in ks:
+            sym_rows.append([sympy.sympify(rs[k][c]) for c in cols])
+    A2 = DomainMatrix.from_list_sympy(len(sym_rows), len(cols), sym_rows).to_field()
+    null2 = A2.nullspace()
+    if null2.shape[0] != can1.shape[0]:
+        raise NoHamiltonianError("recover_hamiltonian: the solution space for symbolic "
+                                 "parameters differs from the generic one; give parameter "
+                                 "values")
+    can2, piv2 = _rref_basis(null2)
+    if list(piv2) != list(piv1):
+        raise NoHamiltonianError("recover_hamiltonian: inconsistent pivots between the "
+                                 "numeric and symbolic solves; give parameter values")
+    K2 = can2.domain
+    return [[K2.to_sympy(can2[i, j].element) for j in range(len(cols))]
+            for i in range(can2.shape[0])]
+
+
+def _chosen_solution(rows2, chosen, chosen_sign, has_tau):
+    """The coefficient vector (over ``cols``) of the chosen member: the tau row with
+    declared tau, else ``chosen_sign * sum_i chosen_i rows2_i``."""
     if has_tau:
-        vec = rows2[0]
-    else:
-        vec = [sum(al * r[i] for al, r in zip(chosen, rows2)) for i in range(len(cols))]
-        vec = [chosen_sign * v for v in vec]
-    timings["phase2_solve"] = time.perf_counter() - t0
+        return rows2[0]
+    vec = [sum(al * r[i] for al, r in zip(chosen, rows2)) for i in range(len(rows2[0]))]
+    return [chosen_sign * v for v in vec]
 
-    # --- assemble M (q-form) and fix the scale
-    basis_q = [V.q_form(b) for b in basisT]
+
+# ----------------------------------------------------------------------------- M and P
+def _mass_matrix(vec, cols, ansatz, basis_q, problem, scale_entry):
+    """``M(q)`` (s x s, q-form) from the coefficient vector, scale fixed (see
+    :func:`_normalise_scale`), collected in the basis functions -> ``(M, scale_note)``."""
     coeff = {}
     for ci, c in enumerate(cols):
-        if c == N:
+        if c == ansatz.N:
             continue
         coeff[c] = sympy.cancel(vec[ci])
-
-    def assemble(cf):
-        Mm = sympy.zeros(s, s)
-        for c, v in cf.items():
-            e, j = divmod(c, nb)
-            a, b = entries[e]
-            Mm[a, b] += v * basis_q[j]
-            if a != b:
-                Mm[b, a] += v * basis_q[j]
-        return Mm
-
-    Mq = assemble(coeff)
-    q0 = {v: 0 for v in q}
-    if has_tau:
+    Mq = ansatz.assemble(coeff, basis_q)
+    if problem.has_tau:
         scale_note = "scale fixed by the declared tau (M Phi - tau is not homogeneous in M)"
     else:
-        if scale_entry is None:
-            cand = [(s - 1, s - 1)] + [(i, i) for i in range(s)]
-        else:
-            cand = [tuple(scale_entry)]
-        entry = next((ij for ij in cand if sympy.simplify(Mq[ij].xreplace(q0)) != 0), None)
-        if entry is None:
-            raise NoHamiltonianError(f"recover_hamiltonian: M{cand[0]} vanishes at q = 0; "
-                                     "choose another scale_entry")
-        target = sympy.Integer(1) if scale_r is None else scale_r
-        factor = sympy.cancel(target / Mq[entry].xreplace(q0))
-        coeff = {c: sympy.cancel(v * factor) for c, v in coeff.items()}
-        Mq = assemble(coeff)
-        scale_note = (f"M[{entry[0]}][{entry[1]}] at q = 0 normalised to {target} "
-                      "(eqs. (9)-(10) are homogeneous in M)")
+        Mq, scale_note = _normalise_scale(Mq, coeff, ansatz, basis_q, problem, scale_entry)
+    nb = ansatz.nb
     Mq = Mq.applyfunc(lambda e: sympy.collect(sympy.expand(e), basis_q[1:] if nb > 1 else []))
+    return Mq, scale_note
 
-    # --- potential energy by the integrals (15), coordinate by coordinate
-    t0 = time.perf_counter()
-    MT = [[V.trig_form(Mq[a, b]) for b in range(s)] for a in range(s)]
-    G = [tau0T[k] - sum((MT[k][m] * Phi0T[m] for m in range(s)), sympy.Integer(0))
+
+def _normalise_scale(Mq, coeff, ansatz, basis_q, problem, scale_entry):
+    """Eqs. (9)-(10) are homogeneous in M: scale it so that ``M[scale_entry]`` at ``q = 0``
+    equals the scale (default 1; entry default the last diagonal one, else the first
+    diagonal entry non-zero at q = 0) -> ``(M, scale_note)``."""
+    s = problem.s
+    q0 = {v: 0 for v in problem.V.q}
+    if scale_entry is None:
+        cand = [(s - 1, s - 1)] + [(i, i) for i in range(s)]
+    else:
+        cand = [tuple(scale_entry)]
+    entry = next((ij for ij in cand if sympy.simplify(Mq[ij].xreplace(q0)) != 0), None)
+    if entry is None:
+        raise NoHamiltonianError(f"recover_hamiltonian: M{cand[0]} vanishes at q = 0; "
+                                 "choose another scale_entry")
+    target = sympy.Integer(1) if problem.scale_r is None else problem.scale_r
+    factor = sympy.cancel(target / Mq[entry].xreplace(q0))
+    coeff = {c: sympy.cancel(v * factor) for c, v in coeff.items()}
+    return (ansatz.assemble(coeff, basis_q),
+            f"M[{entry[0]}][{entry[1]}] at q = 0 normalised to {target} "
+            "(eqs. (9)-(10) are homogeneous in M)")
+
+
+def _potential(MT, problem, degree, par_vals, rng):
+    """``P(q)`` (q-form, ``P(0) = 0``) by the integrals (15), coordinate by coordinate, of
+    ``dP/dq = tau - M Phi`` at ``qd = 0`` (eq. (14)); ``MT`` is ``M`` in trig form (s x s
+    lists).  The integrand is first fitted as a polynomial in the monomials of degree
+    ``degree + 1`` (:func:`_fit_polynomial`).  Raises when the remainder for ``q_i`` still
+    depends on ``q_1..q_(i-1)`` (not a gradient)."""
+    V, s, q = problem.V, problem.s, problem.V.q
+    G = [problem.tau0T[k] - sum((MT[k][m] * problem.Phi0T[m] for m in range(s)), sympy.Integer(0))
          for k in range(s)]        # = dP/dq at qd = 0
-    G_poly = _fit_polynomial(G, V, gens, degree + 1, par_vals, params, rng)
+    G_poly = _fit_polynomial(G, V, problem.gens, degree + 1, par_vals, problem.params, rng)
     if G_poly is None:      # no fit in the monomials: hand the integrand to sympy as it is
         G_poly = [V.trig_form(sympy.simplify(V.q_form(g))) for g in G]
     P = sympy.Integer(0)
@@ -762,49 +1034,54 @@ def recover_hamiltonian(f, q, qd, *, tau=None, basis=None, degree: int = 2,
                                      f"remainder for q{i + 1} still depends on {bad})")
         R_q = sympy.expand(V.q_form(R_i))
         P += sympy.integrate(R_q, q[i])
-    P = sympy.expand(P - P.xreplace(q0))
-    PT = V.trig_form(P)
-    # grad P == tau - M Phi at qd = 0 is proved below as part of the full identity
-    timings["potential"] = time.perf_counter() - t0
+    q0 = {v: 0 for v in q}
+    return sympy.expand(P - P.xreplace(q0))
 
-    # --- exact verification of the whole structure: M Phi - tau + C qd + dP/dq == 0
-    t0 = time.perf_counter()
+
+# ----------------------------------------------------------------------------- verification
+def _verify_equations_of_motion(MT, PT, problem):
+    """Exact identity test of the whole structure, ``M Phi - tau + C(M) qd + dP/dq == 0``
+    (eq. (2) with eq. (4)), equation by equation; ``MT``, ``PT`` in trig form."""
+    V, s, qd = problem.V, problem.s, problem.V.qd
     qdv = sympy.Matrix(qd)
     Mdot = sum((sympy.Matrix(MT).applyfunc(lambda e: V.d(e, l)) * qd[l] for l in range(s)),
                sympy.zeros(s, s))
     for k in range(s):
         Cqd_k = (Mdot * qdv)[k] - (qdv.T * sympy.Matrix(MT).applyfunc(lambda e: V.d(e, k))
                                    * qdv)[0, 0] / 2
-        res = sum((MT[k][m] * PhiT[m] for m in range(s)), sympy.Integer(0)) - tauT[k] + Cqd_k \
-            + V.d(PT, k)
+        res = sum((MT[k][m] * problem.PhiT[m] for m in range(s)), sympy.Integer(0)) \
+            - problem.tauT[k] + Cqd_k + V.d(PT, k)
         if not V.is_zero(res):
             raise NoHamiltonianError(f"recover_hamiltonian: verification failed for equation "
                                      f"{k + 1} (the sampled solve found a spurious solution); "
                                      "try another seed or basis")
-    Mq = Mq.applyfunc(sympy.sympify)
+
+
+def _energies(Mq, P, problem):
+    """``K = 1/2 qd^T M qd`` (eq. (13)), ``H = K + P`` (eq. (4)), ``dH/dt = grad H . f``
+    with ``f`` as given, and ``qd^T tau`` (eq. (7)) -> ``(K, H, dHdt, dHdt_simplified)``."""
+    q, qd = problem.V.q, problem.V.qd
+    qdv = sympy.Matrix(qd)
     K = sympy.expand((qdv.T * Mq * qdv)[0, 0] / 2)
     H = K + P
-    dHdt = sum((sympy.diff(H, x) * fx for x, fx in zip([*q, *qd], f_given)), sympy.Integer(0))
-    dHdt_s = sympy.expand(sum((a * b for a, b in zip(qd, tau_r)), sympy.Integer(0)))
+    dHdt = sum((sympy.diff(H, x) * fx for x, fx in zip([*q, *qd], problem.f_given)),
+               sympy.Integer(0))
+    dHdt_s = sympy.expand(sum((a * b for a, b in zip(qd, problem.tau_r)), sympy.Integer(0)))
+    return K, H, dHdt, dHdt_s
+
+
+def _verify_energy_balance(dHdt, dHdt_s, V, rationalize):
+    """Exact identity test of eq. (7): ``grad H . f == qd^T tau`` (floats in ``dHdt``
+    rationalized as the ODE was)."""
     if not V.is_zero(V.trig_form(_rationalize(dHdt, rationalize)) - V.trig_form(dHdt_s)):
         raise NoHamiltonianError("recover_hamiltonian: dH/dt != qd^T tau (verification failed)")
-    timings["verify"] = time.perf_counter() - t0
 
-    # --- symmetry and positive definiteness
-    t0 = time.perf_counter()
-    pd_ok, pd_report = _check_pd(Mq, V, trig_idx, poly_idx, params, par_vals, pd_params, q_box,
-                                 max_boxes)
-    timings["pd_check"] = time.perf_counter() - t0
-    timings["total"] = time.perf_counter() - t_start
-    alternatives = ()
-    if family_dim > 1:
-        alternatives = tuple(assemble({c: r[ci] for ci, c in enumerate(cols) if c != N})
-                             for r in rows2[(1 if has_tau else 0):])
-    return RecoveredHamiltonian(
-        q=tuple(q), qd=tuple(qd), f=tuple(f_given), tau=tuple(tau_given), M=Mq, K=K, P=P, H=H,
-        dHdt=dHdt, dHdt_simplified=dHdt_s, basis=tuple(basis_q), family_dim=family_dim,
-        pd_report=pd_report, positive_definite_proved=pd_ok, scale_note=scale_note,
-        params=tuple(params), alternatives=alternatives, timings=timings)
+
+def _family_members(rows, cols, ansatz, basis_q):
+    """The mass matrices of the homogeneous solution rows (``alternatives``)."""
+    return tuple(ansatz.assemble({c: r[ci] for ci, c in enumerate(cols) if c != ansatz.N},
+                                 basis_q)
+                 for r in rows)
 
 
 def _fit_polynomial(G, V, gens, degree, par_vals, params, rng):
