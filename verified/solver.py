@@ -37,6 +37,7 @@ import numpy as np
 from .graph import Graph
 from .hooks import ProgressHook, RunSetup, check_hooks
 from .interval import Interval, concatenate, hull, stack
+from .linalg import SingularMatrixError
 from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
 from .policies import REMAINDER_SLACK, BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl  # noqa: F401
@@ -391,7 +392,13 @@ def solve(
             if found.enclosure is None:
                 run.stop(f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}", "breakdown")
                 break
-            step = run.advance(stepper, X, found, gap_lo, gap_hi)
+            try:
+                step = run.advance(stepper, X, found, gap_lo, gap_hi)
+            except SingularMatrixError as exc:
+                # a set so wide that its basis or its recentring cannot be inverted any
+                # more (non-finite or singular enclosures): everything up to here stands
+                run.stop(f"set update failed at t = {run.t:g}: {exc}", "breakdown")
+                break
             t, steps = run.t, steps + 1
             wrap.update(step)
             run.call_hooks(hook_list, step)

@@ -151,6 +151,27 @@ def test_a_hook_removing_every_set_is_a_breakdown(ode, box):
     assert sol.stats["steps"] == 1 and len(sol.tube) == 1
 
 
+def test_a_set_update_that_cannot_be_inverted_is_a_breakdown(ode, box, reference, monkeypatch):
+    """A SingularMatrixError inside a step (a set so wide that its basis or recentring
+    cannot be inverted: seen on the UR5 with second-order sets) ends the run as a
+    break-down holding exactly the steps verified before it, not as an exception."""
+    from verified.linalg import SingularMatrixError
+
+    calls = {"n": 0}
+    real = lohner.LohnerStepper.step
+
+    def failing(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise SingularMatrixError("cannot verify 1 of 1 linear systems", [(0,)])
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(lohner.LohnerStepper, "step", failing)
+    sol = solve(ode, box, (0.0, 0.6), t_eval=T_EVAL, subdivision=[2, 2])
+    assert sol.status == "breakdown" and "set update failed" in sol.reason and "cannot verify" in sol.reason
+    _assert_prefix(sol, reference, 3)
+
+
 # ----------------------------------------------------------------------------- stopping early
 class StopAt(Hook):
     def __init__(self, k, exc=None):
