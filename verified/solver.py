@@ -87,6 +87,18 @@ class VerifiedODE:
             self._second = TaylorODE(second_variational_graph(self.graph))
         return self._second
 
+    def second_variational_along(self, directions: int):
+        """Evaluator over a set's own forms (affine, or Taylor models with
+        ``arithmetic="taylor_model"``) of the second variational equations along
+        ``directions`` columns (:func:`verified.variational.second_variational_graph`),
+        built on first use for each count."""
+        cache = self.__dict__.setdefault("_second_along", {})
+        if directions not in cache:
+            graph = second_variational_graph(self.graph, directions)
+            cache[directions] = (AffineTaylorODE(graph, fresh_symbols=0) if self.arithmetic == "affine"
+                                 else TaylorModelODE(graph))
+        return cache[directions]
+
     @property
     def second_variational_over_set(self):
         """Affine (or, with ``arithmetic="taylor_model"``, degree-2 Taylor model) evaluator
@@ -606,7 +618,9 @@ class _Run:
 def _stepper(prob: VerifiedODE, order, params, error_basis, set_order=1, absorb=False) -> LohnerStepper:
     if set_order == 2:
         return QuadraticStepper(prob.taylor, prob.variational, prob.second_variational, order, params, error_basis,
-                                second_over_set=prob.second_variational_over_set)
+                                second_over_set=prob.second_variational_over_set,
+                                second_directional=(None if prob.arithmetic == "interval"
+                                                    else prob.second_variational_along))
     return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis, absorb=absorb)
 
 

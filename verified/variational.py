@@ -59,7 +59,7 @@ def pair_index(n: int) -> list[tuple[int, int]]:
     return [(a, b) for a in range(n) for b in range(a, n)]
 
 
-def second_variational_graph(graph: Graph) -> Graph:
+def second_variational_graph(graph: Graph, directions: int | None = None) -> Graph:
     """The graph of ``(x, V, W) -> (f, Df V, W')`` with, for each pair ``a <= b``,
 
         W_ab' = D^2 f[V_a, V_b] + Df W_ab,      W_ab(t0) = 0,  V(t0) = I,
@@ -70,14 +70,24 @@ def second_variational_graph(graph: Graph) -> Graph:
     of the Taylor coefficients ``x_[k]`` at ``c`` (over a box: enclosures of them over
     the box) -- what a second-order set step needs (:mod:`verified.quadratic`).
 
-    Inputs ``(x_1..x_n, V row-major, W_ab for pair_index(n), each an n-vector)``;
+    Inputs ``(x_1..x_n, V row-major, W_ab for pair_index(p), each an n-vector)``;
     outputs in the same layout. Built by forward mode twice: once for ``Df(x) v`` as a
     graph of ``(x, v)``, then again on that graph in the directions ``(V_b, W_ab)``.
+
+    ``directions=p`` (default ``n``) makes ``V`` an ``n x p`` matrix: started from
+    ``V(t0) = C`` (n, p), ``W_ab`` is then the second derivative along columns ``a``
+    and ``b`` of ``C``, ``C_a^T D^2 x(t) C_b``. That costs ``1 + p + p(p+1)/2`` times
+    the right-hand side instead of ``1 + n + n(n+1)/2``: what a second-order set whose
+    parameters move it in ``p < n`` directions needs (a UR5 with an uncertain pose and
+    an exact velocity: p = 6 of n = 12).
     """
     n = graph.n_inputs
     if graph.n_outputs != n:
         raise ValueError(f"variational equations need a square ODE graph, got {n} inputs and {graph.n_outputs} outputs")
-    pairs = pair_index(n)
+    p_dir = n if directions is None else int(directions)
+    if not 1 <= p_dir <= n:
+        raise ValueError(f"directions must be in [1, {n}], got {directions!r}")
+    pairs = pair_index(p_dir)
     # F1(x, v) = Df(x) v
     b1 = GraphBuilder(2 * n, graph.n_params, param_names=graph.param_names)
     x1 = [b1.input(i) for i in range(n)]
@@ -86,21 +96,21 @@ def second_variational_graph(graph: Graph) -> Graph:
     zero1 = b1.const(0)
     F1 = b1.build([zero1 if di[0] is None else di[0] for di in d1])
 
-    names = (list(graph.input_names) + [f"V_{i}_{j}" for i in range(n) for j in range(n)]
+    names = (list(graph.input_names) + [f"V_{i}_{j}" for i in range(n) for j in range(p_dir)]
              + [f"W_{a}_{c}_{i}" for a, c in pairs for i in range(n)])
-    b = GraphBuilder(n + n * n + n * len(pairs), graph.n_params, input_names=names, param_names=graph.param_names)
+    b = GraphBuilder(n + n * p_dir + n * len(pairs), graph.n_params, input_names=names, param_names=graph.param_names)
     x = [b.input(i) for i in range(n)]
     p = [b.param(i) for i in range(graph.n_params)]
-    V = [[b.input(n + i * n + j) for j in range(n)] for i in range(n)]  # V[i][j]
-    W = {pc: [b.input(n + n * n + k * n + i) for i in range(n)] for k, pc in enumerate(pairs)}
+    V = [[b.input(n + i * p_dir + j) for j in range(p_dir)] for i in range(n)]  # V[i][j]
+    W = {pc: [b.input(n + n * p_dir + k * n + i) for i in range(n)] for k, pc in enumerate(pairs)}
     values, dV = forward_mode(b, graph, x, p, V)  # seeds[i][j] = V[i][j]: direction j = column j
     zero = b.const(0)
     outputs = list(values)
     for di in dV:
         outputs += [zero if dij is None else dij for dij in di]
     dW = {}
-    for a in range(n):
-        partners = [c for c in range(a, n)]
+    for a in range(p_dir):
+        partners = [c for c in range(a, p_dir)]
         # directions k <-> pair (a, partners[k]): dx = V_c, dv = W_ac
         seeds = [[V[i][c] for c in partners] for i in range(n)] + [[W[(a, c)][i] for c in partners] for i in range(n)]
         _, d = forward_mode(b, F1, x + [V[i][a] for i in range(n)], p, seeds)
@@ -108,6 +118,6 @@ def second_variational_graph(graph: Graph) -> Graph:
             dW[(a, c)] = [zero if d[i][k] is None else d[i][k] for i in range(n)]
     for pc in pairs:
         outputs += dW[pc]
-    out_names = (list(graph.output_names) + [f"dV_{i}_{j}" for i in range(n) for j in range(n)]
+    out_names = (list(graph.output_names) + [f"dV_{i}_{j}" for i in range(n) for j in range(p_dir)]
                  + [f"dW_{a}_{c}_{i}" for a, c in pairs for i in range(n)])
     return b.build(outputs, out_names)

@@ -43,6 +43,29 @@ def test_second_variational_graph_matches_finite_differences():
         np.testing.assert_allclose(dW[k], d2 + g.jacobian_float(x) @ W[k], rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.parametrize("p", [1, 2, 3])
+def test_directional_second_variational_graph_matches_finite_differences(p):
+    """directions=p: V is n x p and W_ab the second derivative along V's columns a, b."""
+    g = trace(dp.rhs, 4)
+    g2 = second_variational_graph(g, directions=p)
+    n, P = 4, pair_index(p)
+    assert g2.n_inputs == n + n * p + n * len(P) == g2.n_outputs
+    rng = np.random.default_rng(p)
+    x = rng.uniform(-1, 1, n)
+    V = rng.normal(size=(n, p))
+    W = rng.normal(size=(len(P), n))
+    out = g2.eval_float(np.r_[x, V.ravel(), W.ravel()])
+    np.testing.assert_allclose(out[:n], g.eval_float(x), rtol=1e-14)
+    np.testing.assert_allclose(out[n:n + n * p].reshape(n, p), g.jacobian_float(x) @ V, rtol=1e-12, atol=1e-12)
+    dW = out[n + n * p:].reshape(len(P), n)
+    eps = 1e-6
+    for k, (a, b) in enumerate(P):
+        d2 = (g.jacobian_float(x + eps * V[:, b]) @ V[:, a] - g.jacobian_float(x - eps * V[:, b]) @ V[:, a]) / (2 * eps)
+        np.testing.assert_allclose(dW[k], d2 + g.jacobian_float(x) @ W[k], rtol=1e-6, atol=1e-6)
+    with pytest.raises(ValueError, match="directions"):
+        second_variational_graph(g, directions=5)
+
+
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 10**6), n=st.integers(1, 4))
 def test_quadratic_range_encloses_exact_values(seed, n):
@@ -114,6 +137,39 @@ def test_oracle_bites_when_third_order_terms_are_dropped(monkeypatch):
     monkeypatch.setattr(quadratic, "_bilinear", zero)
     sol, sols = _pendulum_run(T=2.0, box_scale=3.0)
     assert misses(sol, sols) != []
+
+
+def _cubic_shear_run(monkeypatch, lagrange=None):
+    """x1' = 0, x2' = x1^3 from x1 in [-0.5, 0.5], x2 = 0.2 exact: a set that extends in
+    one direction of two (the directional Hessian path), whose whole curvature is third
+    order (x2(t) = 0.2 + t x1^3, closed form). Returns (misses, calls of the path)."""
+    calls = []
+    real = quadratic.QuadraticStepper._directional_lagrange
+
+    def spy(self, sets, live, *args):
+        calls.append(live.size)
+        out = real(self, sets, live, *args)
+        return out if lagrange is None else lagrange(out)
+    monkeypatch.setattr(quadratic.QuadraticStepper, "_directional_lagrange", spy)
+    g = trace(lambda x, p: [x[0] * 0.0, x[0] * x[0] * x[0]], 2)
+    sol = solve(VerifiedODE(g, "affine"), Interval(np.array([-0.5, 0.2]), np.array([0.5, 0.2])), (0.0, 1.0),
+                t_eval=[0.5, 1.0], set_order=2)
+    assert sol.success, sol.reason
+    u = np.linspace(-0.5, 0.5, 101)
+    out = sum(int(((x2 < b.lo[0, 1]) | (x2 > b.hi[0, 1])).sum())
+              for t, b in zip(sol.t, sol.boxes) for x2 in [0.2 + t * u**3])
+    return out, calls
+
+
+def test_directional_hessian_path_is_taken_and_sound(monkeypatch):
+    misses_, calls = _cubic_shear_run(monkeypatch)
+    assert calls and set(calls) == {1}
+    assert misses_ == 0
+
+
+def test_oracle_bites_when_the_directional_lagrange_term_is_dropped(monkeypatch):
+    misses_, calls = _cubic_shear_run(monkeypatch, lagrange=lambda out: quadratic.Interval(np.zeros(out.shape)))
+    assert calls and misses_ > 0
 
 
 def test_oracle_bites_when_the_quadratic_part_is_dropped(monkeypatch):
