@@ -287,9 +287,15 @@ class QuadraticStepper(LohnerStepper):
         # With it, the Hessian over the set is taken only along the columns of C that
         # carry width (at most max_directions), where the set actually extends; the
         # rest of v (the other columns, q) is paired with the interval Hessian over the
-        # hull. Measured: UR5 q +- 1e-3 (p = 6 of n = 12) ... (see _directional_lagrange)
+        # hull, and the Jacobian's mean-value form loses the Hessian over the set. Pays
+        # where the full second variational system is large, hence only from
+        # directional_min_states states on. Measured (set_order=2): UR5 q +- 1e-3 (p = 6
+        # of n = 12), affine, 60 s: 0.407 s reached against 0.260 s; 3-link arm (n = 6)
+        # +- 0.01 with Taylor models: 0.316 s in 70 s against 0.324 s in 39 s, +- 1e-4
+        # affine: ratio 1.42 in 25 s against 1.39 in 37 s at T = 2.
         self.second_directional = second_directional
         self.max_directions = int(max_directions)
+        self.directional_min_states = 8
 
     def _derivatives(self, x, h):
         """``DP`` (B, n, n) and ``H`` (B, n, n, n) of the Taylor polynomial map over the
@@ -318,8 +324,11 @@ class QuadraticStepper(LohnerStepper):
     def _directions(self, sets: QuadraticSets):
         """Indices of the parameters (columns of C) whose range has width in some set of
         the batch, the widest ``max_directions`` of them; None when that is every
-        parameter (or none): the full Hessian over the set is then no dearer."""
+        parameter (or none: the full Hessian over the set is then no dearer), or when
+        the system has fewer than ``directional_min_states`` states."""
         m = sets.C.shape[2]
+        if self.n < self.directional_min_states:
+            return None
         rad = sets.r0.rad()  # (B, m)
         reach = (np.abs(sets.C) * rad[:, None, :]).max(axis=1).max(axis=0)  # (m,)
         # (a column whose reach is rounding-level, 1e-323 after a hull with 0, is no
