@@ -29,7 +29,7 @@ __all__ = ["QRBasis", "AutoBasis", "EnergyAlignedBasis", "BlockBasis", "error_ba
 #: a step is retried smaller when its remainder exceeds this many times ``tol``
 REMAINDER_SLACK = 10.0
 #: a step may grow by this factor to land on an output time instead of stopping just short
-# of it (UR5 PD scene, output_dt 0.25: one step in five was a sliver of 0.002-0.02 s)
+#: of it (UR5 PD scene, output_dt 0.25: one step in five was a sliver of 0.002-0.02 s)
 LANDING_STRETCH = 1.2
 
 
@@ -233,7 +233,9 @@ class StepControl:
     def propose(self, stepper, cX: Interval, limit: float, gap_lo: float, gap_hi: float) -> float:
         """The step (s) to try from the coefficients ``cX`` (B, K+1, N), at most ``limit``
         (the wrapping control's) and the gap to the next output time (``gap_lo <= gap
-        <= gap_hi``): when it reaches the gap it becomes ``gap_hi`` (land there)."""
+        <= gap_hi``): when it reaches the gap, or would reach it stretched by
+        ``LANDING_STRETCH`` (within ``h_max`` and the stretched limit), it becomes
+        ``gap_hi`` (land there)."""
         h = min(stepper.suggest_step(cX, self.tol, self.steer), self.h_max, limit, gap_hi)
         if h * LANDING_STRETCH >= gap_lo and gap_hi <= min(self.h_max, limit * LANDING_STRETCH):
             # land on the output time (validate the enclosure up to gap_hi); a gap a
