@@ -215,6 +215,20 @@ def _rx(t):
     return _h(np.array([[1, 0, 0], [0, c, -s], [0, s, c]]))
 
 
+def _textbook_frames(rows, q, convention):
+    """The 4x4 pose of every DH frame by the textbook products, link by link."""
+    H = np.eye(4)
+    for i, r in enumerate(rows):
+        th = r["theta"] + (q[i] if r["joint"] == "R" else 0.0)
+        d = r["d"] + (q[i] if r["joint"] == "P" else 0.0)
+        if convention == "standard":
+            A = _rz(th) @ _h(p=(0, 0, d)) @ _h(p=(r["a"], 0, 0)) @ _rx(r["alpha"])
+        else:
+            A = _rx(r["alpha"]) @ _h(p=(r["a"], 0, 0)) @ _rz(th) @ _h(p=(0, 0, d))
+        H = H @ A
+        yield H
+
+
 @pytest.mark.parametrize("convention", ["standard", "modified"])
 def test_dh_forward_kinematics_textbook(convention):
     """DH frames vs the textbook 4x4 products (independent of our tree construction):
@@ -229,15 +243,7 @@ def test_dh_forward_kinematics_textbook(convention):
     c = Chain.from_dh(rows, convention=convention)
     num = c.numeric()
     q = rng.uniform(-2, 2, 5)
-    H = np.eye(4)
-    for i, r in enumerate(rows):
-        th = r["theta"] + (q[i] if r["joint"] == "R" else 0.0)
-        d = r["d"] + (q[i] if r["joint"] == "P" else 0.0)
-        if convention == "standard":
-            A = _rz(th) @ _h(p=(0, 0, d)) @ _h(p=(r["a"], 0, 0)) @ _rx(r["alpha"])
-        else:
-            A = _rx(r["alpha"]) @ _h(p=(r["a"], 0, 0)) @ _rz(th) @ _h(p=(0, 0, d))
-        H = H @ A
+    for i, H in enumerate(_textbook_frames(rows, q, convention)):
         R, p = num.frame_placement(f"link{i + 1}", q)
         assert np.allclose(np.array(R, float), H[:3, :3], atol=1e-13)
         assert np.allclose(np.array(p, float), H[:3, 3], atol=1e-13)
@@ -245,16 +251,8 @@ def test_dh_forward_kinematics_textbook(convention):
     rows2 = [dict(r, com=(0.1, -0.2, 0.3)) for r in rows]
     c2 = Chain.from_dh(rows2, convention=convention)
     P = c2.numeric().potential_energy(q)
-    H = np.eye(4)
     expected = 0.0
-    for i, r in enumerate(rows):
-        th = r["theta"] + (q[i] if r["joint"] == "R" else 0.0)
-        d = r["d"] + (q[i] if r["joint"] == "P" else 0.0)
-        if convention == "standard":
-            A = _rz(th) @ _h(p=(0, 0, d)) @ _h(p=(r["a"], 0, 0)) @ _rx(r["alpha"])
-        else:
-            A = _rx(r["alpha"]) @ _h(p=(r["a"], 0, 0)) @ _rz(th) @ _h(p=(0, 0, d))
-        H = H @ A
+    for H in _textbook_frames(rows, q, convention):
         com = H @ np.array([0.1, -0.2, 0.3, 1.0])
         expected += 9.81 * com[2]
     assert P == pytest.approx(expected, rel=1e-13)
