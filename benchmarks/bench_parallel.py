@@ -15,8 +15,12 @@ speedup   double pendulum (trace(dp.rhs, 4), box dp.initial_box()), x1(0) in N p
 mixed     per-chunk step sizes, one core: pieces of the paper's box together with pieces
           10x wider, T = 0.5: one batch (one step size for all) against the same boxes in
           two in-process chunks (narrow, wide)
-overhead  16 pieces, T = 0.5: in-process against the parallel path with a warm local
-          cluster of 1 and of 2 workers
+overhead  16 pieces, T = 2 (break-down at 0.80 s) and T = 0.5 (short runs), warm local
+          clusters, each call against the in-process batch measured just before it:
+          ``workers=2`` (the default plan: what a user gets), ``client=`` a cluster of 2
+          with the default plan, and explicit ``chunks=1`` on a cluster of 1 and
+          ``chunks=2`` on a cluster of 2 (what every call cost before the plan kept small
+          batches in one chunk: Dask's own per-call cost)
 scaling   local clusters of 1, 2, 4 workers (processes, 1 thread each) on the speedup run,
           and from the measured per-chunk costs and message sizes an estimate for 64
           workers and 65,536 pieces
@@ -117,30 +121,39 @@ def section_mixed(ode, box, n_each, T, repeat, log):
     return rows
 
 
-def section_overhead(ode, box, T, repeat, log):
+def section_overhead(ode, box, Ts, repeat, log):
     from verified.parallel import local_client
     from verified.solver import solve
-    log(f"\n## overhead: 16 pieces, T = {T}, warm clusters")
+    sub = [16, 1, 1, 1]
     clients = {w: local_client(w) for w in (1, 2)}
     for w in (1, 2):
-        solve(ode, box, (0, 0.05), subdivision=[16, 1, 1, 1], client=clients[w], chunks=w)
-    solve(ode, box, (0, 0.05), subdivision=[16, 1, 1, 1])
+        solve(ode, box, (0, 0.05), subdivision=sub, client=clients[w], chunks=w)  # graph shipped, first steps
+    solve(ode, box, (0, 0.05), subdivision=sub, workers=2)
+    solve(ode, box, (0, 0.05), subdivision=sub)
+    # (label, keyword arguments of the parallel call)
+    cases = [("workers=2", dict(workers=2)),
+             ("client 2w, default plan", dict(client=clients[2])),
+             ("client 1w, chunks=1", dict(client=clients[1], chunks=1)),
+             ("client 2w, chunks=2", dict(client=clients[2], chunks=2))]
     rows = []
-    for r in range(repeat):
-        l0 = load()
-        w0, s0 = timed(lambda: solve(ode, box, (0, T), subdivision=[16, 1, 1, 1]))
-        out = dict(run=r + 1, inprocess_s=w0, load=l0, status=s0.status)
-        msg = f"run {r + 1}: in-process {w0:.3f} s ({l0})"
-        for w in (1, 2):
-            lw = load()
-            ww, sw = timed(lambda: solve(ode, box, (0, T), subdivision=[16, 1, 1, 1], client=clients[w], chunks=w))
-            out[f"workers{w}_s"] = ww
-            out[f"workers{w}_ratio"] = ww / w0
-            out[f"workers{w}_setup_s"] = sw.stats.get("setup_s")
-            msg += f" | {w} worker{'s' if w > 1 else ''} {ww:.3f} s = {ww / w0:.2f}x ({lw}; setup " \
-                   f"{sw.stats.get('setup_s', 0):.3f} s)"
-        rows.append(out)
-        log(msg)
+    for T in Ts:
+        log(f"\n## overhead: 16 pieces, T = {T}, warm clusters (ratio = call / in-process batch just before it)")
+        for r in range(repeat):
+            out = dict(T=T, run=r + 1, load=load())
+            msg = f"run {r + 1} ({out['load']})"
+            for label, kw in cases:
+                w0, s0 = timed(lambda: solve(ode, box, (0, T), subdivision=sub))
+                ww, sw = timed(lambda: solve(ode, box, (0, T), subdivision=sub, **kw))
+                out[label] = dict(inprocess_s=w0, parallel_s=ww, ratio=ww / w0, backend=sw.stats["backend"],
+                                  chunks=sw.stats["chunks"], setup_s=sw.stats.get("setup_s"),
+                                  status=(s0.status, sw.status), t_reached=(s0.t_reached, sw.t_reached))
+                msg += (f" | {label}: {1e3 * w0:.0f} / {1e3 * ww:.0f} ms = {ww / w0:.2f}x "
+                        f"({sw.stats['backend']}, {sw.stats['chunks']} chunk{'s' if sw.stats['chunks'] > 1 else ''})")
+            rows.append(out)
+            log(msg + f" | {s0.status} at {s0.t_reached:.3f} / {sw.status} at {sw.t_reached:.3f}")
+        for label, _ in cases:
+            q = [x[label]["ratio"] for x in rows if x["T"] == T]
+            log(f"T = {T}, {label}: ratio median {np.median(q):.2f}x (min {min(q):.2f}x, max {max(q):.2f}x)")
     return rows
 
 
@@ -222,7 +235,7 @@ def main(argv=None):
     if "mixed" in only:
         res["mixed"] = section_mixed(ode, box, n_mixed, t_mixed, args.repeat, log)
     if "overhead" in only:
-        res["overhead"] = section_overhead(ode, box, 0.5, args.repeat, log)
+        res["overhead"] = section_overhead(ode, box, (0.5,) if args.quick else (2.0, 0.5), args.repeat, log)
     if "scaling" in only:
         res["scaling"] = section_scaling(ode, box, pieces, T, log)
         res["estimate"] = estimate(res["scaling"], pieces, log)
