@@ -10,7 +10,11 @@ with its own step sizes, wrapping control and (with ``adaptive``) its own splitt
 Where the chunks run:
 
 * in this process, one after the other (``workers=1`` with ``chunks > 1``, or when
-  Dask is not installed): only the per-chunk step sizes change;
+  Dask is not installed): only the per-chunk step sizes change; a plan of one chunk
+  (the default for fewer than ``2 * MIN_CHUNK_BOXES`` boxes, :func:`plan_chunks`) with
+  ``workers > 1`` is one in-process batch, exactly ``solve``'s result: a local
+  cluster's worker would run it on the same cores after a Dask round trip (and, on a
+  first call, the cluster's start);
 * on a local Dask cluster (``dask.distributed.LocalCluster``, one process per worker,
   1 thread each), created on first use and kept for later calls
   (:func:`local_client`); its workers load the numba caches once when they start
@@ -90,7 +94,8 @@ from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate, hull, stack
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
-           "default_workers", "dask_available", "SchedulerError", "CONNECT_TIMEOUT", "CHUNK_TARGET"]
+           "default_workers", "dask_available", "SchedulerError", "CONNECT_TIMEOUT", "CHUNK_TARGET",
+           "MIN_CHUNK_BOXES"]
 
 #: seconds to wait for a scheduler before :class:`SchedulerError`
 CONNECT_TIMEOUT = 10.0
@@ -103,6 +108,19 @@ CHUNK_TARGET = 512
 AUTO_MIN_PIECES = 32
 #: at most this many chunks per worker by default (load balance against fixed costs)
 MAX_CHUNKS_PER_WORKER = 4
+#: the default plan never makes a chunk smaller than this (boxes). A step of the batched
+#: solver costs ~2 ms of Python whatever the batch size plus ~0.15 ms per box, so a
+#: small batch split in two pays the fixed cost twice. Double pendulum, one core, one
+#: batch against the same boxes in 2 chunks, CPU: 16 boxes (chunks of 8) 1.38-1.48x,
+#: 32 (of 16) 1.23-1.27x, 128 (of 64) 0.70-0.97x, T = 0.5; 256 boxes, T = 1, in chunks
+#: of 128/64/32/16: 0.86/0.96/1.23/1.58x. From 64 boxes per chunk splitting costs no
+#: extra CPU, so a run split by default is not slower than one batch by more than
+#: Dask's own per-call cost (~10 ms a round trip here) even when the other cores are
+#: busy; 16 pieces in 2 chunks on 2 idle workers cost 1.22-1.29x (T = 2) and 1.7x
+#: (T = 0.5) of one in-process batch. The price: 64-127 boxes are not split (2 chunks of
+#: 32 would be ~0.6x on idle cores; ask with ``chunks=2``). An explicit ``chunks=`` is
+#: not bound by it
+MIN_CHUNK_BOXES = 64
 _STATUS_RANK = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
 
 
@@ -126,16 +144,19 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def plan_chunks(n_pieces: int, workers: int, chunks: int | None = None) -> list[tuple[int, int]]:
+def plan_chunks(n_pieces: int, workers: int, chunks: int | None = None,
+                max_per_worker: int = MAX_CHUNKS_PER_WORKER) -> list[tuple[int, int]]:
     """Contiguous ``(start, stop)`` ranges of the initial boxes, one per chunk.
 
-    Default: ``workers`` chunks, more (up to ``MAX_CHUNKS_PER_WORKER`` per worker) when
-    each would still hold ``CHUNK_TARGET`` boxes; never more chunks than boxes.
+    Default (``chunks=None``): ``workers`` chunks, more (up to ``max_per_worker`` per
+    worker) when each would still hold ``CHUNK_TARGET`` boxes, fewer when a chunk would
+    hold less than ``MIN_CHUNK_BOXES`` boxes (a batch below ``2 * MIN_CHUNK_BOXES`` is one
+    chunk). An explicit ``chunks`` is used as given (never more chunks than boxes).
     Neighbouring boxes behave alike, so contiguous chunks keep the boxes that need
     short steps together."""
     if chunks is None:
-        per = max(1, min(MAX_CHUNKS_PER_WORKER, n_pieces // max(1, workers * CHUNK_TARGET)))
-        chunks = workers * per
+        per = max(1, min(max_per_worker, n_pieces // max(1, workers * CHUNK_TARGET)))
+        chunks = max(1, min(workers * per, n_pieces // MIN_CHUNK_BOXES))
     chunks = max(1, min(int(chunks), n_pieces))
     edges = np.linspace(0, n_pieces, chunks + 1).round().astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
@@ -388,11 +409,13 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     """``solve(ode, x0, t_span, **kwargs)`` in chunks (see the module docstring).
 
     workers : None, "auto" or an int >= 1. "auto": every core of this machine
-        (:func:`default_workers`) when Dask is installed and there are at least two
-        boxes, else in-process. An int > 1 without Dask warns and runs in-process.
-        Ignored when ``client`` is given.
+        (:func:`default_workers`) when Dask is installed and there are at least
+        ``AUTO_MIN_PIECES`` boxes, else in-process. An int > 1 without Dask warns and
+        runs in-process. A plan of one chunk runs in-process too. Ignored when
+        ``client`` is given (then even one chunk runs on that cluster).
     client : None, a ``distributed.Client`` or a scheduler address (str)
-    chunks : None (default plan, :func:`plan_chunks`) or the number of chunks
+    chunks : None (default plan, :func:`plan_chunks`: no chunk below
+        ``MIN_CHUNK_BOXES`` boxes) or the number of chunks, used as given
     """
     from .solver import VerifiedODE, solve
     from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
@@ -445,9 +468,14 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
                               RuntimeWarning, stacklevel=3)
     if backend == "inprocess":
         n_workers = 1
-    if deadline is not None and chunks is None:
-        chunks = n_workers  # with a wall-clock cap every chunk should be running when it strikes
-    ranges = plan_chunks(nb, n_workers, chunks)
+    # with a wall-clock cap every chunk should be running when it strikes: one per worker
+    ranges = plan_chunks(nb, n_workers, chunks, max_per_worker=1 if deadline is not None else MAX_CHUNKS_PER_WORKER)
+    if backend == "dask-local" and len(ranges) == 1:
+        # one chunk on a local cluster runs on the same cores as this process, only later
+        # (a Dask round trip, ~10 ms here) and, on a first call, after the cluster's
+        # start (1-3 s): run it here. 16 pieces with workers=2 went from 1.55x (T = 2)
+        # and 1.66x (T = 0.5) of one in-process batch to this batch itself
+        backend, n_workers = "inprocess", 1
     if backend == "inprocess" and len(ranges) == 1:  # one batch: exactly solve's own result
         sol = solve(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
                     hooks=list(hooks_in), **kwargs)

@@ -85,7 +85,7 @@ def test_inprocess_chunks_contain_samples(ode, box, oracle, single):
 
 def test_dask_chunks_contain_samples(ode, box, oracle, single, client):
     ticks = []
-    sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, client=client,
+    sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, client=client, chunks=2,
                 progress=lambda t, t_end: ticks.append((t, t_end)))
     assert sol.stats["backend"] == "dask" and sol.stats["chunks"] == 2
     assert sol.status == single.status and sol.t_reached == single.t_reached
@@ -199,12 +199,64 @@ def test_wall_cap_is_one_deadline(ode, box):
 
 
 def test_plan_chunks():
-    assert parallel.plan_chunks(16, 2) == [(0, 8), (8, 16)]
-    assert parallel.plan_chunks(3, 4) == [(0, 1), (1, 2), (2, 3)]
-    assert len(parallel.plan_chunks(65536, 64)) == 128
-    r = parallel.plan_chunks(1000, 3, 7)
+    plan, M = parallel.plan_chunks, parallel.MIN_CHUNK_BOXES
+    # default: no chunk below MIN_CHUNK_BOXES boxes, so a small batch is one chunk
+    assert plan(16, 2) == [(0, 16)]
+    assert plan(3, 4) == [(0, 3)]
+    assert len(plan(2 * M - 1, 2)) == 1 and len(plan(2 * M, 2)) == 2
+    assert len(plan(5 * M, 8)) == 5 and all(b - a >= M for a, b in plan(5 * M, 8))
+    assert plan(1024, 2) == [(0, 512), (512, 1024)]
+    assert len(plan(65536, 64)) == 128
+    # more chunks per worker only for big batches; a wall-clock cap: one per worker
+    assert len(plan(4096, 2)) == 8 and len(plan(4096, 2, max_per_worker=1)) == 2
+    # explicit chunks are used as given, also below the minimum (never more than boxes)
+    assert plan(16, 2, 2) == [(0, 8), (8, 16)]
+    assert plan(16, 1, 4) == [(0, 4), (4, 8), (8, 12), (12, 16)]
+    assert plan(3, 4, 4) == [(0, 1), (1, 2), (2, 3)]
+    r = plan(1000, 3, 7)
     assert len(r) == 7 and r[0][0] == 0 and r[-1][1] == 1000
     assert all(a[1] == b[0] for a, b in zip(r, r[1:]))
+
+
+def test_small_batch_with_workers_is_one_in_process_batch(ode, box, oracle, single, monkeypatch):
+    """A plan of one chunk never starts (or uses) a local cluster: the result is the
+    in-process batch itself, also with workers="auto" and with a wall-clock cap."""
+    def no_cluster(workers):
+        raise AssertionError("a local cluster was asked for")
+    monkeypatch.setattr(parallel, "local_client", no_cluster)
+    monkeypatch.setattr(parallel, "default_workers", lambda: 2)
+    sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, workers=2)
+    assert sol.stats["backend"] == "inprocess" and sol.stats["chunks"] == 1 and sol.stats["workers"] == 1
+    assert sol.status == single.status and sol.t_reached == single.t_reached
+    np.testing.assert_array_equal(sol.tube_t, single.tube_t)
+    for a, b in zip(sol.boxes, single.boxes):
+        np.testing.assert_array_equal(a.lo, b.lo)
+        np.testing.assert_array_equal(a.hi, b.hi)
+    assert not misses(sol, oracle)
+    n = 2 * parallel.MIN_CHUNK_BOXES - 1  # "auto" used a cluster from AUTO_MIN_PIECES = 32 on
+    for kw in (dict(workers="auto"), dict(workers=2, hooks=[StopAfterWall(60.0)])):
+        s = solve(ode, box, (0.0, 0.02), subdivision=[n, 1, 1, 1], **kw)
+        assert s.stats["backend"] == "inprocess" and s.stats["chunks"] == 1 and s.status == "completed"
+
+
+def test_default_plan_and_explicit_chunks_on_a_cluster(ode, box, oracle, single, client, monkeypatch):
+    """workers=2 (the local cluster: here the test's cluster) splits 2 * MIN_CHUNK_BOXES
+    boxes in two and honours an explicit chunks= below the minimum; client= runs even a
+    one-chunk plan on the cluster."""
+    monkeypatch.setattr(parallel, "local_client", lambda workers: client)
+    sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, workers=2, chunks=4)
+    assert sol.stats["backend"] == "dask-local" and sol.stats["chunks"] == 4
+    assert [c["boxes"] for c in sol.chunks] == [(0, 4), (4, 8), (8, 12), (12, 16)]
+    assert sol.status == single.status and sol.t_reached == single.t_reached and not misses(sol, oracle)
+    one = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, client=client)
+    assert one.stats["backend"] == "dask" and one.stats["chunks"] == 1 and one.chunks[0]["boxes"] == (0, 16)
+    assert one.chunks[0]["worker_pid"] != os.getpid()
+    assert one.status == single.status and one.t_reached == single.t_reached and not misses(one, oracle)
+    np.testing.assert_allclose(np.asarray(one.hull[-1].width()), np.asarray(single.hull[-1].width()), rtol=1e-9)
+    n = 2 * parallel.MIN_CHUNK_BOXES
+    two = solve(ode, box, (0.0, 0.02), subdivision=[n, 1, 1, 1], workers=2)
+    assert two.stats["backend"] == "dask-local" and [c["boxes"] for c in two.chunks] == [(0, n // 2), (n // 2, n)]
+    assert two.status == "completed" and two.boxes[-1].shape == (n, 4)
 
 
 def test_simulate_forwards_workers(client):
@@ -212,8 +264,8 @@ def test_simulate_forwards_workers(client):
     from mbs.simulate import simulate
     x0 = Interval([2.1, 3.1], [2.2, 3.2])
     a = simulate("pendulum_paper", x0, 0.3, mode="ii", subdivision=[4, 1], progress=False)
-    b = simulate("pendulum_paper", x0, 0.3, mode="ii", subdivision=[4, 1], progress=False, client=client)
-    assert a.status == b.status == "completed" and b.stats["chunks"] == 2
+    b = simulate("pendulum_paper", x0, 0.3, mode="ii", subdivision=[4, 1], progress=False, client=client, chunks=2)
+    assert a.status == b.status == "completed" and b.stats["chunks"] == 2 and b.stats["backend"] == "dask"
     assert b.consistency is not None and b.stats["tests"] >= a.stats["tests"]
     assert np.all(b.hull[-1].width() < 1.1 * a.hull[-1].width() + 1e-12)
 
@@ -272,7 +324,10 @@ def test_cli_scenarios_on_a_cluster(tmp_path, client, monkeypatch, capsys):
     assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--samples", "4",
                  "--scheduler", "tcp://given"]) == 0
     data = json.loads((tmp_path / "o" / "scenarios.json").read_text())
-    assert data["status"] == "completed" and all(r["chunks"] == 2 for r in data["scenarios"])
+    # 4 pieces per scenario: one chunk each (the default plan), on the given cluster
+    assert data["status"] == "completed" and all(r["chunks"] == 1 for r in data["scenarios"])
+    for r in data["scenarios"]:
+        assert json.loads((tmp_path / "o" / r["result"]).read_text())["stats"]["backend"] == "dask"
 
 
 def test_cli_bad_parallel_flags(tmp_path, monkeypatch, capsys):
