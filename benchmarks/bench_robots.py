@@ -20,12 +20,14 @@ Cases (issue 17's targets table):
    -0.3, 0.2, ...), eps = 1e-3, T = 1, through ``solve`` on the numeric rhs graph (what
    mode i integrates): simulate()'s M(q) > 0 proof fails on the initial box for n >= 5.
 5. ``dp``: the paper's double pendulum (eq. 22 traced, ``models.double_pendulum``,
-   initial box eq. 25): one box (break-down time, horizon 3), T = 1 with 256 pieces
+   initial box eq. 25): one box (break-down time, horizon 3; also with second-order
+   sets, Taylor-model Jacobians and 12 parameters per state), T = 1 with 256 pieces
    (target ratio <= 1.02 in <= 10 s), T = 3 with 1024 pieces (target <= 1.1 in <= 60 s).
 6. ``pendulum``: the paper's pendulum (eq. 18 traced), q(0) in [2.1, 2.2],
    qd(0) in [3.1, 3.2], T = 3 and T = 10 (one run to 10 serves both), 1 piece, 4x4 and
    64x64 grids; max_width 1e6 (instead of the solver's 1e3) so that widths like the
-   C++ solver's 5678 and 35040 can be reached and compared.
+   C++ solver's 5678 and 35040 can be reached and compared; interval runs also with
+   ``error_basis="auto"`` (capped at 300 s on the small grids: no time target there).
 7. ``qdd``: enclosure of qdd over the 3-link +-0.01 box (qd = 0) in the evaluators
    the solver uses (order-1 Taylor coefficient of the numeric rhs graph, modes i/ii,
    and of the symbolic one, mode iii) against the sampled range (target: within 2x).
@@ -640,6 +642,12 @@ class Bench:
                      both(dict(order=12, tol=1e-10), dict(order=16, tol=1e-12),
                           dict(order=12, tol=1e-10, error_basis="auto"),
                           dict(order=12, tol=1e-10, error_basis="auto", set_order=2))),
+                    # the furthest found: Taylor-model Jacobians, second-order sets with 12
+                    # parameters per state (4 by default) and order 6 (the affine column:
+                    # taylor_model is affine Taylor coefficients plus degree-2 Jacobians)
+                    ("one box, taylor_model", 3.0, 1, np.arange(61) / 20, False,
+                     {"interval": [], "affine": [dict(order=6, tol=1e-10, error_basis="auto", set_order=2,
+                                                      arithmetic="taylor_model", params_per_state=12)]}),
                     ("T = 1, 256 pieces", 1.0, 256, [1.0], True,
                      both(dict(order=12, tol=1e-10), dict(order=8, tol=1e-9), dict(order=12, tol=1e-10, absorb=True))),
                     # second-order sets (verified/quadratic.py): far fewer pieces for the same width
@@ -660,9 +668,10 @@ class Bench:
 
             def one(a, setting, T=T, pieces=pieces, t_eval=t_eval, true=true):
                 opts, cap = split_opts(setting, self.cap)
+                ode = VerifiedODE(graph, opts.pop("arithmetic")) if "arithmetic" in opts else odes[a]
 
                 def call(progress):
-                    return solve(odes[a], Interval(lo, hi), (0.0, T), t_eval=t_eval,
+                    return solve(ode, Interval(lo, hi), (0.0, T), t_eval=t_eval,
                                  subdivision=[pieces, 1, 1, 1], progress=progress, **opts)
                 sol, wall = capped(call, cap)
                 return measure("dp", a, setting_label(setting), T, sol, wall, oracle, names, final_widths=true)
@@ -692,12 +701,19 @@ class Bench:
         rows, labelled = [], []
         per_grid = {}
         for k in grids:
+            # error_basis="auto" (the QR basis or a plain box per set and step, whichever is
+            # tighter) is what follows the saddle at the top: one box and 4x4 run past the
+            # C++ solver's reach, but with steps falling to ~1e-4 s once the sets are 1e3-1e5
+            # wide; a cap of 300 s lets those runs end at their break-down (no time target here)
+            auto = dict(order=12, tol=1e-10, error_basis="auto")
             if self.quick:
-                settings = {a: [dict(order=12, tol=1e-10)] for a in ARITHMETICS}
+                settings = {a: [dict(order=12, tol=1e-10), auto] for a in ARITHMETICS}
             elif k < 64:
                 settings = {a: [dict(order=12, tol=1e-10), dict(order=20, tol=1e-12)] for a in ARITHMETICS}
-            else:  # 4096 boxes: one setting each (affine: ~0.5 s per step at order 12)
+                settings["interval"].append(dict(auto, cap=max(self.cap, 300.0)))
+            else:  # 4096 boxes: few settings (affine: ~0.5 s per step at order 12)
                 settings = {a: [dict(order=12, tol=1e-10)] for a in ARITHMETICS}
+                settings["interval"].append(auto)
             short, long_ = {a: [] for a in ARITHMETICS}, {a: [] for a in ARITHMETICS}
             for a in ARITHMETICS:
                 for opts in settings[a]:
@@ -710,10 +726,12 @@ class Bench:
                         if t >= T_short and "wall" not in passed:
                             passed["wall"], passed["at"] = wall, passed["steps"]
 
-                    def call(progress, a=a, opts=opts):
+                    run_opts, cap = split_opts(opts, self.cap)
+
+                    def call(progress, a=a, run_opts=run_opts):
                         return solve(odes[a], Interval(lo, hi), (0.0, T_long), t_eval=t_eval, subdivision=[k, k],
-                                     max_width=1e6, progress=progress, **opts)
-                    sol, wall = capped(call, self.cap, on_progress=hook)
+                                     max_width=1e6, progress=progress, **run_opts)
+                    sol, wall = capped(call, cap, on_progress=hook)
                     r_long = measure("pendulum", a, setting_label(opts), T_long, sol, wall, oracle, names)
                     part = truncated(sol, T_short)
                     r_short = measure("pendulum", a, setting_label(opts), T_short, part,
