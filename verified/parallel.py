@@ -103,9 +103,6 @@ CONNECT_TIMEOUT = 10.0
 #: step (~2-4 ms of Python per step and chunk) shows; measured on the double pendulum,
 #: T = 1, 256 boxes in 1/2/4/8/16 chunks on one core: 5.7/4.9/5.5/7.0/9.0 s
 CHUNK_TARGET = 512
-#: ``workers="auto"`` uses a cluster only from this many boxes on (and >= 2 per worker):
-#: below, starting the cluster (~2-3 s, once per process) outweighs the work
-AUTO_MIN_PIECES = 32
 #: at most this many chunks per worker by default (load balance against fixed costs)
 MAX_CHUNKS_PER_WORKER = 4
 #: the default plan never makes a chunk smaller than this (boxes). A step of the batched
@@ -121,6 +118,10 @@ MAX_CHUNKS_PER_WORKER = 4
 #: 32 would be ~0.6x on idle cores; ask with ``chunks=2``). An explicit ``chunks=`` is
 #: not bound by it
 MIN_CHUNK_BOXES = 64
+#: ``workers="auto"`` uses a cluster only from this many boxes on (and >= 2 per worker):
+#: below, the default plan is one chunk, which runs in this process anyway (it was 32,
+#: with the cluster's start of ~2-3 s once per process the reason)
+AUTO_MIN_PIECES = 2 * MIN_CHUNK_BOXES
 _STATUS_RANK = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
 
 

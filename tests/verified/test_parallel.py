@@ -233,7 +233,7 @@ def test_small_batch_with_workers_is_one_in_process_batch(ode, box, oracle, sing
         np.testing.assert_array_equal(a.lo, b.lo)
         np.testing.assert_array_equal(a.hi, b.hi)
     assert not misses(sol, oracle)
-    n = 2 * parallel.MIN_CHUNK_BOXES - 1  # "auto" used a cluster from AUTO_MIN_PIECES = 32 on
+    n = 2 * parallel.MIN_CHUNK_BOXES - 1  # "auto" used a cluster from 32 pieces on before the minimum
     for kw in (dict(workers="auto"), dict(workers=2, hooks=[StopAfterWall(60.0)])):
         s = solve(ode, box, (0.0, 0.02), subdivision=[n, 1, 1, 1], **kw)
         assert s.stats["backend"] == "inprocess" and s.stats["chunks"] == 1 and s.status == "completed"
