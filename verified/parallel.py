@@ -474,8 +474,9 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     if backend == "dask-local" and len(ranges) == 1:
         # one chunk on a local cluster runs on the same cores as this process, only later
         # (a Dask round trip, ~10 ms here) and, on a first call, after the cluster's
-        # start (1-3 s): run it here. 16 pieces with workers=2 went from 1.55x (T = 2)
-        # and 1.66x (T = 0.5) of one in-process batch to this batch itself
+        # start (1-3 s): run it here. 16 pieces with workers=2 went from 1.14-1.55x (T = 2)
+        # and 1.52-1.66x (T = 0.5) of one in-process batch (bench_parallel overhead, two
+        # runs, other jobs on the machine) to this batch itself
         backend, n_workers = "inprocess", 1
     if backend == "inprocess" and len(ranges) == 1:  # one batch: exactly solve's own result
         sol = solve(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
