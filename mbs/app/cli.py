@@ -148,7 +148,7 @@ def main(argv=None):
                         "(exit 4; Ctrl-C does the same with exit 130)")
     p.add_argument("--workers", default="auto", metavar="N",
                    help="run the initial boxes in chunks on N local worker processes (Dask; default 'auto': "
-                        "every core when there are >= 32 pieces and dask is installed; 1: one batch in-process)")
+                        "every core when there are >= 128 pieces and dask is installed; 1: one batch in-process)")
     p.add_argument("--scheduler", default=None, metavar="ADDR",
                    help="run the chunks on an existing Dask cluster, e.g. tcp://host:8786 (a one-line error "
                         "after 10 s when it cannot be reached)")
