@@ -94,7 +94,7 @@ from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate, hull, stack
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
-           "default_workers", "dask_available", "SchedulerError", "CONNECT_TIMEOUT", "CHUNK_TARGET",
+           "default_workers", "dask_available", "SchedulerError", "WorkerStartError", "CONNECT_TIMEOUT", "CHUNK_TARGET",
            "MIN_CHUNK_BOXES"]
 
 #: seconds to wait for a scheduler before :class:`SchedulerError`
@@ -127,6 +127,10 @@ _STATUS_RANK = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
 
 class SchedulerError(ConnectionError):
     """A Dask scheduler that cannot be reached (the message names the address)."""
+
+
+class WorkerStartError(RuntimeError):
+    """Local Dask workers that could not be started (the message says why and what to do)."""
 
 
 def dask_available() -> bool:
@@ -316,9 +320,18 @@ def local_client(workers: int):
     if got is not None and got[1].status == "running":
         return got[1]
     from distributed import Client, LocalCluster
-    # the scheduler's HTTP server on a free port (":8787" warns when another cluster runs)
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=logging.ERROR)
+    try:
+        # the scheduler's HTTP server on a free port (":8787" warns when another cluster runs)
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.ERROR)
+    except RuntimeError as exc:
+        # Dask spawns its worker processes, and a spawned process first re-runs the
+        # calling script's top level: unguarded, that reaches this call again while the
+        # process is still starting, and the parent only sees "Nanny failed to start"
+        raise WorkerStartError(
+            f"could not start {workers} local Dask worker processes ({exc}); worker processes re-run "
+            "the calling script's top level, so put it under `if __name__ == \"__main__\":`, or pass "
+            "workers=None to run in this process") from None
     client = Client(cluster, set_as_default=False)
     client.run(_warm_kernels)
     client.register_worker_callbacks(_warm_kernels)  # also workers restarted later (a killed worker)

@@ -7,6 +7,7 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -172,6 +173,39 @@ def test_unreachable_scheduler_is_one_line_error(monkeypatch, box):
     assert "tcp://127.0.0.1:9" in msg and "\n" not in msg and "1 s" in msg
     with pytest.raises(ValueError, match="tcp://host:port"):
         parallel.connect("nonsense")
+
+
+def test_local_workers_that_cannot_start_are_one_clear_error(monkeypatch):
+    """Dask's "Nanny failed to start" (what an unguarded script gets: the spawned workers
+    re-run its top level) becomes WorkerStartError naming the fix."""
+    import distributed
+
+    def failing(*args, **kwargs):
+        raise RuntimeError("Nanny failed to start.")
+    monkeypatch.setattr(distributed, "LocalCluster", failing)
+    monkeypatch.setattr(parallel, "_LOCAL", {})
+    with pytest.raises(parallel.WorkerStartError, match="__name__ == .__main__.") as e:
+        parallel.local_client(2)
+    assert "\n" not in str(e.value) and "workers=None" in str(e.value)
+
+
+@pytest.mark.slow
+def test_unguarded_script_gets_the_worker_start_error(tmp_path):
+    """A real script without the main guard (2 workers, 256 pieces): it exits with
+    WorkerStartError, not Dask's bare "Nanny failed to start"."""
+    import subprocess
+    import sys
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        "from verified.solver import solve\nfrom verified.interval import Interval\n"
+        "from verified.graph import trace\nfrom models import double_pendulum as dp\n"
+        "lo, hi = dp.initial_box()\n"
+        "solve(trace(dp.rhs, 4), Interval(lo, hi), (0.0, 0.01), subdivision=[256, 1, 1, 1], workers=2)\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
+                         cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(root)})
+    assert out.returncode != 0
+    assert "WorkerStartError" in out.stderr and "__main__" in out.stderr
 
 
 def test_fallbacks_and_bad_arguments(ode, box, monkeypatch):
