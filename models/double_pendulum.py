@@ -27,10 +27,11 @@ chain models).  Initial box eq. (25): :func:`initial_box`.
 """
 from __future__ import annotations
 
-import math
 from fractions import Fraction
 
 import numpy as np
+
+from verified.exact import enclose_fraction, enclose_pi_multiple
 
 M1 = M2 = 1.0
 L1 = L2 = 1.0
@@ -107,32 +108,15 @@ def sympy_model(**params):
     return xs, rhs(xs, **kw), hamiltonian(xs, **kw)
 
 
-def _enclose(text):
-    """(lo, hi) doubles around the exact rational ``text`` ("43/100", "0.43")."""
-    q = Fraction(text)
-    f = float(q)
-    lo = f if Fraction(f) <= q else math.nextafter(f, -math.inf)
-    hi = f if Fraction(f) >= q else math.nextafter(f, math.inf)
-    return lo, hi
-
-
-def _enclose_pi(factor):
-    """(lo, hi) doubles around factor * pi (factor a Fraction), via 40-digit sympy."""
-    import sympy
-    v = sympy.N(sympy.Rational(factor.numerator, factor.denominator) * sympy.pi, 40)
-    f = float(v)
-    return math.nextafter(f, -math.inf), math.nextafter(f, math.inf)
-
-
 def initial_box():
     """Initial box eq. (25) as (lo, hi) float arrays, rounded outward:
     x1 in [0.99, 1.01] * 3 pi / 4, x2 = -11 pi / 20, x3 = 0.43, x4 = 0.67 (the point
     values are enclosed by one-ulp intervals)."""
-    x1lo = _enclose_pi(Fraction(99, 100) * Fraction(3, 4))[0]
-    x1hi = _enclose_pi(Fraction(101, 100) * Fraction(3, 4))[1]
-    x2 = _enclose_pi(Fraction(-11, 20))
-    x3 = _enclose("43/100")
-    x4 = _enclose("67/100")
+    x1lo = enclose_pi_multiple(0, Fraction(99, 100) * Fraction(3, 4))[0]
+    x1hi = enclose_pi_multiple(0, Fraction(101, 100) * Fraction(3, 4))[1]
+    x2 = enclose_pi_multiple(0, Fraction(-11, 20))
+    x3 = enclose_fraction(Fraction(43, 100))
+    x4 = enclose_fraction(Fraction(67, 100))
     return np.array([x1lo, x2[0], x3[0], x4[0]]), np.array([x1hi, x2[1], x3[1], x4[1]])
 
 

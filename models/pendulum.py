@@ -11,7 +11,11 @@ Coordinates: q = phi (angle from the downward vertical) [rad], state x = (q, qd)
 """
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
+
+from verified.exact import enclose_fraction
 
 M, L, G = 1.0, 1.0, 9.81
 #: initial box of sec. 5.1 (these bounds are doubles exactly as printed... see below)
@@ -20,9 +24,8 @@ INITIAL_BOX = ((2.1, 3.1), (2.2, 3.2))
 
 def initial_box():
     """(lo, hi) float arrays enclosing [2.1, 2.2] x [3.1, 3.2] (rounded outward)."""
-    from .double_pendulum import _enclose
-    lo = np.array([_enclose("21/10")[0], _enclose("31/10")[0]])
-    hi = np.array([_enclose("22/10")[1], _enclose("32/10")[1]])
+    lo = np.array([enclose_fraction(Fraction(21, 10))[0], enclose_fraction(Fraction(31, 10))[0]])
+    hi = np.array([enclose_fraction(Fraction(22, 10))[1], enclose_fraction(Fraction(32, 10))[1]])
     return lo, hi
 
 

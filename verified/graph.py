@@ -33,6 +33,8 @@ from typing import Any, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
+from .exact import enclose_fraction
+
 __all__ = [
     "Op",
     "Node",
@@ -114,18 +116,14 @@ def enclose_rational(q: Fraction | int) -> tuple[float, float, float]:
     """
     q = Fraction(q)
     try:
-        f = float(q)
+        lo, hi = enclose_fraction(q)
     except OverflowError:
         raise ValueError(f"constant {q} is outside the double range") from None
-    if not math.isfinite(f):
-        raise ValueError(f"constant {q} is outside the double range")
-    if f == 0.0:
-        f = 0.0  # no negative zero in constants: it would split hash-consing of 0
-    exact = Fraction(f)
-    if exact == q:
-        return f, f, f
-    lo, hi = (f, _next_up(f)) if exact < q else (_next_down(f), f)
-    if not (math.isfinite(lo) and math.isfinite(hi)):
+    # + 0.0: no negative zero in constants (a tiny negative q rounds to -0.0): it would
+    # split hash-consing of 0
+    f = float(q) + 0.0
+    lo, hi = lo + 0.0, hi + 0.0
+    if not (math.isfinite(f) and math.isfinite(lo) and math.isfinite(hi)):
         raise ValueError(f"constant {q} is outside the double range")
     return lo, hi, f
 

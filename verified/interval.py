@@ -44,6 +44,7 @@ from fractions import Fraction
 import numpy as np
 
 from . import _kernels as _k
+from .exact import enclose_fraction
 
 __all__ = [
     "Interval",
@@ -93,13 +94,9 @@ def _enclose_number(v, what):
             return lo, hi
         return f, f
     try:
-        f = float(v)
+        return enclose_fraction(v)
     except OverflowError:
         raise IntervalError(f"{what}: the number {v!r} is beyond the float range") from None
-    exact = Fraction(f)
-    lo = f if exact <= v else float(np.nextafter(f, -np.inf))
-    hi = f if exact >= v else float(np.nextafter(f, np.inf))
-    return lo, hi
 
 
 def _needs_enclosure(value):

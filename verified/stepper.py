@@ -17,6 +17,7 @@ from typing import Protocol
 
 import numpy as np
 
+from .exact import enclose_fraction
 from .interval import Interval
 
 __all__ = ["StepResult", "Stepper"]
@@ -78,10 +79,7 @@ class StepResult:
     @property
     def t_enclosure(self) -> Interval:
         """A scalar interval of floats enclosing the exact time ``t_exact``."""
-        f = float(self.t_exact)
-        lo = f if Fraction(f) <= self.t_exact else float(np.nextafter(f, -np.inf))
-        hi = f if Fraction(f) >= self.t_exact else float(np.nextafter(f, np.inf))
-        return Interval(lo, hi)
+        return Interval(*enclose_fraction(self.t_exact))
 
 
 class Stepper(Protocol):

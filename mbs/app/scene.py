@@ -110,6 +110,8 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 import numpy as np
 
+from verified.exact import enclose_fraction, enclose_pi_multiple
+
 from ..errors import ModelError
 from ..modes import MODES, get_mode
 from ..robots import ERD_PREFIX, PAPER_MODELS
@@ -143,13 +145,6 @@ def scene_dir() -> Path:
 
 
 # --------------------------------------------------------------------------- numbers
-def _enclose_fraction(q: Fraction) -> tuple[float, float]:
-    f = float(q)
-    lo = f if Fraction(f) <= q else math.nextafter(f, -math.inf)
-    hi = f if Fraction(f) >= q else math.nextafter(f, math.inf)
-    return lo, hi
-
-
 def _eval_expr(text: str, where: str) -> tuple[Fraction, Fraction]:
     """Exact value ``a + b * pi`` of an expression string, as (a, b)."""
     try:
@@ -195,22 +190,13 @@ def enclose_number(value, where: str = "value") -> tuple[float, float]:
     if isinstance(value, bool):
         raise SceneError(f"{where}: expected a number, got a boolean")
     if isinstance(value, int):
-        return _enclose_fraction(Fraction(value))
+        return enclose_fraction(Fraction(value))
     if isinstance(value, float):
         if not math.isfinite(value):
             raise SceneError(f"{where}: {value!r} is not a finite number")
-        return _enclose_fraction(Fraction(repr(value)))
+        return enclose_fraction(Fraction(repr(value)))
     if isinstance(value, str):
-        a, b = _eval_expr(value, where)
-        if b == 0:
-            return _enclose_fraction(a)
-        import mpmath
-        with mpmath.workprec(200):
-            v = mpmath.mpf(a.numerator) / a.denominator + mpmath.mpf(b.numerator) / b.denominator * mpmath.pi
-            f = float(v)
-        # the 200-bit value is within 2^-190 (relative) of the true one, far less than
-        # half an ulp, and a + b pi (b != 0) is irrational: one ulp each side encloses it
-        return math.nextafter(f, -math.inf), math.nextafter(f, math.inf)
+        return enclose_pi_multiple(*_eval_expr(value, where))
     raise SceneError(f"{where}: expected a number, an expression string or [lo, hi], "
                      f"got {type(value).__name__}")
 
