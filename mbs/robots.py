@@ -82,9 +82,23 @@ ALIASES = {"panda": "panda_arm", "franka": "panda_arm", "ur5_robot": "ur5",
            "double_pendulum": "double_pendulum_urdf"}
 ERD_PREFIX = "example-robot-data:"
 
-#: the paper's models (sec. 5.1, 5.2), names :func:`mbs.simulate.simulate` builds itself:
-#: a DH chain in modes i/ii, the hand-written eqs. (18)/(19), (22)/(24) in mode iii
+#: the paper's models (sec. 5.1, 5.2): the names of ``models.registry.SYSTEMS``, System
+#: factories (:class:`models.paper.PaperModel`): a DH chain in modes i/ii, the
+#: hand-written eqs. (18)/(19), (22)/(24) in mode iii (here too, so that scenes can
+#: list them without importing ``models``)
 PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
+
+
+def system_entry(name):
+    """The registry's System factory for a model name (``models.registry.SYSTEMS``: the
+    paper's models, :class:`models.paper.PaperModel`), or None: a name of a chain
+    model, or not a name at all. The factory has ``chain(params=None)``,
+    ``system(mode, energy_rate, cparams=None)`` (None: integrate the chain) and
+    ``param_names``."""
+    if not isinstance(name, str):
+        return None
+    from models.registry import SYSTEMS
+    return SYSTEMS.get(name)
 
 
 def model_names() -> list:

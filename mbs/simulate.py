@@ -17,10 +17,12 @@ Example::
     sol = simulate("double_pendulum_paper", Interval(*dp.initial_box()), 1.0, mode="iii")
     sol.hull[-1], sol.consistency.tests, sol.stats["pruned_boxes"]
 
-Models: a name of :mod:`models.registry` (plus ``"pendulum_paper"`` and
-``"double_pendulum_paper"``: the numeric model of a DH chain in modes i/ii and the
-paper's hand-written eqs. (18)/(19) and (22)/(24) in mode iii), an :class:`mbs.Chain`,
-or an :class:`mbs.system.System` (e.g. recovered from a bare ODE).
+Models: a name of :mod:`models.registry`: a chain model (``FACTORIES``) or a System
+factory (``SYSTEMS``: ``"pendulum_paper"`` and ``"double_pendulum_paper"``, the numeric
+model of a DH chain in modes i/ii and the paper's hand-written eqs. (18)/(19) and
+(22)/(24) in mode iii, :mod:`models.paper`); an :class:`mbs.Chain`; or an
+:class:`mbs.system.System` (e.g. recovered from a bare ODE). This module names no
+model: it asks :func:`mbs.robots.system_entry` and :func:`mbs.robots.load_model`.
 """
 from __future__ import annotations
 
@@ -34,7 +36,7 @@ from verified.solver import Solution, solve
 from .errors import ModelError
 from .modes import ALL_MODES, MODES, Mode, get_mode
 from .numeric import PIVOT_TOL
-from .robots import PAPER_MODELS
+from .robots import PAPER_MODELS, load_model, system_entry
 from .system import System
 
 __all__ = ["MODES", "Mode", "PAPER_MODELS", "simulate", "compare_modes", "system_for", "width_deviations",
@@ -44,101 +46,6 @@ __all__ = ["MODES", "Mode", "PAPER_MODELS", "simulate", "compare_modes", "system
 #: 0.01 s / 50 parts in mode (iii)); the fields of :mod:`mbs.modes`
 TEST_DEFAULTS = {m.name: dict(test_interval=m.test_interval, test_splits=m.test_splits)
                  for m in ALL_MODES if m.energy_test}
-
-
-def _paper_param_names(mod) -> list:
-    """The parameters of a paper model's hand-written functions (m1, m2, l1, l2, g / m, l, g)."""
-    import inspect
-    return [k for k in inspect.signature(mod.rhs).parameters if k not in ("x", "p")]
-
-
-def _paper_chain(name: str, params: dict | None):
-    """The chain of a paper model (DH); the paper's parameters named in ``params``
-    become sympy symbols (PARAMs of the graphs, see :mod:`mbs.uncertain`)."""
-    from models import double_pendulum as dp
-    from models import pendulum as pd
-    mod = pd if name == "pendulum_paper" else dp
-    if not params:
-        return mod.chain() if mod is pd else mod.dh_chain()
-    import sympy
-    kw = {k: sympy.Symbol(k, positive=True) for k in _paper_param_names(mod) if k in params}
-    return mod.chain(**kw) if mod is pd else mod.dh_chain(**kw)
-
-
-def _paper_system(name: str, mode: Mode, energy_rate: str, cparams=None) -> System:
-    from verified.graph import from_sympy, trace
-
-    from models import double_pendulum as dp
-    from models import pendulum as pd
-
-    if not mode.symbolic:
-        if cparams is not None:
-            return _chain_system(cparams.chain, mode, energy_rate, name=name, cparams=cparams)
-        chain = pd.chain() if name == "pendulum_paper" else dp.dh_chain()
-        return _chain_system(chain, mode, energy_rate, name=name)
-    mod = pd if name == "pendulum_paper" else dp
-    if cparams is not None:
-        return _paper_system_with_params(mod, name, energy_rate, cparams)
-    xs, f, H = mod.sympy_model()
-    names = [str(s) for s in xs]
-    rhs = trace(mod.rhs, len(xs), input_names=names, output_names=[f"d{s}" for s in names])
-    energy = from_sympy([H], xs, output_names=["H"])
-    import sympy
-    rate_expr = sum(sympy.diff(H, x) * fx for x, fx in zip(xs, f))  # eq. (7), not simplified
-    if energy_rate == "simplified":
-        _prove_conservative(mod, len(xs))
-        return System(name=name, rhs=rhs, energy=energy, conservative=True,
-                      description="paper's symbolic model, dH/dt simplified to 0")
-    return System(name=name, rhs=rhs, energy=energy, energy_rate=from_sympy([rate_expr], xs, output_names=["dHdt"]),
-                  description="paper's symbolic model, dH/dt unsimplified (grad H . f)")
-
-
-def _paper_system_with_params(mod, name: str, energy_rate: str, cparams) -> System:
-    """Mode iii of a paper model with some of its parameters uncertain: the hand-written
-    eqs. (18)/(19) or (22)/(24) traced with those parameters as PARAMs."""
-    import sympy
-    from verified.graph import from_sympy, trace
-
-    pnames = list(cparams.names)
-    extra = [k for k in pnames if k not in _paper_param_names(mod)]
-    if extra:
-        raise ValueError(f"{name}: mode iii takes only the paper's parameters "
-                         f"({', '.join(_paper_param_names(mod))}) as params, not {', '.join(extra)}; "
-                         "use mode i or ii for payloads, mass scales and damping")
-    xs = list(sympy.sympify(mod.sympy_model()[0]))
-    names = [str(s) for s in xs]
-    n = len(xs)
-    rhs = trace(lambda x, p: mod.rhs(list(x), **dict(zip(pnames, p))), n, len(pnames), input_names=names,
-                param_names=pnames, output_names=[f"d{s}" for s in names])
-    energy = trace(lambda x, p: [mod.hamiltonian(list(x), **dict(zip(pnames, p)))], n, len(pnames),
-                   input_names=names, param_names=pnames, output_names=["H"])
-    if energy_rate == "simplified":
-        _prove_conservative(mod, n)
-        return System(name=name, rhs=rhs, energy=energy, conservative=True, params=cparams.as_dict(),
-                      description="paper's symbolic model with parameters, dH/dt simplified to 0")
-    syms = [sympy.Symbol(k, positive=True) for k in pnames]
-    kw = dict(zip(pnames, syms))
-    f, H = mod.rhs(xs, **kw), mod.hamiltonian(xs, **kw)
-    rate_expr = sum(sympy.diff(H, x) * fx for x, fx in zip(xs, f))
-    rate = from_sympy([rate_expr], xs, syms, output_names=["dHdt"])
-    return System(name=name, rhs=rhs, energy=energy, energy_rate=rate, params=cparams.as_dict(),
-                  description="paper's symbolic model with parameters, dH/dt unsimplified (grad H . f)")
-
-
-def _prove_conservative(mod, n: int):
-    """dH/dt = grad H . f simplifies to 0 with every parameter a free symbol, so it is
-    0 for the float parameter values too (simplifying with the float values leaves
-    rounding residues such as 7e-15 x3 sin x1)."""
-    import sympy
-    import inspect
-    xs = list(sympy.symbols(f"x1:{n + 1}", real=True))
-    names = [k for k in inspect.signature(mod.rhs).parameters if k not in ("x", "p")]  # m, l, g, ...
-    ps = {k: sympy.Symbol(k, positive=True) for k in names}
-    f = mod.rhs(xs, **ps)
-    H = mod.hamiltonian(xs, **ps)
-    rate = sympy.simplify(sum(sympy.diff(H, x) * fx for x, fx in zip(xs, f)))
-    if rate != 0:  # pragma: no cover - guards the claim that the paper's models are conservative
-        raise ModelError(f"{mod.__name__}: dH/dt does not simplify to 0 ({rate})")
 
 
 def _chain_system(chain, mode: Mode, energy_rate: str, name: str | None = None, cparams=None) -> System:
@@ -205,11 +112,8 @@ def _model_chain(model, params):
                          "not a bare System; write the torque into the System's rhs instead")
     if isinstance(model, str):
         name = model
-        if model in PAPER_MODELS:
-            chain = _paper_chain(model, params)
-        else:
-            from .robots import load_model
-            chain = load_model(model)
+        entry = system_entry(model)
+        chain = entry.chain(params) if entry is not None else load_model(model)
     elif isinstance(model, Chain):
         chain, name = model, None
     else:
@@ -258,16 +162,21 @@ def _system_and_chain(model, mode: str | Mode, energy_rate: str, params=None):
     from .chain import Chain
     from .uncertain import ChainParameters
     if isinstance(model, str):
-        if model in PAPER_MODELS:
-            # the paper's models are these chains (mode iii: the same M, hand-written)
+        entry = system_entry(model)
+        if entry is not None:
+            # a registry System factory (the paper's models): its chain in modes i and
+            # ii, its own System (hand-written, the same M) where it has one
+            cp = None
             if params:
                 _require_dict(params, model)
-                chain = _paper_chain(model, params)
+                chain = entry.chain(params)
                 cp = ChainParameters(chain, params, model_name=model)
-                return _paper_system(model, mode, energy_rate, cp), _MassMatrix(chain, cp)
-            chain = _paper_chain(model, None)
-            return _paper_system(model, mode, energy_rate), _MassMatrix(chain)
-        from .robots import load_model
+            else:
+                chain = entry.chain()
+            system = entry.system(mode, energy_rate, cp)
+            if system is None:
+                system = _chain_system(chain, mode, energy_rate, name=model, cparams=cp)
+            return system, _MassMatrix(chain, cp)
         chain = load_model(model)  # registry names, aliases (panda), example-robot-data:NAME, URDF paths
         name = model
     elif isinstance(model, Chain):

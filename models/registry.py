@@ -1,11 +1,16 @@
-"""Name -> chain factory for every ready model (handy for CLIs and benchmarks).
+"""Name -> factory for every ready model (handy for CLIs and benchmarks).
+
+- :data:`FACTORIES`: name -> chain factory (:func:`get`, :data:`NAMES`);
+- :data:`SYSTEMS`: name -> System factory (:class:`models.paper.PaperModel`) for the
+  paper's models, which :func:`mbs.simulate.simulate` builds per mode: the DH chain in
+  modes i and ii, the hand-written equations in mode iii.
 
 >>> from models.registry import get, NAMES
 >>> chain = get("ur5")
 """
 from __future__ import annotations
 
-from . import double_pendulum, pendulum, planar, puma560, robots
+from . import double_pendulum, paper, pendulum, planar, puma560, robots
 
 FACTORIES = {
     "pendulum": pendulum.chain,
@@ -24,6 +29,9 @@ FACTORIES = {
     "panda_arm": robots.panda_arm,
 }
 NAMES = tuple(FACTORIES)
+
+#: the paper's models (sec. 5.1, 5.2); their names are :data:`mbs.robots.PAPER_MODELS`
+SYSTEMS = {m.name: m for m in (paper.PENDULUM, paper.DOUBLE_PENDULUM)}
 
 
 def get(name: str):

@@ -652,9 +652,8 @@ def _parameters(table: dict, spec: dict, where: str):
         if "urdf" in spec:
             allowed = ()
         elif spec.get("name") in PAPER_MODELS:
-            from ..simulate import _paper_param_names
-            from models import double_pendulum, pendulum
-            allowed = tuple(_paper_param_names(pendulum if spec["name"] == "pendulum_paper" else double_pendulum))
+            from models.registry import SYSTEMS
+            allowed = tuple(SYSTEMS[spec["name"]].param_names)
         elif "name" in spec:
             allowed = ()
         if allowed is not None:

@@ -26,3 +26,11 @@ def test_core_does_not_import_the_app_layer():
     bad = {p.name: sorted({m for m in _imports(p) if m == "mbs.app" or m.startswith("mbs.app.")})
            for p in sorted(MBS.glob("*.py")) if p.name != "__main__.py"}
     assert {k: v for k, v in bad.items() if v} == {}
+
+
+def test_only_robots_reaches_into_models():
+    """The core names no model: mbs.simulate asks mbs.robots (system_entry, load_model),
+    the one seam to the registry of ready models (models.registry), for a name."""
+    users = sorted(p.name for p in MBS.glob("*.py")
+                   if any(m == "models" or m.startswith("models.") for m in _imports(p)))
+    assert users == ["robots.py"]

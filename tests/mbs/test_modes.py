@@ -29,6 +29,19 @@ def test_defined_once():
         "(i) numeric, no test", "(ii) numeric + energy test", "(iii) symbolic + energy test"]
 
 
+def test_paper_models_are_registry_system_factories():
+    """The paper's models are entries of models.registry.SYSTEMS (System factories),
+    named by mbs.robots.PAPER_MODELS; chain names have no System factory."""
+    import mbs.robots
+    from models.registry import SYSTEMS
+    assert tuple(SYSTEMS) == mbs.robots.PAPER_MODELS
+    assert mbs.robots.system_entry("pendulum_paper") is SYSTEMS["pendulum_paper"]
+    assert mbs.robots.system_entry("ur5") is None and mbs.robots.system_entry(None) is None
+    assert SYSTEMS["double_pendulum_paper"].param_names == ["m1", "m2", "l1", "l2", "g"]
+    assert SYSTEMS["pendulum_paper"].system(MODE_II, "unsimplified") is None  # the chain's numeric model
+    assert SYSTEMS["pendulum_paper"].system(MODE_III, "unsimplified").has_energy
+
+
 def test_simulate_takes_a_mode_and_records_its_name():
     from mbs.simulate import simulate
     from verified.interval import Interval
