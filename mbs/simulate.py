@@ -366,8 +366,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     if mode.energy_test:
         rate = "zero" if system.conservative else ("derive" if system.energy_rate is None else system.energy_rate)
         test = EnergyTest(system.energy, rate, constraints,
-                          max_interval=mode.test_interval if test_interval is None else test_interval,
-                          splits=mode.test_splits if test_splits is None else test_splits,
+                          test_interval=mode.test_interval if test_interval is None else test_interval,
+                          test_splits=mode.test_splits if test_splits is None else test_splits,
                           strategy=split_strategy, refine=refine, min_gain=min_gain, backward_depth=backward_depth,
                           max_boxes=solver_kwargs.get("max_boxes", 4096), contract=contract, prune=prune)
     elif constraints:

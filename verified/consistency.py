@@ -22,7 +22,7 @@ proves the part empty of true states.
 When to test (``t*``): the reduction area ``RA(t) = diam H_H - diam(H_H ∩ H_V)``
 (eq. (16)) is tracked after every step (summed over the sets of a batch); the test
 runs at its first local maximum after the previous test, and at the latest
-``max_interval`` seconds after it.
+``test_interval`` seconds after it.
 
 Further constraints (paper sec. 3) use the same machinery: holonomic ``g(x, t) = 0``
 and inequalities such as a kinetic-energy bound, see :class:`Constraint`.
@@ -144,12 +144,21 @@ class ConsistencyRecord:
     h_v_set: Interval | None = None
 
 
+def _renamed(value, old_value, name: str, old_name: str, default):
+    """The value of a keyword given under its name or its old name (not both)."""
+    if old_value is not None:
+        if value is not None:
+            raise TypeError(f"EnergyTest: give {name} or its old name {old_name}, not both")
+        return old_value
+    return default if value is None else value
+
+
 class EnergyTest(Hook):
     """The energy consistency test, optional further constraints, and the backward test.
 
     A solver hook (:mod:`verified.hooks`; ``solve(..., consistency=test)`` or
     ``hooks=[test]``): ``before_run`` appends the energy state ``h`` and caps the step
-    at ``max_interval``; ``after_step`` records ``RA(t)`` and, at ``t*``, prunes the sets
+    at ``test_interval``; ``after_step`` records ``RA(t)`` and, at ``t*``, prunes the sets
     (rolling the last step back when ``RA`` peaked at the step before);
     ``after_run`` attaches the record and the statistics to the Solution.
 
@@ -163,10 +172,12 @@ class EnergyTest(Hook):
         ``grad H . f`` by forward-mode differentiation (mode (ii)); "zero" declares
         the system conservative (``H_V = H(0)``; only sound if it is!).
     constraints : sequence of Constraint
-    max_interval : float
-        Longest time (s) between two tests (the paper: 0.1 s in mode (ii), 0.01 s in (iii)).
-    splits : int
-        Parts per set at a test (paper: 10 and 50). "gradient"/"widest" bisect
+    test_interval : float
+        Longest time (s) between two tests (the paper: 0.1 s in mode (ii), 0.01 s in (iii));
+        the same name as :func:`mbs.simulate.simulate`'s, scenes' and
+        :class:`mbs.modes.Mode`'s (``max_interval``, its old name, still works).
+    test_splits : int
+        Parts per set at a test (paper: 10 and 50; old name ``splits``). "gradient"/"widest" bisect
         ``round(log2(splits))`` times, pruning between rounds; "grid" cuts the two
         directions that widen ``H_H`` most into a ``k x k`` grid, ``k^2 ~ splits``.
     strategy : "gradient", "widest" or "grid"
@@ -189,10 +200,18 @@ class EnergyTest(Hook):
     """
 
     def __init__(self, energy: Graph | None = None, energy_rate="derive", constraints=(), *,
-                 max_interval: float = 0.1, splits: int = 10, strategy: str = "gradient",
-                 refine: str = "pruned", min_gain: float = 0.1, backward_depth: int = 0,
-                 max_boxes: int = 4096, contract: str = "step", prune: bool = True, align=None,
-                 check_claim: bool = True, reset_h: bool = False):
+                 test_interval: float | None = None, test_splits: int | None = None,
+                 strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
+                 backward_depth: int = 0, max_boxes: int = 4096, contract: str = "step",
+                 prune: bool = True, align=None, check_claim: bool = True, reset_h: bool = False,
+                 max_interval: float | None = None, splits: int | None = None):
+        # one name per knob (issue 15): test_interval / test_splits as everywhere else;
+        # the old names are accepted so that existing callers keep working, and the
+        # error messages below name whichever the caller used
+        interval_name = "max_interval" if max_interval is not None else "test_interval"
+        splits_name = "splits" if splits is not None else "test_splits"
+        test_interval = _renamed(test_interval, max_interval, "test_interval", "max_interval", 0.1)
+        test_splits = _renamed(test_splits, splits, "test_splits", "splits", 10)
         if energy is None and not constraints:
             raise ValueError("EnergyTest needs an energy graph or at least one constraint")
         if energy is not None and (not isinstance(energy, Graph) or energy.n_outputs != 1):
@@ -205,17 +224,17 @@ class EnergyTest(Hook):
             raise ValueError(f"contract must be 'step', 'test' or 'off', got {contract!r}")
         if refine not in ("pruned", "always"):
             raise ValueError(f"refine must be 'pruned' or 'always', got {refine!r}")
-        if not (np.isfinite(max_interval) and max_interval > 0):
-            raise ValueError(f"max_interval must be a positive number of seconds, got {max_interval!r}")
-        if int(splits) < 2:
-            raise ValueError(f"splits must be >= 2, got {splits!r}")
+        if not (np.isfinite(test_interval) and test_interval > 0):
+            raise ValueError(f"{interval_name} must be a positive number of seconds, got {test_interval!r}")
+        if int(test_splits) < 2:
+            raise ValueError(f"{splits_name} must be >= 2, got {test_splits!r}")
         if int(backward_depth) < 0:
             raise ValueError(f"backward_depth must be >= 0, got {backward_depth!r}")
         self.energy = energy
         self.energy_rate = energy_rate
         self.constraints = tuple(constraints)
-        self.max_interval = float(max_interval)
-        self.splits = int(splits)
+        self.test_interval = float(test_interval)
+        self.test_splits = int(test_splits)
         self.strategy = strategy
         self.refine = refine
         if not 0 <= float(min_gain) < 1:
@@ -235,14 +254,14 @@ class EnergyTest(Hook):
     # ------------------------------------------------------------------ solver hook
     def before_run(self, setup):
         """Bind to the run (see :meth:`prepare`): the graph with ``h`` appended, the
-        initial sets with ``h(0)``, steps of at most ``max_interval``."""
+        initial sets with ``h(0)``, steps of at most ``test_interval``."""
         graph = self.prepare(setup.user_graph, setup.graph, setup.n_state, setup.params, t0=setup.t0)
         self._refute_claim(setup.sets.hull(), setup.sets.c, setup.t0)
-        # "a test at least every max_interval seconds" (contraction alone needs no cap:
+        # "a test at least every test_interval seconds" (contraction alone needs no cap:
         # it runs after every step, and a cap changes the steps of the run it is compared with)
         tests = self.prune or self.contract == "test"
         return replace(setup, graph=graph, sets=self.initial_sets(setup.sets),
-                       h_max=min(setup.h_max, self.max_interval) if tests else setup.h_max)
+                       h_max=min(setup.h_max, self.test_interval) if tests else setup.h_max)
 
     def after_step(self, step, sets, run):
         out = self._after_step(step, sets, run)
@@ -598,7 +617,7 @@ class EnergyTest(Hook):
                 if len(hist) >= 2:
                     self.peaked = hist[-2] > 0
                 return "previous"
-        if since >= self.max_interval * (1 - 1e-12):
+        if since >= self.test_interval * (1 - 1e-12):
             return "now"
         return None
 
@@ -644,10 +663,10 @@ class EnergyTest(Hook):
         levels = [(sets.take(idx), 1, alive)]
         cur_checks = [(e[alive], lo, hi, inf[alive]) for e, lo, hi, inf in checks]
         if self.strategy == "grid":
-            k = max(2, int(round(np.sqrt(self.splits))))
+            k = max(2, int(round(np.sqrt(self.test_splits))))
             plan = [k * k]
         else:
-            plan = [2] * max(1, int(round(np.log2(self.splits))))
+            plan = [2] * max(1, int(round(np.log2(self.test_splits))))
         for fan in plan:
             cur = levels[-1][0]
             if cur.n_sets == 0:

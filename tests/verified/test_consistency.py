@@ -66,7 +66,7 @@ def test_pendulum_pruning_keeps_every_sampled_trajectory(strategy):
     """Sec. 5.1's pendulum: the parts kept after each test hold every sampled state."""
     rhs, H = _pendulum_graphs()
     lo, hi = pd.initial_box()
-    test = EnergyTest(H, "derive", max_interval=0.05, splits=16, strategy=strategy, min_gain=0.0)
+    test = EnergyTest(H, "derive", test_interval=0.05, test_splits=16, strategy=strategy, min_gain=0.0)
     sol = solve(rhs, Interval(lo, hi), (0.0, 0.6), t_eval=np.linspace(0.1, 0.6, 6), consistency=test)
     assert sol.status == "completed"
     assert sol.stats["tests"] >= 5 and sol.stats["pruned_boxes"] > 0
@@ -81,7 +81,7 @@ def test_pendulum_pruning_keeps_every_sampled_trajectory(strategy):
 def test_double_pendulum_pruning_is_sound_with_the_backward_test():
     rhs, H = dp.rhs_graph(), dp.energy_graph()
     lo, hi = dp.initial_box()
-    test = EnergyTest(H, "derive", max_interval=0.05, splits=16, min_gain=0.0, backward_depth=2)
+    test = EnergyTest(H, "derive", test_interval=0.05, test_splits=16, min_gain=0.0, backward_depth=2)
     sol = solve(rhs, Interval(lo, hi), (0.0, 0.4), t_eval=[0.1, 0.2, 0.3, 0.4], consistency=test)
     assert sol.status == "completed"
     assert sol.stats["pruned_boxes"] > 0 and sol.stats["backward_runs"] > 0
@@ -94,7 +94,7 @@ def test_a_false_conservation_claim_is_caught_by_the_oracle():
     rhs, _ = _pendulum_graphs()
     fake = trace(lambda x, p: [x[0] * x[1]], 2)  # q qd is not conserved
     lo, hi = pd.initial_box()
-    test = EnergyTest(fake, "zero", max_interval=0.05, splits=16, min_gain=0.0, check_claim=False)
+    test = EnergyTest(fake, "zero", test_interval=0.05, test_splits=16, min_gain=0.0, check_claim=False)
     sol = solve(rhs, Interval(lo, hi), (0.0, 0.4), t_eval=[0.2, 0.4], consistency=test)
     # (the claim check, on by default, refuses this claim before the first step:
     # tests/verified/test_energy_contraction.py)
@@ -113,7 +113,7 @@ def test_inequality_constraint_on_kinetic_energy_is_sound_and_prunes():
     h_max = float(H.eval_interval(Interval(lo, hi)).hi[0])
     K = trace(lambda x, p: [0.5 * x[1] * x[1]], 2)
     con = Constraint.bounds(K, upper=h_max, name="kinetic energy bound")
-    test = EnergyTest(None, constraints=[con], max_interval=0.05, splits=8, min_gain=0.0)
+    test = EnergyTest(None, constraints=[con], test_interval=0.05, test_splits=8, min_gain=0.0)
     sol = solve(rhs, Interval(lo, hi), (0.0, 0.5), t_eval=[0.25, 0.5], consistency=test)
     assert sol.status == "completed" and sol.stats["tests"] > 0
     _check(sol, lambda x: pd.rhs(x), lo, hi, 0.5)
@@ -125,14 +125,29 @@ def test_time_dependent_equality_constraint_sees_the_time():
     rhs = trace(lambda x, p: [x[0] * 0 + 1.0, x[1] * 0], 2)
     x0 = Interval([0.0, 0.0], [0.0, 1.0])
     good = Constraint.equality(trace(lambda x, p: [x[0] - x[2]], 3), time_dependent=True)
-    sol = solve(rhs, x0, (0.0, 1.0), consistency=EnergyTest(constraints=[good], max_interval=0.25))
+    sol = solve(rhs, x0, (0.0, 1.0), consistency=EnergyTest(constraints=[good], test_interval=0.25))
     assert sol.status == "completed" and sol.hull[-1].contains(np.array([1.0, 0.5])).all()
     bad = Constraint.equality(trace(lambda x, p: [x[0] - x[2] - 1.0], 3), time_dependent=True)
-    sol = solve(rhs, x0, (0.0, 1.0), consistency=EnergyTest(constraints=[bad], max_interval=0.25))
+    sol = solve(rhs, x0, (0.0, 1.0), consistency=EnergyTest(constraints=[bad], test_interval=0.25))
     assert sol.status == "breakdown" and "removed every set" in sol.reason
 
 
 # ----------------------------------------------------------------------------- errors
+def test_test_interval_and_test_splits_are_the_knobs_names():
+    """One name per knob: EnergyTest takes simulate's test_interval / test_splits; the
+    old max_interval / splits still work, both names at once do not."""
+    rhs, H = _pendulum_graphs()
+    a, b = EnergyTest(H, test_interval=0.05, test_splits=16), EnergyTest(H, max_interval=0.05, splits=16)
+    assert (a.test_interval, a.test_splits) == (b.test_interval, b.test_splits) == (0.05, 16)
+    assert (EnergyTest(H).test_interval, EnergyTest(H).test_splits) == (0.1, 10)
+    with pytest.raises(ValueError, match="test_interval must be a positive"):
+        EnergyTest(H, test_interval=0.0)
+    with pytest.raises(ValueError, match="test_splits must be >= 2"):
+        EnergyTest(H, test_splits=1)
+    with pytest.raises(TypeError, match="not both"):
+        EnergyTest(H, test_interval=0.1, max_interval=0.1)
+
+
 def test_clear_errors_for_bad_settings():
     rhs, H = _pendulum_graphs()
     with pytest.raises(ValueError, match="strategy"):

@@ -177,7 +177,7 @@ def test_a_contraction_that_cuts_too_far_is_caught_by_the_sampling_oracle(monkey
 def test_contraction_with_pruning_and_the_backward_test_is_sound():
     rhs, H = _pendulum()
     lo, hi = pd.initial_box()
-    test = EnergyTest(H, "derive", contract="step", max_interval=0.1, splits=16, min_gain=0.0, backward_depth=1)
+    test = EnergyTest(H, "derive", contract="step", test_interval=0.1, test_splits=16, min_gain=0.0, backward_depth=1)
     sol = solve(rhs, Interval(lo, hi), (0.0, 0.8), t_eval=np.linspace(0.1, 0.8, 8), consistency=test)
     assert sol.status == "completed" and sol.stats["tests"] > 0
     _check(sol, lambda x: pd.rhs(x), lo, hi, 0.8)
@@ -201,7 +201,7 @@ def test_damped_urdf_double_pendulum_mode_ii_contracted_and_sound():
 def test_ra_is_per_set_and_has_a_first_local_maximum_on_the_pendulum():
     rhs, H = _pendulum()
     lo, hi = pd.initial_box()
-    test = EnergyTest(H, "derive", contract="off", max_interval=1.0, splits=16, min_gain=0.0)
+    test = EnergyTest(H, "derive", contract="off", test_interval=1.0, test_splits=16, min_gain=0.0)
     sol = solve(rhs, Interval(lo, hi), (0.0, 1.0), t_eval=[1.0], consistency=test)
     rec = sol.consistency
     assert rec.tests, "no test ran"

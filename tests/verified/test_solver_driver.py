@@ -295,7 +295,7 @@ def test_the_energy_test_as_a_hook_equals_the_consistency_argument(ode, box):
     H = trace(lambda x, p: [pd.hamiltonian(x)], 2, input_names=NAMES)
 
     def run(kw):
-        test = EnergyTest(H, "derive", max_interval=0.05, splits=8, min_gain=0.0)
+        test = EnergyTest(H, "derive", test_interval=0.05, test_splits=8, min_gain=0.0)
         return solve(ode, box, (0.0, 0.3), t_eval=[0.1, 0.2, 0.3], **kw(test))
 
     a = run(lambda t: dict(consistency=t))
@@ -360,7 +360,7 @@ def test_adaptive_splitting_after_a_pruning_hook_is_sound():
     rhs = trace(pd.rhs, 2, input_names=NAMES)
     H = trace(lambda x, p: [pd.hamiltonian(x)], 2, input_names=NAMES)
     lo, hi = pd.initial_box()
-    test = EnergyTest(H, "derive", max_interval=0.1, splits=16, min_gain=0.0)
+    test = EnergyTest(H, "derive", test_interval=0.1, test_splits=16, min_gain=0.0)
     sol = solve(rhs, Interval(lo, hi), (0.0, 0.3), t_eval=[0.1, 0.2, 0.3], adaptive=True, split_ratio=0.001,
                 consistency=test)
     assert sol.success and sol.stats["splits"] > 0 and sol.stats["pruned_boxes"] > 0
