@@ -560,3 +560,25 @@ def iabs_loop(a, b, lo, hi):
 def ipow_loop(a, b, n, lo, hi):
     for i in range(a.size):
         lo[i], hi[i] = ipow(a[i], b[i], n)
+
+
+# ----------------------------------------------------------------- matrix products
+@njit(cache=True)
+def matmul_bounds(alo, ahi, blo, bhi):
+    """Bounds of the interval matrix products ``a[b] @ b[b]`` of a batch: ``alo``,
+    ``ahi`` (nb, n, k), ``blo``, ``bhi`` (nb, k, m) -> ``clo``, ``chi`` (nb, n, m)."""
+    nb, n, k = alo.shape
+    m = blo.shape[2]
+    clo = np.empty((nb, n, m))
+    chi = np.empty((nb, n, m))
+    for b in range(nb):
+        for i in range(n):
+            for j in range(m):
+                sl = 0.0
+                sh = 0.0
+                for t in range(k):
+                    pl, ph = mul(alo[b, i, t], ahi[b, i, t], blo[b, t, j], bhi[b, t, j])
+                    sl, sh = add(sl, sh, pl, ph)
+                clo[b, i, j] = sl
+                chi[b, i, j] = sh
+    return clo, chi

@@ -474,13 +474,9 @@ class Interval:
         return _power(self, exponent)
 
     def __matmul__(self, other):
-        from .linalg import matmul
-
         return matmul(self, other)
 
     def __rmatmul__(self, other):
-        from .linalg import matmul
-
         return matmul(other, self)
 
     def sum(self, axis=None):
@@ -495,8 +491,6 @@ class Interval:
         return x[..., 0]
 
     def dot(self, other):
-        from .linalg import matmul
-
         return matmul(self, other)
 
     # Comparisons between intervals have no single meaning: refuse them loudly.
@@ -780,3 +774,56 @@ _UFUNCS = {
     np.fmin: minimum,
     np.fmax: maximum,
 }
+
+
+# --------------------------------------------------------------------------- matrix products
+# (here, not in verified.linalg: the @ operator needs them, and linalg builds on Interval)
+def _flatten(x, batch_shape, core_shape):
+    full = batch_shape + core_shape
+    lo = np.ascontiguousarray(np.broadcast_to(x.lo, full)).reshape((-1,) + core_shape)
+    hi = np.ascontiguousarray(np.broadcast_to(x.hi, full)).reshape((-1,) + core_shape)
+    return lo, hi
+
+
+def matmul(a, b):
+    """Interval matrix product ``a @ b`` with numpy's ``matmul`` shape rules.
+
+    Parameters
+    ----------
+    a : Interval or float array, shape ``(..., n, k)``
+    b : Interval or float array, shape ``(..., k, m)``, or ``(k,)`` for one vector
+        (use :func:`matvec` for a batch of vectors ``(..., k)``).
+
+    Returns
+    -------
+    Interval of shape ``(..., n, m)`` (``(..., n)`` for a 1-d ``b``): encloses every
+    product of point matrices taken from ``a`` and ``b``. Floats are exact points.
+    """
+    a = _as_interval(a)
+    b = _as_interval(b)
+    if b.ndim == 1:
+        return matvec(a, b)
+    if a.ndim < 2:
+        raise ValueError(f"matmul needs a matrix on the left, got shape {a.shape}")
+    if a.shape[-1] != b.shape[-2]:
+        raise ValueError(
+            f"matmul shapes {a.shape} and {b.shape} do not align (inner sizes {a.shape[-1]} vs {b.shape[-2]})"
+        )
+    try:
+        batch = np.broadcast_shapes(a.shape[:-2], b.shape[:-2])
+    except ValueError:
+        raise ValueError(f"matmul batch shapes {a.shape[:-2]} and {b.shape[:-2]} do not broadcast") from None
+    alo, ahi = _flatten(a, batch, a.shape[-2:])
+    blo, bhi = _flatten(b, batch, b.shape[-2:])
+    clo, chi = _k.matmul_bounds(alo, ahi, blo, bhi)
+    shape = batch + (a.shape[-2], b.shape[-1])
+    return Interval._from_bounds(clo.reshape(shape), chi.reshape(shape))
+
+
+def matvec(a, x):
+    """Batched interval matrix-vector product: ``(..., n, k) x (..., k) -> (..., n)``."""
+    a = _as_interval(a)
+    x = _as_interval(x)
+    if x.ndim < 1:
+        raise ValueError("matvec needs a vector on the right")
+    return matmul(a, x.reshape(x.shape + (1,)))[..., 0]

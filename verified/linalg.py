@@ -1,6 +1,8 @@
 """Interval linear algebra for small dense systems, batched over leading axes.
 
-* :func:`matmul` -- interval matrix-matrix and matrix-vector products.
+* :func:`matmul`, :func:`matvec` -- interval matrix-matrix and matrix-vector products
+  (defined in :mod:`verified.interval`, which the ``@`` operator of an Interval
+  calls, so that the two modules do not import each other; re-exported here).
 * :func:`solve` -- a verified enclosure of the solution set of ``A x = b`` for
   interval ``A`` (for example a mass matrix ``M(q)`` over a box of ``q``) and
   interval ``b``, by preconditioned interval Gauss elimination:
@@ -18,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from . import _kernels as _k
-from .interval import Interval, _as_interval
+from .interval import Interval, _as_interval, _flatten, matmul, matvec  # noqa: F401 (re-exported)
 
 __all__ = ["matmul", "matvec", "solve", "SingularMatrixError"]
 
@@ -38,25 +40,6 @@ class SingularMatrixError(np.linalg.LinAlgError, ValueError):
 
 
 # ----------------------------------------------------------------- kernels
-@njit(cache=True)
-def _matmul_kernel(alo, ahi, blo, bhi):
-    nb, n, k = alo.shape
-    m = blo.shape[2]
-    clo = np.empty((nb, n, m))
-    chi = np.empty((nb, n, m))
-    for b in range(nb):
-        for i in range(n):
-            for j in range(m):
-                sl = 0.0
-                sh = 0.0
-                for t in range(k):
-                    pl, ph = _k.mul(alo[b, i, t], ahi[b, i, t], blo[b, t, j], bhi[b, t, j])
-                    sl, sh = _k.add(sl, sh, pl, ph)
-                clo[b, i, j] = sl
-                chi[b, i, j] = sh
-    return clo, chi
-
-
 STATUS_OK = 0
 STATUS_SINGULAR_MIDPOINT = 1
 STATUS_PIVOT_CONTAINS_ZERO = 2
@@ -173,62 +156,6 @@ def _solve_kernel(alo, ahi, blo, bhi):
 
 
 # ----------------------------------------------------------------- wrappers
-def _batch(x, core_ndim):
-    """Split an Interval's shape into (batch shape, core shape)."""
-    return x.shape[: x.ndim - core_ndim], x.shape[x.ndim - core_ndim :]
-
-
-def _flatten(x, batch_shape, core_shape):
-    full = batch_shape + core_shape
-    lo = np.ascontiguousarray(np.broadcast_to(x.lo, full)).reshape((-1,) + core_shape)
-    hi = np.ascontiguousarray(np.broadcast_to(x.hi, full)).reshape((-1,) + core_shape)
-    return lo, hi
-
-
-def matmul(a, b):
-    """Interval matrix product ``a @ b`` with numpy's ``matmul`` shape rules.
-
-    Parameters
-    ----------
-    a : Interval or float array, shape ``(..., n, k)``
-    b : Interval or float array, shape ``(..., k, m)``, or ``(k,)`` for one vector
-        (use :func:`matvec` for a batch of vectors ``(..., k)``).
-
-    Returns
-    -------
-    Interval of shape ``(..., n, m)`` (``(..., n)`` for a 1-d ``b``): encloses every
-    product of point matrices taken from ``a`` and ``b``. Floats are exact points.
-    """
-    a = _as_interval(a)
-    b = _as_interval(b)
-    if b.ndim == 1:
-        return matvec(a, b)
-    if a.ndim < 2:
-        raise ValueError(f"matmul needs a matrix on the left, got shape {a.shape}")
-    if a.shape[-1] != b.shape[-2]:
-        raise ValueError(
-            f"matmul shapes {a.shape} and {b.shape} do not align (inner sizes {a.shape[-1]} vs {b.shape[-2]})"
-        )
-    try:
-        batch = np.broadcast_shapes(a.shape[:-2], b.shape[:-2])
-    except ValueError:
-        raise ValueError(f"matmul batch shapes {a.shape[:-2]} and {b.shape[:-2]} do not broadcast") from None
-    alo, ahi = _flatten(a, batch, a.shape[-2:])
-    blo, bhi = _flatten(b, batch, b.shape[-2:])
-    clo, chi = _matmul_kernel(alo, ahi, blo, bhi)
-    shape = batch + (a.shape[-2], b.shape[-1])
-    return Interval._from_bounds(clo.reshape(shape), chi.reshape(shape))
-
-
-def matvec(a, x):
-    """Batched interval matrix-vector product: ``(..., n, k) x (..., k) -> (..., n)``."""
-    a = _as_interval(a)
-    x = _as_interval(x)
-    if x.ndim < 1:
-        raise ValueError("matvec needs a vector on the right")
-    return matmul(a, x.reshape(x.shape + (1,)))[..., 0]
-
-
 _FAILURE_TEXT = {
     STATUS_SINGULAR_MIDPOINT: "the midpoint matrix is singular",
     STATUS_PIVOT_CONTAINS_ZERO: "an interval pivot contains zero (the interval matrix may contain a singular matrix)",
