@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .chain import RawJoint, build_tree, IDENTITY
+from . import spatial as sp3
+from .chain import IDENTITY, RawJoint, build_tree, joint_motion
 from .errors import ModelError, UnsupportedJointError
 from .inertia import RigidInertia
 
@@ -174,8 +175,6 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
         T = _placement(j.origin, where)
         if j.name in lock:
             val = float(lock[j.name])
-            from .chain import joint_motion
-            import mbs.spatial as sp3
             if kind in ("revolute", "continuous", "prismatic"):
                 axis = _axis(j, where)
                 T = sp3.compose(T, joint_motion("revolute" if kind != "prismatic" else "prismatic",
