@@ -6,7 +6,7 @@ import pinocchio as pin
 import pytest
 
 from oracles.closed_loop import Q0, box, closed_loop_trajectory, corners, ct_oracle, pin_model
-from oracles.sampling import in_union
+from oracles.sampling import in_union, misses
 from mbs.control import (PD, ClosedLoop, ComputedTorque, ControlError, Disturbance, FunctionController, Quintic,
                          closed_loop, parse_control)
 from mbs.simulate import simulate
@@ -22,18 +22,6 @@ def quintic(q0, q1, T, t):
     return q0 + (q1 - q0) * p, (q1 - q0) * dp, (q1 - q0) * ddp
 
 
-def misses(sol, trajs, n, per_step=3):
-    bad = []
-    for t, b in zip(sol.t, sol.boxes):
-        b2 = Interval(b.lo[..., :n], b.hi[..., :n])
-        bad += [(t, tr(t)) for tr in trajs if not in_union(tr(t), b2)]
-    for j, b in enumerate(sol.tube):
-        b2 = Interval(b.lo[..., :n], b.hi[..., :n])
-        for t in np.linspace(sol.tube_t[j], sol.tube_t[j + 1], per_step):
-            bad += [(t, tr(t)) for tr in trajs if not in_union(tr(t), b2)]
-    return bad
-
-
 # --------------------------------------------------------------------------- computed torque
 @pytest.mark.parametrize("mode", ["i", "ii"])
 def test_computed_torque_with_mass_error_encloses_pinocchio(mode):
@@ -44,7 +32,7 @@ def test_computed_torque_with_mass_error_encloses_pinocchio(mode):
     assert sol.status == "completed", sol.reason
     assert sol.state_names == ("q1", "q2", "qd1", "qd2")   # constant reference: no time state
     trajs = ct_oracle(chain, corners(x0.lo, x0.hi, 6), 0.6)
-    assert not misses(sol, trajs, 4)
+    assert not misses(sol, trajs, per_step=3, states=4)
     # the mass error shows: the nominal model's gravity is 10% too large, the arm moves
     # away from the reference (and the enclosure follows it, not the reference)
     assert not Interval(sol.hull.lo[-1], sol.hull.hi[-1]).contains(np.r_[Q0, 0, 0]).all()
@@ -67,7 +55,7 @@ def test_a_wrong_controller_graph_is_caught_by_the_oracle(monkeypatch):
                    control=ComputedTorque(kp=25.0, kd=10.0, q_ref=Q0, nominal={"mass_scale": 1.1}))
     assert sol.status == "completed"
     trajs = ct_oracle(chain, corners(x0.lo, x0.hi, 2), 0.6)
-    assert misses(sol, trajs, 4)
+    assert misses(sol, trajs, per_step=3, states=4)
 
 
 # --------------------------------------------------------------------------- PD, quintic, disturbance
@@ -93,7 +81,7 @@ def test_pd_tracking_quintic_with_disturbance_encloses_pinocchio():
             r, rd, _ = quintic(Q0, q1, 1.0, t)
             return kp * (r - q) + kd * (rd - qd) + pin.computeGeneralizedGravity(plant, data, q) + np.r_[w, 0.0]
         trajs += [closed_loop_trajectory(plant, law, x, 0.6) for x in corners(x0.lo, x0.hi, 2, seed=k)]
-    assert not misses(sol, trajs, 4)
+    assert not misses(sol, trajs, per_step=3, states=4)
 
 
 def test_function_controller_with_parameter_and_time():
@@ -114,7 +102,7 @@ def test_function_controller_with_parameter_and_time():
             return np.array([k * (0.5 - q[0]) - 3.0 * qd[0] + 2.0 * np.sin(3.0 * t) + 18.0 * np.cos(q[0]),
                              8.0 * (-0.3 - q[1]) - 2.0 * qd[1]])
         trajs += [closed_loop_trajectory(plant, law, x, 0.4) for x in corners(x0.lo, x0.hi, 2, seed=int(k))]
-    assert not misses(sol, trajs, 4)
+    assert not misses(sol, trajs, per_step=3, states=4)
 
 
 def test_time_state_does_not_steer_steps_or_widen():
@@ -230,7 +218,7 @@ def test_param_subdivision_splits_the_parameter_box_and_stays_sound():
         def law(t, q, qd, w=w):
             return np.array([float(v) for v in loop.torque(list(q) + list(qd), [w])])
         trajs += [closed_loop_trajectory(plant, law, x, 0.4) for x in corners(x0.lo, x0.hi, 1)]
-    assert not misses(sol, trajs, 4)
+    assert not misses(sol, trajs, per_step=3, states=4)
     for bad, match in [({"nope": 2}, "unknown parameter"), ({"disturbance.joint2": 0}, "positive integer")]:
         with pytest.raises(ValueError, match=match):
             simulate("planar2", x0, 0.1, mode="i", progress=False, control=ctl, param_subdivision=bad)

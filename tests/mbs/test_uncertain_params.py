@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from oracles.sampling import in_union, pinocchio_with
+from oracles.sampling import misses, pinocchio_with
 from mbs.app.scene import SceneError, loads_scene
 from mbs.simulate import simulate, system_for
 from mbs.uncertain import ChainParameters, ParameterError
@@ -31,16 +31,6 @@ def aba_trajectory(model, damping, x0, times):
     s = solve_ivp(f, (0.0, times[-1]), x0, method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True)
     assert s.success
     return s.sol
-
-
-def misses(sol, trajectories, per_step=3):
-    bad = []
-    for t, boxes in zip(sol.t, sol.boxes):
-        bad += [(t, tr(t)) for tr in trajectories if not in_union(tr(t), boxes)]
-    for j, boxes in enumerate(sol.tube):
-        for t in np.linspace(sol.tube_t[j], sol.tube_t[j + 1], per_step):
-            bad += [(t, tr(t)) for tr in trajectories if not in_union(tr(t), boxes)]
-    return bad
 
 
 def corners_and_random(lo, hi, n_random, seed=0):
@@ -66,7 +56,7 @@ def test_paper_model_parameter_interval_from_python_runs_and_is_sound():
             s = solve_ivp(lambda t, x: dp.rhs(x, m1=m1), (0, 0.2), x0, method="DOP853",
                           rtol=1e-12, atol=1e-12, dense_output=True)
             trajs.append(s.sol)
-    assert not misses(sol, trajs)
+    assert not misses(sol, trajs, per_step=3)
     # the mass really is a parameter: the enclosure is wider than with m1 = 1 fixed
     fixed = simulate("double_pendulum_paper", Interval(lo, hi), 0.2, mode="i", output_dt=0.1)
     assert (sol.hull[-1].width() > 1.5 * fixed.hull[-1].width()).any()
@@ -80,7 +70,7 @@ def test_paper_model_parameter_interval_in_mode_iii():
     trajs = [solve_ivp(lambda t, x, m2=m2: dp.rhs(x, m2=m2), (0, 0.2), x0, method="DOP853", rtol=1e-12,
                        atol=1e-12, dense_output=True).sol
              for m2 in (0.95, 1.05) for x0 in corners_and_random(lo, hi, 2)]
-    assert not misses(sol, trajs)
+    assert not misses(sol, trajs, per_step=3)
 
 
 SCENE_M1 = """
@@ -138,7 +128,7 @@ mode = "i"
         for x0 in corners_and_random([0.5, 0.2, 0, 0], [0.51, 0.2, 0, 0], 2):
             trajs.append(solve_ivp(lambda t, x, l1=l1: dp.rhs(x, m1=1.5, l1=l1), (0, 0.2), x0, method="DOP853",
                                    rtol=1e-12, atol=1e-12, dense_output=True).sol)
-    assert not misses(sol, trajs)
+    assert not misses(sol, trajs, per_step=3)
 
 
 # --------------------------------------------------------------------------- graphs
@@ -343,7 +333,7 @@ def test_system_parameters_by_name():
     assert sol.params == {"k": (9.0, 10.0)}
     trajs = [solve_ivp(lambda t, x, k=k: [x[1], -k * np.sin(x[0])], (0, 0.3), x0, method="DOP853", rtol=1e-12,
                        atol=1e-12, dense_output=True).sol for k in (9.0, 9.5, 10.0) for x0 in ([0.5, 0], [0.51, 0])]
-    assert not misses(sol, trajs)
+    assert not misses(sol, trajs, per_step=3)
     with pytest.raises(ValueError, match=r"unknown parameter\(s\) 'g' for 'pendulum_k'; its parameters: k"):
         simulate(system, box, 0.1, mode="i", params={"g": 9.81})
     with pytest.raises(ValueError, match=r"params k: inverted interval"):

@@ -37,15 +37,27 @@ def in_union(x, boxes, slack=SLACK):
     return bool(np.any(np.all((boxes.lo - slack <= x) & (x <= boxes.hi + slack), axis=-1)))
 
 
-def misses(solution, sols, per_step=4):
-    """List of (time, point) pairs outside the enclosure (empty list: all inside)."""
+def _first(boxes, states):
+    """The boxes cut to their first ``states`` components (None: all)."""
+    if states is None:
+        return boxes
+    return type(boxes)(boxes.lo[..., :states], boxes.hi[..., :states])
+
+
+def misses(solution, sols, per_step=4, states=None):
+    """List of (time, point) pairs outside the enclosure (empty list: all inside): each
+    dense solution in ``sols`` at every output time and at ``per_step`` times in every
+    step (its tube box). ``states``: compare only the first ``states`` components (a
+    closed loop whose controller states the sampled plant does not have)."""
     bad = []
     for t, boxes in zip(solution.t, solution.boxes):
+        boxes = _first(boxes, states)
         for s in sols:
             x = s(t)
             if not in_union(x, boxes):
                 bad.append((t, x))
     for j, tube_boxes in enumerate(solution.tube):
+        tube_boxes = _first(tube_boxes, states)
         ta, tb = solution.tube_t[j], solution.tube_t[j + 1]
         for t in np.linspace(ta, tb, per_step):
             for s in sols:
