@@ -1,0 +1,96 @@
+"""The energy shell as a solver hook (:mod:`verified.energy_shell`): the paper's
+pendulum over the top, one box, held inside ``H <= hmax`` -- bounded where the plain
+run grows to widths of thousands, sampled trajectories (DOP853) inside every output box
+and the tube, and a shell that cuts too far is caught by the samples."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from oracles.sampling import misses, sample_initial_points, trajectories
+from verified.contractor import EnergyShell
+from verified.energy_shell import EnergyShellHook, max_energy
+from verified.graph import trace
+from verified.interval import Interval
+from verified.solver import solve
+
+from models import pendulum as pd
+
+T = 2.4  # the plain run's qd enclosure passes the shell's bound (+-6.5) at ~1.6 s
+
+
+def _shell():
+    M = trace(lambda q, p: [q[0] * 0.0 + pd.M * pd.L ** 2], 1)
+    V = trace(lambda q, p: [pd.M * pd.G * pd.L * (1.0 - np.cos(q[0]))], 1)
+    return EnergyShell(M, V)
+
+
+def _hmax(lo, hi):
+    return max_energy(trace(lambda x, p: [pd.hamiltonian(x)], 2), Interval(lo, hi))
+
+
+def _run(hooks, T=T):
+    lo, hi = pd.initial_box()
+    return solve(trace(pd.rhs, 2), Interval(lo, hi), (0.0, T), t_eval=np.linspace(0, T, 13), error_basis="auto",
+                 max_width=1e6, hooks=hooks)
+
+
+@pytest.fixture(scope="module")
+def samples():
+    lo, hi = pd.initial_box()
+    return trajectories(lambda x: pd.rhs(x), sample_initial_points(lo, hi, 40), T)
+
+
+def test_max_energy_bounds_the_initial_energy():
+    lo, hi = pd.initial_box()
+    hmax = _hmax(lo, hi)
+    x = sample_initial_points(lo, hi, 200)
+    H = 0.5 * x[:, 1] ** 2 + pd.G * (1 - np.cos(x[:, 0]))
+    assert H.max() <= hmax < H.max() + 1.0  # measured 21.17 against 20.70
+
+
+def test_pendulum_over_the_top_held_in_the_shell(samples):
+    lo, hi = pd.initial_box()
+    hook = EnergyShellHook(_shell(), _hmax(lo, hi))
+    held = _run([hook])
+    plain = _run([])
+    assert held.status == "completed", held
+    assert held.stats["shell_resets"] >= 1
+    assert misses(held, samples, per_step=2) == []
+    # |qd| <= sqrt(2 hmax / (m l^2)) = 6.5: the shell holds qd; the plain run does not
+    vmax = np.sqrt(2 * _hmax(lo, hi))
+    assert held.hull[-1].width()[1] <= 2 * vmax * 1.01 / 0.5  # (a set is reset once cut to half)
+    assert held.hull[-1].width()[1] < 0.5 * plain.hull[-1].width()[1]
+
+
+@pytest.mark.slow  # 3 s: the default run stays under 3 minutes
+def test_oracle_bites_when_the_shell_cuts_too_far(samples, monkeypatch):
+    """A shell whose velocity bound is 5 % too small (6.2 against the true 6.43 at the
+    bottom) must lose sampled trajectories."""
+    lo, hi = pd.initial_box()
+    real = EnergyShell.ellipsoid_bound
+
+    def tight(self, boxes, hmax, params=None, *, pieces=256):
+        b = real(self, boxes, hmax, params, pieces=pieces)
+        return np.where(b > 0, b * 0.95, b)
+    monkeypatch.setattr(EnergyShell, "ellipsoid_bound", tight)
+    held = _run([EnergyShellHook(_shell(), _hmax(lo, hi), cut=0.9)])
+    assert misses(held, samples, per_step=2) != []
+
+
+def test_bad_shell_arguments():
+    lo, hi = pd.initial_box()
+    sh = _shell()
+    with pytest.raises(ValueError, match="hmax must be a finite number"):
+        EnergyShellHook(sh, float("nan"))
+    with pytest.raises(ValueError, match="cut must be in"):
+        EnergyShellHook(sh, 30.0, cut=0.0)
+    with pytest.raises(TypeError, match="EnergyShell"):
+        EnergyShellHook("shell", 30.0)
+    with pytest.raises(ValueError, match="outside the energy shell"):
+        _run([EnergyShellHook(sh, 10.0)], T=0.1)  # the box's energy is 19.6-20.7 J
+    with pytest.raises(ValueError, match="set_order=1"):
+        solve(trace(pd.rhs, 2), Interval(lo, hi), (0.0, 0.1), set_order=2, hooks=[EnergyShellHook(sh, 30.0)])
+    with pytest.raises(ValueError, match="one value"):
+        max_energy(trace(pd.rhs, 2), Interval(lo, hi))

@@ -1,0 +1,133 @@
+"""Hold the enclosure inside the energy shell ``H(q, qd) <= hmax`` (issue 13, item 1).
+
+For a conservative or dissipative mechanical system (``dH/dt <= 0`` along every
+solution, paper eq. (7) with no input power), every true state at every time satisfies
+``H(x(t)) <= hmax`` with ``hmax`` the largest energy of the initial set (eq. (12):
+``H_V`` never rises). :class:`verified.contractor.EnergyShell` contracts a box in
+``(q, qd)`` to that shell: the velocities by the exact ellipsoid bound
+``|qd_i| <= sqrt(2 (hmax - V(q)) (M(q)^-1)_ii)``, the positions through ``V(q) <= hmax``.
+
+:class:`EnergyShellHook` applies it after every step. A set whose hull the shell cuts
+to less than ``cut`` of its width in some component has become much wider than the
+physics allows (wrapping over a long horizon, a fold near a saddle): the hook replaces
+it by the contracted box (a fresh set: centre, diagonal parameters). That loses the
+set's correlations, so it is done only where the cut is large; every other set is left
+as it is. A set whose box holds no state of the shell holds no true state and is
+dropped. The result is bounded and sound where the plain run breaks down "too wide":
+the paper's pendulum over the top (one box) keeps ``|qd| <= 6.4`` instead of growing to
+widths of 5000 (docs/energy_contraction.md).
+
+Soundness rests on ``hmax``: the caller states that ``H`` never rises above it along
+the solutions from the initial set (:func:`max_energy` gives the bound for a
+non-increasing ``H``). The hook checks what it can: ``hmax`` is a finite float and the
+initial sets lie in the shell (else the claim is wrong and the run raises).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .contractor import EnergyShell
+from .energy_contraction import _put  # replace sets in place (shared with the energy contraction)
+from .evaluate import eval_interval
+from .graph import Graph
+from .hooks import Hook, RunSetup
+from .interval import Interval
+from .sets import DoubletonSets
+
+__all__ = ["EnergyShellHook", "max_energy"]
+
+
+def max_energy(H: Graph, boxes: Interval, params=None) -> float:
+    """An upper bound of ``H`` over the boxes (Interval (B, n) or (n,)): the ``hmax`` of a
+    system whose energy does not rise (interval evaluation, rounded outward)."""
+    boxes = boxes if isinstance(boxes, Interval) else Interval(boxes)
+    if boxes.ndim == 1:
+        boxes = boxes.reshape(1, -1)
+    if H.n_outputs != 1 or H.n_inputs != boxes.shape[1]:
+        raise ValueError(f"H must map the {boxes.shape[1]} states to one value, got "
+                         f"{H.n_inputs} inputs -> {H.n_outputs} outputs")
+    hi = float(np.max(eval_interval(H, boxes, params)[..., 0].hi))
+    if not np.isfinite(hi):
+        raise ValueError("H is unbounded over the initial boxes; no energy shell")
+    return hi
+
+
+class EnergyShellHook(Hook):
+    """Keep every set inside ``H(q, qd) <= hmax`` (see the module docstring).
+
+    Args:
+        shell: the :class:`~verified.contractor.EnergyShell` of the system (``M(q)`` and
+            ``V(q)`` graphs); the solver's first ``2 n_q`` states must be ``(q, qd)``.
+        hmax: upper bound of ``H`` along every solution from the initial set (J).
+        cut: a set is replaced by its contracted box when that box is narrower than
+            ``cut`` times the set's hull in some component (default 0.5).
+        pieces: sub-boxes of ``q`` for the ellipsoid bound (EnergyShell.contract).
+        params: parameters of the shell's graphs (fixed floats or intervals), if any.
+    """
+
+    def __init__(self, shell: EnergyShell, hmax: float, *, cut: float = 0.5, pieces: int = 64, params=None):
+        if not isinstance(shell, EnergyShell):
+            raise TypeError(f"shell must be a verified.contractor.EnergyShell, got {type(shell).__name__}")
+        hmax = float(hmax)
+        if not np.isfinite(hmax):
+            raise ValueError(f"hmax must be a finite number, got {hmax!r}")
+        if not 0.0 < float(cut) <= 1.0:
+            raise ValueError(f"cut must be in (0, 1], got {cut!r}")
+        self.shell, self.hmax, self.cut, self.pieces, self.params = shell, hmax, float(cut), int(pieces), params
+        self.resets = 0  # sets replaced by their contracted box
+        self.dropped = 0  # sets outside the shell
+
+    def before_run(self, setup: RunSetup):
+        nq2 = 2 * self.shell.nq
+        if setup.n_state < nq2:
+            raise ValueError(f"the energy shell needs the first {nq2} states to be (q, qd); "
+                             f"the ODE has {setup.n_state}")
+        if not isinstance(setup.sets, DoubletonSets) or type(setup.sets) is not DoubletonSets:
+            raise ValueError("the energy shell works on first-order sets (set_order=1)")
+        res = self._contract(setup.sets.hull()[:, :nq2])
+        if res.empty.any():
+            raise ValueError(f"an initial box lies outside the energy shell H <= {self.hmax!r}: "
+                             "hmax is not an upper bound of the initial energy")
+        return None
+
+    def _contract(self, boxes: Interval):
+        return self.shell.contract(boxes, self.hmax, params=self.params, pieces=self.pieces)
+
+    def after_step(self, step, sets, run):
+        if type(sets) is not DoubletonSets:
+            return None
+        nq2 = 2 * self.shell.nq
+        hull = sets.hull()
+        res = self._contract(hull[:, :nq2])
+        keep = ~res.empty
+        if not keep.any():
+            # the initial sets were inside the shell, so some true state is in some set:
+            # the claim behind hmax must be wrong
+            run.stop(f"energy shell H <= {self.hmax:g} excludes every set at t = {step.t:g}: "
+                     "the energy is not bounded by hmax", "breakdown")
+            return None
+        width = hull.width()[:, :nq2]
+        new_w = np.where(keep[:, None], res.boxes.width(), width)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            replace = keep & (new_w < self.cut * width).any(axis=1)
+        if not replace.any() and keep.all():
+            return None
+        out = sets
+        if replace.any():
+            idx = np.flatnonzero(replace)
+            lo, hi = hull.lo[idx].copy(), hull.hi[idx].copy()  # (k, N): other states keep their hull
+            lo[:, :nq2], hi[:, :nq2] = res.boxes.lo[idx], res.boxes.hi[idx]
+            box = Interval(lo, hi)
+            fresh = DoubletonSets.from_boxes(box).with_params(sets.C.shape[2])
+            out = _put(out, idx, fresh)
+            self.resets += idx.size
+        if not keep.all():
+            self.dropped += int((~keep).sum())
+            out = out.take(np.flatnonzero(keep))
+        return out
+
+    def after_run(self, solution) -> None:
+        solution.stats["shell_resets"] = self.resets
+        solution.stats["shell_dropped"] = self.dropped
+
