@@ -441,6 +441,24 @@ class NumericModel:
             return [self.hamiltonian(x[:n], x[n:])]
         return trace(fn, 2 * n, 0, input_names=self._names(), output_names=["H"])
 
+    def mass_matrix_graph(self):
+        """Expression graph q -> the n * n entries of M(q) (row-major; kg m^2, crba)."""
+        from verified.graph import trace
+        n = self.n
+        def fn(q, p):
+            M = self.mass_matrix(list(q))
+            return [M[i][j] for i in range(n) for j in range(n)]
+        return trace(fn, n, 0, input_names=[f"q{i + 1}" for i in range(n)],
+                     output_names=[f"M{i + 1}{j + 1}" for i in range(n) for j in range(n)])
+
+    def potential_graph(self):
+        """Expression graph q -> [P(q)] (J, ``potential_energy``)."""
+        from verified.graph import trace
+        n = self.n
+        def fn(q, p):
+            return [self.potential_energy(list(q))]
+        return trace(fn, n, 0, input_names=[f"q{i + 1}" for i in range(n)], output_names=["P"])
+
     def energy_rate_graph(self):
         """Expression graph (q, qd) -> [dH/dt] = qd^T (-D qd) (eq. (7), tau_ext = 0).
         (The paper's mode (ii) differentiates H along the ODE by automatic

@@ -258,7 +258,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
              backward_depth: int = 0, contract: str = "step", prune: bool = True,
              constraints=(), progress=None, max_wall: float | None = None, control=None,
-             param_subdivision: dict | None = None, **solver_kwargs) -> Solution:
+             param_subdivision: dict | None = None, energy_shell: bool = False, **solver_kwargs) -> Solution:
     """Verified enclosure of ``model`` from the initial box ``x0`` in simulation ``mode``.
 
     Parameters
@@ -320,6 +320,16 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         Measured (UR5 under PD, payload 1 kg +- 10%, T = 5, 60 s): 1 piece reaches
         0.96 s (steps ~3 ms: the affine remainder grows with the parameter's width),
         4 pieces 1.9 s (steps ~30 ms).
+    energy_shell : bool
+        Hold the enclosure inside the energy shell ``H(q, qd) <= hmax``
+        (:class:`verified.energy_shell.EnergyShellHook`; ``hmax`` the interval bound of
+        ``H`` over the initial box): a set the shell cuts to less than half its width is
+        replaced by its contracted box. Sound for a chain without control inputs and
+        without uncertain parameters (its energy never rises: damping only takes it
+        away); anything else is a ValueError. Measured on the paper's pendulum over the
+        top, one box, ``error_basis="auto"``: worst ratio at T = 3 417 -> 2.55, T = 10
+        completed at 4.6 (without: break-down at 4.12 s). Default False: on enclosures
+        that stay narrow it only costs time.
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
         an unknown keyword raises ``TypeError`` naming ``simulate()``
 
@@ -383,6 +393,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         # double pendulum, damping 0.05 as a parameter: 0.098 s, as a constant or with
         # "auto" completed to 0.3 s)
         solver_kwargs["error_basis"] = "auto"
+    if energy_shell:
+        solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [_energy_shell_hook(masses, loop, box)]
     if max_wall is not None:
         from verified.hooks import StopAfterWall
         if isinstance(max_wall, bool) or not isinstance(max_wall, (int, float)) or not max_wall > 0 \
@@ -414,6 +426,24 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         from .frames import attach_frames
         attach_frames(sol, masses.chain, loop.cparams if loop is not None else getattr(masses, "cparams", None))
     return sol
+
+
+def _energy_shell_hook(masses, loop, box: Interval):
+    """The EnergyShellHook of a passive chain: M(q) and P(q) of its numeric model,
+    ``hmax`` = the interval bound of ``H = K + P`` over the initial box (sound because
+    ``dH/dt = -qd^T D qd <= 0`` without inputs, eq. (7))."""
+    from verified.contractor import EnergyShell
+    from verified.energy_shell import EnergyShellHook, max_energy
+    if loop is not None:
+        raise ValueError("energy_shell=True needs a system without control inputs (a controller can add energy)")
+    if masses is None:
+        raise ValueError("energy_shell=True needs a chain model (URDF, DH table or a registry model), "
+                         "not a bare System (its M(q) and P(q) are unknown)")
+    if masses.cparams is not None:
+        raise ValueError("energy_shell=True does not take uncertain parameters yet")
+    num = masses.num
+    hmax = max_energy(num.energy_graph(), box if box.ndim > 1 else box.reshape(1, -1))
+    return EnergyShellHook(EnergyShell(num.mass_matrix_graph(), num.potential_graph()), hmax)
 
 
 class _CtrlC:

@@ -62,3 +62,34 @@ def test_scene_keys():
         loads_scene(SCENE + 'contract = "sideways"\n')
     with pytest.raises(SceneError, match="prune"):
         loads_scene(SCENE + 'prune = "no"\n')
+
+
+def test_energy_shell_through_simulate_holds_the_pendulum_and_stays_sound():
+    """``simulate(..., energy_shell=True)``: the chain's M(q) and P(q) give the shell, the
+    initial box its hmax; the pendulum over the top (mode i)
+    keeps |qd| within the shell where the plain run's enclosure grows, samples inside."""
+    lo, hi = pd.initial_box()
+    T = 2.4
+    kw = dict(mode="i", output_dt=0.2, error_basis="auto", max_width=1e6, progress=False)
+    held = simulate("pendulum_paper", Interval(lo, hi), T, energy_shell=True, **kw)
+    plain = simulate("pendulum_paper", Interval(lo, hi), T, **kw)
+    assert held.status == "completed", held
+    assert held.stats["shell_resets"] >= 1 and "shell_resets" not in plain.stats
+    assert held.hull[-1].width()[1] < 0.5 * plain.hull[-1].width()[1]
+    sols = trajectories(lambda x: pd.rhs(x), sample_initial_points(lo, hi, 30), T)
+    assert misses(held, sols, per_step=2, states=2) == []
+
+
+def test_energy_shell_refuses_what_it_cannot_bound():
+    from mbs.control import PD
+    from mbs.system import System
+    from verified.graph import trace
+    lo, hi = pd.initial_box()
+    box = Interval(lo, hi)
+    with pytest.raises(ValueError, match="without control inputs"):
+        simulate("pendulum_paper", box, 0.1, mode="i", control=PD(1.0, 1.0), energy_shell=True, progress=False)
+    bare = System(name="bare", rhs=trace(pd.rhs, 2))
+    with pytest.raises(ValueError, match="chain model"):
+        simulate(bare, box, 0.1, mode="i", energy_shell=True, progress=False)
+    with pytest.raises(ValueError, match="uncertain parameters"):
+        simulate("pendulum_paper", box, 0.1, mode="i", params={"mass_scale": [0.9, 1.1]}, energy_shell=True, progress=False)
