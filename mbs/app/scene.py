@@ -58,6 +58,7 @@
     param_subdivision = { "payload.mass" = 4 }   # or split uncertain parameters (one box)
     h_max = 0.05
     max_boxes = 4096
+    energy_shell = true     # chains without control: hold the sets inside H <= hmax
 
     [control]               # optional: joint torques (modes i, ii; see mbs.control)
     type = "pd"             # "pd" or "computed_torque"
@@ -127,7 +128,8 @@ _SIMULATION = {"t_end", "output_dt", "mode", "frames"}
 _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_min": float,
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
            "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
-           "set_order": int, "merge_slack": float, "param_subdivision": None, "absorb": bool}
+           "set_order": int, "merge_slack": float, "param_subdivision": None, "absorb": bool,
+           "params_per_state": int, "energy_shell": bool}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str, "contract": str, "prune": bool}
 _CONTRACTS = ("step", "test", "off")

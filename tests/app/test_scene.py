@@ -190,6 +190,14 @@ def test_solver_set_order_and_merge_slack():
     _err(GOOD.replace("order = 12\n", "order = 12\nset_order = 3\n"), "set_order", "not 1 or 2")
 
 
+def test_solver_energy_shell_and_params_per_state():
+    kw = loads_scene(GOOD.replace("order = 12\n", "order = 12\nenergy_shell = true\nparams_per_state = 12\n")
+                     ).simulate_kwargs(NAMES)
+    assert kw["energy_shell"] is True and kw["params_per_state"] == 12
+    _err(GOOD.replace("order = 12\n", "order = 12\nenergy_shell = 1\n"), "energy_shell")
+    _err(GOOD.replace("order = 12\n", "order = 12\nparams_per_state = 0\n"), "params_per_state")
+
+
 def test_solver_arithmetic():
     for name in ("interval", "affine", "taylor_model"):
         kw = loads_scene(GOOD.replace("order = 12\n", f"order = 12\narithmetic = '{name}'\n")).simulate_kwargs(NAMES)
