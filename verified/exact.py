@@ -7,11 +7,10 @@ number into floats calls these functions instead of repeating the rule:
 
 - :mod:`verified.interval` (``Fraction``, ``Decimal`` and big-int operands),
 - :mod:`verified.graph` (constant nodes, :func:`verified.graph.enclose_rational`),
-- :mod:`verified.stepper` (the exact step times),
+- :mod:`verified.stepper` and :mod:`verified.solver` (the exact step times and the gap
+  to the next output time),
 - :mod:`mbs.app.scene` (numbers and ``pi`` expressions in scene files),
 - :mod:`models.pendulum`, :mod:`models.double_pendulum` (the paper's initial boxes).
-
-(``verified.solver._round_up`` / ``_round_down`` apply the same rule to one side.)
 
 Rounding is never to nearest: ``lo <= exact <= hi`` always, with ``lo == hi`` only when
 the exact number is a double.

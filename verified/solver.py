@@ -34,6 +34,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from .exact import enclose_fraction
 from .graph import Graph
 from .hooks import ProgressHook, RunSetup, check_hooks
 from .interval import Interval, concatenate, hull, stack
@@ -304,7 +305,7 @@ def solve(
     consistency : verified.consistency.EnergyTest or None
         Energy (Hamiltonian) consistency test, further constraints and the backward
         test (paper sec. 4): branch and prune at the first local maximum of the
-        reduction area RA(t), at least every ``max_interval`` seconds. Its record
+        reduction area RA(t), at least every ``test_interval`` seconds. Its record
         (RA(t), H_H, H_V, every test) is returned as ``Solution.consistency``.
     hooks : sequence of hook objects (:mod:`verified.hooks`)
         Called before the run, after every accepted step (with the step's
@@ -550,7 +551,7 @@ class _Run:
     def gap(self):
         """Floats ``lo <= exact time to the next output <= hi``."""
         gap = Fraction(float(self.outs[self.next_out])) - self.t_exact
-        return _round_down(gap), _round_up(gap)
+        return enclose_fraction(gap)  # the exact gap between two doubles
 
     def advance(self, stepper, X, found, gap_lo, gap_hi):
         """Take the validated step ``found`` (:class:`~verified.policies.Validated`),
@@ -640,16 +641,6 @@ def _stepper(prob: VerifiedODE, order, params, error_basis, set_order=1, absorb=
     if params_per_state is not None:
         stepper.max_params = params_per_state * stepper.n
     return stepper
-
-
-def _round_up(q: Fraction) -> float:
-    f = float(q)
-    return f if Fraction(f) >= q else float(np.nextafter(f, np.inf))
-
-
-def _round_down(q: Fraction) -> float:
-    f = float(q)
-    return f if Fraction(f) <= q else float(np.nextafter(f, -np.inf))
 
 
 def _stack_hulls(list_of_boxes):

@@ -73,7 +73,7 @@ def test_pd_tracking_quintic_with_disturbance_encloses_pinocchio():
     t_w = np.asarray(sol.hull.width())[:, -1]
     assert np.all(t_w < 1e-12)                         # the time stays a point
     assert np.allclose(sol.hull.mid()[:, -1], sol.t)
-    plant, nd = pin_model(chain), None
+    plant = pin_model(chain)
     data = plant.createData()
     trajs = []
     for k, w in enumerate([-0.2, 0.2, 0.0]):
