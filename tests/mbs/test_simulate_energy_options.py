@@ -69,8 +69,8 @@ def test_energy_shell_through_simulate_holds_the_pendulum_and_stays_sound():
     initial box its hmax; the pendulum over the top (mode i)
     keeps |qd| within the shell where the plain run's enclosure grows, samples inside."""
     lo, hi = pd.initial_box()
-    T = 2.4
-    kw = dict(mode="i", output_dt=0.2, error_basis="auto", max_width=1e6, progress=False)
+    T = 2.0
+    kw = dict(mode="i", output_dt=0.25, error_basis="auto", max_width=1e6, progress=False)
     held = simulate("pendulum_paper", Interval(lo, hi), T, energy_shell=True, **kw)
     plain = simulate("pendulum_paper", Interval(lo, hi), T, **kw)
     assert held.status == "completed", held
