@@ -79,6 +79,38 @@ def test_oracle_bites_when_the_shell_cuts_too_far(samples, monkeypatch):
     assert misses(held, samples, per_step=2) != []
 
 
+def test_sets_inside_the_shell_are_left_and_the_rest_contracted_as_alone():
+    """One after_step on a batch: sets whose hull lies inside the shell (H over the hull
+    <= hmax: no contraction can cut them) come back unchanged, the others exactly as the
+    shell contracts their hull alone (replaced when cut to less than half, dropped when
+    outside)."""
+    from types import SimpleNamespace
+
+    from verified.sets import DoubletonSets
+    sh = _shell()
+    hmax = 20.0  # |qd| <= sqrt(40) = 6.32 at q = 0
+    boxes = Interval(np.array([[0.0, 1.0], [0.0, -30.0], [3.0, 0.0], [0.0, 5.0]]),
+                     np.array([[0.1, 1.1], [0.1, 30.0], [3.1, 0.1], [0.1, 9.0]]))
+    sets = DoubletonSets.from_boxes(boxes)
+    hook = EnergyShellHook(sh, hmax)
+    stopped = []
+    out = hook.after_step(SimpleNamespace(t=0.1), sets, SimpleNamespace(stop=lambda *a: stopped.append(a)))
+    alone = sh.contract(boxes, hmax, pieces=hook.pieces)
+    # set 0 inside (kept as is), set 1 cut to |qd| <= 6.32 (replaced), set 2 near the top
+    # (V = 19.5, H <= 19.53: inside), set 3 partly outside (cut)
+    assert not stopped
+    assert not alone.empty.any()
+    kept = np.flatnonzero(~alone.empty)
+    assert out.n_sets == kept.size
+    h = out.hull()
+    for j, i in enumerate(kept):
+        cut = (alone.boxes.width()[i] < 0.5 * boxes.width()[i]).any()
+        want = alone.boxes[i] if cut else boxes[i]
+        assert (h.lo[j] <= want.lo + 1e-12).all() and (h.hi[j] >= want.hi - 1e-12).all()
+        assert (h.width()[j] <= want.width() * (1 + 1e-9) + 1e-12).all()
+    assert hook.resets >= 1  # set 1 at least
+
+
 def test_bad_shell_arguments():
     lo, hi = pd.initial_box()
     sh = _shell()
