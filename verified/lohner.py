@@ -67,7 +67,8 @@ class LohnerStepper:
     #: ... up to this many parameters per state (then the error part stays in r)
     PARAMS_PER_STATE = 8
 
-    def __init__(self, taylor, variational, order: int, params=None, error_basis="qr", absorb: bool = False):
+    def __init__(self, taylor, variational, order: int, params=None, error_basis="qr", absorb: bool = False,
+                 max_params: int | None = None):
         self.basis = error_basis_policy(error_basis)  # QRBasis / AutoBasis (verified.policies)
         self.error_basis = self.basis.name if hasattr(self.basis, "name") else error_basis
         self.taylor = taylor
@@ -80,7 +81,7 @@ class LohnerStepper:
         # the same cost.
         self.absorb = bool(absorb)
         self.absorb_ratio = self.ABSORB_RATIO
-        self.max_params = self.PARAMS_PER_STATE * self.n
+        self.max_params = self.PARAMS_PER_STATE * self.n if max_params is None else int(max_params)
         self.absorbed = 0
         # at the cap, merge the least wide absorbed parameters to make room (doubletons)
         self.merge = True

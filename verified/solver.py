@@ -631,16 +631,15 @@ class _Run:
 
 def _stepper(prob: VerifiedODE, order, params, error_basis, set_order=1, absorb=False,
              params_per_state=None) -> LohnerStepper:
+    max_params = None if params_per_state is None else params_per_state * prob.n
     if set_order == 2:
         return QuadraticStepper(prob.taylor, prob.variational, prob.second_variational, order, params, error_basis,
                                 second_over_set=prob.second_variational_over_set,
                                 second_directional=(None if prob.arithmetic == "interval"
                                                     else prob.second_variational_along),
-                                max_params=None if params_per_state is None else params_per_state * prob.n)
-    stepper = LohnerStepper(prob.taylor, prob.variational, order, params, error_basis, absorb=absorb)
-    if params_per_state is not None:
-        stepper.max_params = params_per_state * stepper.n
-    return stepper
+                                max_params=max_params)
+    return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis, absorb=absorb,
+                         max_params=max_params)
 
 
 def _stack_hulls(list_of_boxes):
