@@ -393,6 +393,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         # double pendulum, damping 0.05 as a parameter: 0.098 s, as a constant or with
         # "auto" completed to 0.3 s)
         solver_kwargs["error_basis"] = "auto"
+    if not isinstance(energy_shell, (bool, np.bool_)):
+        raise ValueError(f"energy_shell must be True or False, got {energy_shell!r}")
     if energy_shell:
         solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [_energy_shell_hook(masses, loop, box)]
     if max_wall is not None:
