@@ -60,7 +60,7 @@ def test_pendulum_over_the_top_held_in_the_shell(samples):
     assert misses(held, samples, per_step=2) == []
     # |qd| <= sqrt(2 hmax / (m l^2)) = 6.5: the shell holds qd; the plain run does not
     vmax = np.sqrt(2 * _hmax(lo, hi))
-    assert held.hull[-1].width()[1] <= 2 * vmax * 1.01 / 0.5  # (a set is reset once cut to half)
+    assert held.hull[-1].width()[1] <= 2 * vmax * 1.01 / hook.cut  # (reset once cut below hook.cut)
     assert held.hull[-1].width()[1] < 0.5 * plain.hull[-1].width()[1]
 
 
@@ -104,7 +104,7 @@ def test_sets_inside_the_shell_are_left_and_the_rest_contracted_as_alone():
     assert out.n_sets == kept.size
     h = out.hull()
     for j, i in enumerate(kept):
-        cut = (alone.boxes.width()[i] < 0.5 * boxes.width()[i]).any()
+        cut = (alone.boxes.width()[i] < hook.cut * boxes.width()[i]).any()
         want = alone.boxes[i] if cut else boxes[i]
         assert (h.lo[j] <= want.lo + 1e-12).all() and (h.hi[j] >= want.hi - 1e-12).all()
         assert (h.width()[j] <= want.width() * (1 + 1e-9) + 1e-12).all()
