@@ -444,7 +444,7 @@ def _energy_shell_hook(masses, loop, box: Interval):
     if masses.cparams is not None:
         raise ValueError("energy_shell=True does not take uncertain parameters yet")
     num = masses.num
-    hmax = max_energy(num.energy_graph(), box if box.ndim > 1 else box.reshape(1, -1))
+    hmax = max_energy(num.energy_graph(), box)  # (n,) or (B, n)
     return EnergyShellHook(EnergyShell(num.mass_matrix_graph(), num.potential_graph()), hmax)
 
 

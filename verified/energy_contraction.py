@@ -142,17 +142,8 @@ class EnergyContraction:
         if off.any():
             idx = np.flatnonzero(off)
             moved = recentre(kept.c[idx], kept.C[idx], kept.r0[idx], kept.Q[idx], kept.r[idx])
-            kept = _put(kept, idx, moved)
+            kept = kept.replaced(idx, moved)
         return ContractionResult(kept, empty, ratio, Rk)
-
-
-def _put(sets: DoubletonSets, idx: np.ndarray, part: DoubletonSets) -> DoubletonSets:
-    c, C, Q = sets.c.copy(), sets.C.copy(), sets.Q.copy()
-    r0, r = sets.r0.copy(), sets.r.copy()
-    c[idx], C[idx], Q[idx] = part.c, part.C, part.Q
-    r0.lo[idx], r0.hi[idx] = part.r0.lo, part.r0.hi
-    r.lo[idx], r.hi[idx] = part.r.lo, part.r.hi
-    return DoubletonSets(c, C, r0, Q, r)
 
 
 def _concat(a: Interval, b: Interval) -> Interval:

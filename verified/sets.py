@@ -214,6 +214,16 @@ class DoubletonSets:
     def take(self, index) -> "DoubletonSets":
         return DoubletonSets(self.c[index], self.C[index], self.r0[index], self.Q[index], self.r[index])
 
+    def replaced(self, idx: np.ndarray, part: "DoubletonSets") -> "DoubletonSets":
+        """The same batch with the sets at ``idx`` replaced by ``part`` (as many sets,
+        the same parameter count), the order kept (contractors, the energy shell)."""
+        c, C, Q = self.c.copy(), self.C.copy(), self.Q.copy()
+        r0, r = self.r0.copy(), self.r.copy()
+        c[idx], C[idx], Q[idx] = part.c, part.C, part.Q
+        r0.lo[idx], r0.hi[idx] = part.r0.lo, part.r0.hi
+        r.lo[idx], r.hi[idx] = part.r.lo, part.r.hi
+        return DoubletonSets(c, C, r0, Q, r)
+
     def linear_width(self) -> np.ndarray:
         """Width of the linear part ``C r0`` per box and component, shape (B, n)."""
         return linalg.matvec(self.C, self.r0).width()
