@@ -39,9 +39,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import linalg
-from .graph import Graph, GraphBuilder
-from .graph_ops import augment_with_rate, difference, embed, negated, rate_along
+from .consistency_graphs import Constraint, EnergyClaimError, lift_graphs, prove_energy_rate, refute_claim
 from .energy_contraction import EnergyContraction
+from .energy_state import assign, initial_sets, reset_h
+from .graph import Graph
+from .graph_ops import negated
 from .hooks import Hook
 from .interval import Interval, concatenate, hull, point
 from .sets import DoubletonSets
@@ -50,70 +52,8 @@ __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRAT
            "prove_energy_rate"]
 
 
-class EnergyClaimError(ValueError):
-    """A declared energy rate (``conservative=True``, ``energy_rate="zero"`` or an
-    ``energy_rate`` graph) is refuted: ``grad H . f - rate`` excludes 0 somewhere.
-    Pruning or contracting with it would remove true states."""
-
-
-def prove_energy_rate(rhs: Graph, energy: Graph, rate: Graph | None) -> bool:
-    """Symbolic proof (sympy) that ``grad H . f - rate`` is identically 0 (``rate``
-    None: the claim ``dH/dt = 0``). True when proven; False when sympy cannot
-    simplify it to 0 (no refutation: use the interval check)."""
-    import sympy
-
-    from .graph_sympy import graph_to_sympy
-    xs = sympy.symbols(f"x0:{rhs.n_inputs}", real=True)
-    ps = sympy.symbols(f"p0:{rhs.n_params}", real=True) if rhs.n_params else ()
-    f = graph_to_sympy(rhs, xs, ps)
-    (H,) = graph_to_sympy(energy, xs, ps)
-    expr = sum(sympy.diff(H, x) * fx for x, fx in zip(xs, f))
-    if rate is not None:
-        expr = expr - graph_to_sympy(rate, xs, ps)[0]
-    return sympy.simplify(expr) == 0
-
-
 #: ways to split a set at ``t*`` (compared in benchmarks/bench_consistency.py)
 STRATEGIES = ("gradient", "widest", "grid")
-
-
-@dataclass(frozen=True)
-class Constraint:
-    """``lower <= g(x[, t]) <= upper`` for every true state ``x`` (at time ``t``).
-
-    ``graph`` takes the ODE's ``n`` states (plus the time as one more, last input when
-    ``time_dependent``) and has ``m`` outputs; ``lower``/``upper`` have ``m`` entries
-    (``-inf``/``inf`` for one-sided bounds). Parameters of the ODE are not available
-    to constraints (bake exact values into the graph).
-    """
-
-    graph: Graph
-    lower: tuple
-    upper: tuple
-    time_dependent: bool = False
-    name: str = "constraint"
-
-    def __post_init__(self):
-        m = self.graph.n_outputs
-        lo = np.broadcast_to(np.asarray(self.lower, dtype=float), (m,))
-        hi = np.broadcast_to(np.asarray(self.upper, dtype=float), (m,))
-        if np.isnan(lo).any() or np.isnan(hi).any() or (lo > hi).any():
-            raise ValueError(f"{self.name}: bounds must satisfy lower <= upper (no NaN), got {lo}, {hi}")
-        if self.graph.n_params:
-            raise ValueError(f"{self.name}: constraint graphs cannot have parameters")
-        object.__setattr__(self, "lower", tuple(lo))
-        object.__setattr__(self, "upper", tuple(hi))
-
-    @classmethod
-    def equality(cls, graph: Graph, *, time_dependent: bool = False, name: str = "holonomic") -> "Constraint":
-        """``g(x[, t]) = 0``, e.g. a holonomic constraint ``g(q, t) = 0``."""
-        return cls(graph, (0.0,) * graph.n_outputs, (0.0,) * graph.n_outputs, time_dependent, name)
-
-    @classmethod
-    def bounds(cls, graph: Graph, lower=-np.inf, upper=np.inf, *, time_dependent: bool = False,
-               name: str = "inequality") -> "Constraint":
-        """``lower <= g(x[, t]) <= upper``, e.g. ``K(q, qd) <= K_max``."""
-        return cls(graph, lower, upper, time_dependent, name)
 
 
 @dataclass
@@ -265,45 +205,27 @@ class EnergyTest(Hook):
 
     def after_step(self, step, sets, run):
         out = self._after_step(step, sets, run)
-        if self.align is not None and self._energy is not None:
+        if self.align is not None and self._lifted.energy is not None:
             final = sets if out is None else out
             g = None
             if final.n_sets:
                 with np.errstate(all="ignore"):
-                    g = self._jac(self._residual, point(final.c))[:, 0, :].mid()
+                    g = self._lifted.jac(self._lifted.residual, point(final.c))[:, 0, :].mid()
             self.align.set_direction(g)
         return out
 
     def _refute_claim(self, boxes: Interval, points: np.ndarray, t: float):
-        """Raise :class:`EnergyClaimError` when ``grad H . f - rate`` excludes 0 over one
-        of ``boxes`` (B, >= n_s) or at one of ``points`` (B, >= n_s): the declared
-        rate is then wrong there (every true state of those boxes is a counterexample
-        or the point is), and pruning with it would be unsound."""
-        if self._claim is None:
-            return
-        n_s = self._n_s
-        for what, X in (("at the point", point(np.asarray(points)[:, :n_s])), ("over the box", boxes[:, :n_s])):
-            with np.errstate(all="ignore"):
-                d = self._eval(self._claim, X)[:, 0]
-            bad = (d.lo > 0) | (d.hi < 0)
-            if bad.any():
-                k = int(np.flatnonzero(bad)[0])
-                decl = "conservative=True (dH/dt = 0)" if self.energy_rate == "zero" else "the energy_rate graph"
-                names = self._graph.input_names[:self._n_x]
-                where = ", ".join(f"{nm}={v}" for nm, v in zip(names, (X[k].mid() if what == "over the box" else X[k].lo)))
-                raise EnergyClaimError(
-                    f"the declared energy rate is wrong: grad H . f - dH/dt is in [{d.lo[k]:.6g}, {d.hi[k]:.6g}] "
-                    f"(excludes 0) {what} {where} (t = {t:g}); {decl} does not hold for this ODE, so the "
-                    "energy test cannot use it (pass energy_rate='derive', or fix the model)")
+        """See :func:`verified.consistency_graphs.refute_claim`."""
+        refute_claim(self._lifted, boxes, points, t, self.energy_rate)
 
     def _after_step(self, step, sets, run):
         """Contract the sets with ``H(x) - h = 0`` (``contract="step"``), record
         ``RA(t)``; at ``t*`` branch and prune (returns the surviving sets)."""
         changed = False
-        if self.reset_h and self._energy is not None:
+        if self.reset_h and self._lifted.energy is not None:
             sets, ch = self._reset_h(sets)
             changed |= ch
-        if self._claim is not None:
+        if self._lifted.claim is not None:
             # the claim over every state the step's tube encloses, and at the new centres
             self._refute_claim(step.tube, sets.c, step.t)
         if self.contract == "step" and self._contraction is not None:
@@ -345,62 +267,19 @@ class EnergyTest(Hook):
         return sets
 
     def _reset_h(self, sets):
-        """``(sets, changed)``: ``h`` restarted from ``H`` over the set where ``H_V`` has
-        become wider than ``H_H`` (the integrated ``h`` then carries no information and
-        only grows; with the unsimplified ``dH/dt`` over wide sets it grew past the
-        solver's width limit and ended the run before the states did: pendulum, T = 3,
-        4 x 4 pieces, break-down at 1.56 s with the test, 1.94 s without).
-
-        Sound: every true trajectory has ``h(t) = H(x(t))`` (eq. (12) is an identity
-        along it), so ``h`` may be re-initialized from the state part of the set, as at
-        ``t0`` (:meth:`initial_sets`): ``H(x) ∈ H(c) + DH(X) (C r0 + Q r)``, its
-        ``r0`` part (midpoint) linear, the rest a fresh error. Done only for sets whose
-        ``Q`` keeps ``h`` in its own column and row (block diagonal, as
-        :class:`verified.policies.BlockBasis` keeps it; a QR basis that mixed ``h``
-        into the state directions cannot be separated without wrapping)."""
-        n_s = self._n_s
-        nb = sets.n_sets
-        if nb == 0:
-            return sets, False
-        X = sets.hull()
-        with np.errstate(all="ignore"):
-            hh = self._eval(self._energy, X[:, :n_s])[:, 0]
-        hv = X[:, n_s]
-        block = (sets.Q[:, :n_s, n_s] == 0).all(axis=1) & (sets.Q[:, n_s, :n_s] == 0).all(axis=1)
-        redo = block & np.isfinite(hh.lo) & np.isfinite(hh.hi) & ~(hv.width() <= hh.width())
-        if not redo.any():
-            return sets, False
-        idx = np.flatnonzero(redo)
-        S = sets.take(idx)
-        cx = S.c[:, :n_s]
-        Xs = X[idx][:, :n_s].hull(point(cx))
-        with np.errstate(all="ignore"):
-            Hc = self._eval(self._energy, point(cx))[:, 0]
-            DH = self._jac(self._energy, Xs)[:, 0, :]  # (k, n_s)
-        rowC = _row_times(DH, S.C[:, :n_s, :])  # (k, N) over r0
-        rowQ = _row_times(DH, S.Q[:, :n_s, :])  # (k, N) over r (its h entry is 0: block)
-        row_mid = rowC.mid()
-        c_h = Hc.mid()
-        rest = (Hc - c_h) + _dot(rowC - row_mid, S.r0) + _dot(rowQ, S.r)
-        ok = np.isfinite(rest.lo) & np.isfinite(rest.hi) & np.isfinite(row_mid).all(axis=1)
-        if not ok.any():
-            return sets, False
-        idx, S = idx[ok], S.take(np.flatnonzero(ok))
-        row_mid, c_h, rest = row_mid[ok], c_h[ok], rest[ok]
-        c, C, Q = sets.c.copy(), sets.C.copy(), sets.Q.copy()
-        r = sets.r.copy()
-        c[idx, n_s] = c_h
-        C[idx, n_s, :] = row_mid
-        r.lo[idx, n_s], r.hi[idx, n_s] = rest.lo, rest.hi
-        self.stats["h_resets"] += int(idx.size)
-        _assign(sets, DoubletonSets(c, C, sets.r0, Q, r))
+        """``(sets, changed)``: ``h`` restarted from ``H`` where ``H_V`` became wider
+        than ``H_H`` (:func:`verified.energy_state.reset_h`, in place: never a change
+        the solver must take over)."""
+        sets, resets = reset_h(self._lifted, sets)
+        self.stats["h_resets"] += resets
         return sets, False
 
     def _contract(self, sets):
         """``(sets, changed)``: the sets contracted with ``H(x) - h = 0``
         (:mod:`verified.energy_contraction`); empty sets dropped."""
         w0 = time.perf_counter()
-        res = self._contraction.contract(sets, self._p(sets.n_sets) if self._residual.n_params else None)
+        lifted = self._lifted
+        res = self._contraction.contract(sets, lifted.p(sets.n_sets) if lifted.residual.n_params else None)
         self.stats["contractions"] += 1
         self.stats["contracted_empty"] += int(res.empty.sum())
         if res.ratio.size:
@@ -409,7 +288,7 @@ class EnergyTest(Hook):
         if res.empty.any():
             return res.sets, True
         if (res.ratio < 1).any():
-            _assign(sets, res.sets)
+            assign(sets, res.sets)
         return sets, False
 
     def after_run(self, solution):
@@ -421,63 +300,15 @@ class EnergyTest(Hook):
         """Bind to one solve: ``rhs`` is the user's ODE over ``(x, p)``; ``integrated``
         the graph the solver runs (its parameters possibly turned into states after
         ``x``). Returns the graph to integrate (with ``h`` appended when there is an
-        energy) and remembers how to evaluate the constraints on the solver's sets."""
-        self._params = params
-        self._n_x = n_x
-        self._p_as_states = integrated.n_inputs > n_x
-        n_s = integrated.n_inputs
-        self._n_s = n_s
-
-        def lift(g: Graph) -> Graph:
-            """``g`` over the solver's states (parameters as states if they are)."""
-            if not self._p_as_states:
-                return g
-            b = GraphBuilder(n_s, 0, input_names=integrated.input_names)
-            xs = [b.input(i) for i in range(n_s)]
-            return b.build(embed(b, g, xs[:n_x], xs[n_x:n_x + g.n_params]), g.output_names)
-
-        self._energy = None
+        energy) and remembers how to evaluate the constraints on the solver's sets
+        (:func:`verified.consistency_graphs.lift_graphs`)."""
+        lifted = lift_graphs(rhs, integrated, n_x, params, self.energy, self.energy_rate, self.constraints,
+                             check_claim=self.check_claim)
+        self._lifted = lifted
         self._contraction = None
-        self._claim = None
-        graph = integrated
-        if self.energy is not None:
-            if self.energy.n_inputs != n_x or self.energy.n_params != rhs.n_params:
-                raise ValueError(f"the energy graph takes {self.energy.n_inputs} states and "
-                                 f"{self.energy.n_params} parameters; the ODE has {n_x} and {rhs.n_params}")
-            if isinstance(self.energy_rate, Graph):
-                rate = self.energy_rate
-                if rate.n_inputs != n_x or rate.n_outputs != 1 or rate.n_params != rhs.n_params:
-                    raise ValueError("energy_rate must take the ODE's states and parameters and have one output")
-            elif self.energy_rate == "derive":
-                rate = rate_along(self.energy, rhs)
-            else:
-                rate = None
-            self._claim = None
-            if self.check_claim and self.energy_rate != "derive":
-                # grad H . f - rate: identically 0 if the declared rate is right
-                b = GraphBuilder(n_x, rhs.n_params, input_names=rhs.input_names, param_names=rhs.param_names)
-                xs_ = [b.input(i) for i in range(n_x)]
-                ps_ = [b.param(i) for i in range(rhs.n_params)]
-                (d,) = embed(b, rate_along(self.energy, rhs), xs_, ps_)
-                if rate is not None:
-                    d = b.sub(d, embed(b, rate, xs_, ps_)[0])
-                self._claim = lift(b.build([d], ["dHdt claim residual"]))
-            self._energy = lift(self.energy)
-            graph = augment_with_rate(integrated, None if rate is None else lift(rate), name="h")
-            self._residual = difference(self._energy, n_s + 1, n_s, name="H-h")  # 0 on true trajectories
-            self._contraction = EnergyContraction(self._residual) if self.contract != "off" else None
-        self._n_aug = graph.n_inputs
-        self._constraints = []
-        for c in self.constraints:
-            k = c.graph.n_inputs - (1 if c.time_dependent else 0)
-            if k != n_x:
-                raise ValueError(f"constraint {c.name!r} takes {k} states; the ODE has {n_x}")
-            b = GraphBuilder(self._n_aug + (1 if c.time_dependent else 0), 0)
-            xs = [b.input(i) for i in range(len(b.input_names))]
-            args = xs[:n_x] + ([xs[-1]] if c.time_dependent else [])
-            self._constraints.append((c, b.build(embed(b, c.graph, args), c.graph.output_names)))
+        if lifted.energy is not None and self.contract != "off":
+            self._contraction = EnergyContraction(lifted.residual)
         self._backward = None
-        self._graph = graph
         self.record = ConsistencyRecord(np.zeros(0), np.zeros(0), Interval(np.zeros(0)), Interval(np.zeros(0)))
         self._ra_t, self._ra, self._hh, self._hv = [], [], [], []
         self._hh_set, self._hv_set, self._ra_sets, self._ra_sets_t = [], [], [], []
@@ -486,52 +317,14 @@ class EnergyTest(Hook):
         self.stats = dict(tests=0, pruned_boxes=0, test_s=0.0, backward_s=0.0, backward_runs=0,
                           backward_deleted=0, refinements_skipped=0, contractions=0, contracted_empty=0,
                           contraction_s=0.0, contraction_ratio_min=1.0, h_resets=0)
-        return graph
+        return lifted.graph
 
     def initial_sets(self, sets):
-        """Append ``h(0) = H(x0)`` to the initial doubleton sets, correlated with ``r0``:
-        ``H(x0) ∈ H(c) + DH(X0) (x0 - c)`` (mean value theorem), the midpoint of
-        ``DH(X0) C`` entering the linear part and everything else the error part."""
-        if self._energy is None:
-            return sets
-        nb, n = sets.c.shape
-        X0 = sets.hull()
-        Hc = self._eval(self._energy, point(sets.c))[:, 0]  # (B,)
-        DH = self._jac(self._energy, X0)[:, 0, :]  # (B, n)
-        row = _row_times(DH, sets.C)
-        row_mid = row.mid()  # (B, n)
-        c_h = Hc.mid()
-        # everything that is not row_mid . r0, enclosed: H(c) - c_h, (DH C - row_mid) r0, DH Q r
-        rest = (Hc - c_h) + _dot(row - row_mid, sets.r0) + _dot(_row_times(DH, sets.Q), sets.r)
-        c = np.concatenate([sets.c, c_h[:, None]], axis=1)
-        C = np.zeros((nb, n + 1, n + 1))
-        C[:, :n, :n] = sets.C
-        C[:, n, :n] = row_mid
-        Q = np.zeros((nb, n + 1, n + 1))
-        Q[:, :n, :n] = sets.Q
-        Q[:, n, n] = 1.0
-        zero = point(np.zeros((nb, 1)))
-        r0 = concatenate([sets.r0, zero], axis=1)
-        r = concatenate([sets.r, rest.reshape((nb, 1))], axis=1)
-        return DoubletonSets(c, C, r0, Q, r)
+        """Append ``h(0) = H(x0)`` to the initial sets, correlated with ``r0``
+        (:func:`verified.energy_state.initial_sets`)."""
+        return initial_sets(self._lifted, sets)
 
     # ------------------------------------------------------------------ evaluation
-    def _p(self, nb):
-        if self._params is None or self._p_as_states:
-            return None
-        p = self._params
-        return p if p.ndim == 2 else p.broadcast_to((nb, p.shape[-1]))
-
-    def _eval(self, g: Graph, X: Interval, extra=None) -> Interval:
-        if extra is not None:
-            X = concatenate([X, extra], axis=1)
-        return g.eval_interval(X, self._p(X.shape[0]) if g.n_params else None)
-
-    def _jac(self, g: Graph, X: Interval, extra=None) -> Interval:
-        if extra is not None:
-            X = concatenate([X, extra], axis=1)
-        return g.jacobian_interval(X, self._p(X.shape[0]) if g.n_params else None)
-
     def _checks(self, sets, t: Interval):
         """Per set, the enclosure of every checked quantity and its allowed range:
         a list of ``(enclosure (B, m), lower (m,), upper (m,), gradient-in-directions
@@ -543,16 +336,16 @@ class EnergyTest(Hook):
         widths = params.width()
         out = []
         todo = []
-        if self._energy is not None:
-            todo.append((self._residual, None, np.zeros(1), np.zeros(1)))
-        for c, g in self._constraints:
+        if self._lifted.energy is not None:
+            todo.append((self._lifted.residual, None, np.zeros(1), np.zeros(1)))
+        for c, g in self._lifted.constraints:
             todo.append((g, t if c.time_dependent else None, np.array(c.lower), np.array(c.upper)))
         for g, tt, lo, hi in todo:
             extra = None if tt is None else Interval._from_bounds(np.full((nb, 1), tt.lo), np.full((nb, 1), tt.hi))
-            naive = self._eval(g, X, extra)  # (B, m)
-            D = self._jac(g, X.hull(point(sets.c)), extra)[..., : self._n_aug]  # (B, m, n)
+            naive = self._lifted.eval(g, X, extra)  # (B, m)
+            D = self._lifted.jac(g, X.hull(point(sets.c)), extra)[..., : self._lifted.n_aug]  # (B, m, n)
             Dcols = linalg.matmul(D, cols)  # (B, m, 2n)
-            centre = self._eval(g, point(sets.c), extra)
+            centre = self._lifted.eval(g, point(sets.c), extra)
             mv = centre + linalg.matvec(Dcols, params)
             enc = naive.intersect(mv)
             influence = Dcols.mag() * widths[:, None, :]  # (B, m, 2n)
@@ -579,10 +372,10 @@ class EnergyTest(Hook):
         set, and the hulls over all sets. ``t*`` is the first local maximum of that
         record; the sets with ``RA > 0`` there are the ones tested (:attr:`peaked`)."""
         self.peaked = None
-        if self._energy is not None:
+        if self._lifted.energy is not None:
             X = sets.hull()
-            hh = self._eval(self._energy, X[:, : self._n_s])[:, 0]
-            hv = X[:, self._n_s]
+            hh = self._lifted.eval(self._lifted.energy, X[:, : self._lifted.n_s])[:, 0]
+            hv = X[:, self._lifted.n_s]
             inter = hh.intersect(hv)
             wi = np.where(inter.is_empty(), 0.0, inter.width())
             ra_b = np.nan_to_num(hh.width() - wi, nan=0.0, posinf=np.finfo(float).max)
@@ -679,7 +472,7 @@ class EnergyTest(Hook):
                 children = cur.subdivide_along(d[:, 0], k).subdivide_along(np.repeat(d[:, 1], k), k)
             ch_checks = self._checks(children, t_iv)
             ok = ~self._inconsistent(ch_checks)
-            tested_hulls.append(children.hull()[:, : self._n_x])
+            tested_hulls.append(children.hull()[:, : self._lifted.n_x])
             tested_kept.append(ok)
             levels.append((children.take(np.flatnonzero(ok)), fan, ok))
             cur_checks = [(e[ok], lo, hi, inf[ok]) for e, lo, hi, inf in ch_checks]
@@ -701,9 +494,9 @@ class EnergyTest(Hook):
         self.stats["tests"] += 1
         n_pruned = int((~alive).sum()) + sum(int((~k).sum()) for k in tested_kept)
         self.stats["pruned_boxes"] += n_pruned + removed_back
-        n_s = self._n_s
-        hv = hull(sets.hull()[:, n_s], axis=0) if self._energy is not None else None
-        empty = Interval._from_bounds(np.zeros((0, self._n_x)), np.zeros((0, self._n_x)))
+        n_s = self._lifted.n_s
+        hv = hull(sets.hull()[:, n_s], axis=0) if self._lifted.energy is not None else None
+        empty = Interval._from_bounds(np.zeros((0, self._lifted.n_x)), np.zeros((0, self._lifted.n_x)))
         self.record.tests.append(TestRecord(
             t=t,
             candidates=concatenate(tested_hulls, axis=0) if tested_hulls else empty,
@@ -775,7 +568,7 @@ class EnergyTest(Hook):
         w0 = time.perf_counter()
         prev_sets, h_step, make_stepper = previous
         if self._backward is None:
-            self._backward = make_stepper(negated(self._graph))
+            self._backward = make_stepper(negated(self._lifted.graph))
         stepper = self._backward
         F = prev_sets.hull()  # (P, n)
         alive = np.zeros(parts.n_sets, dtype=bool)  # some piece not in case A
@@ -811,25 +604,6 @@ class EnergyTest(Hook):
         self.record.h_h_set = concatenate([h.reshape((1,)) for h in self._hh_set], axis=0) if self._hh_set else empty
         self.record.h_v_set = concatenate([h.reshape((1,)) for h in self._hv_set], axis=0) if self._hv_set else empty
         return self.record
-
-
-def _assign(sets: DoubletonSets, new: DoubletonSets) -> None:
-    """Make ``sets`` hold ``new`` (the same sets in the same order, contracted): in
-    place, so the solver still sees the step's own sets (adaptive splitting uses the
-    step's per-set widths, and a rollback to the step before stays possible); both
-    enclose the same true states set by set."""
-    sets.c, sets.C, sets.r0, sets.Q, sets.r = new.c, new.C, new.r0, new.Q, new.r
-
-
-def _row_times(row: Interval, M: np.ndarray) -> Interval:
-    """``row @ M`` per set: (B, n) interval times (B, n, k) floats -> (B, k)."""
-    nb, n = row.shape
-    return linalg.matmul(row.reshape((nb, 1, n)), M)[:, 0, :]
-
-
-def _dot(a: Interval, b: Interval) -> Interval:
-    """Per-set dot product of two (B, n) interval arrays -> (B,)."""
-    return (a * b).sum(axis=1)
 
 
 def _one_step(stepper, sets, h):
