@@ -29,6 +29,18 @@ and inequalities such as a kinetic-energy bound, see :class:`Constraint`.
 
 The backward test (sec. 4, cases A/B/C) integrates the parts that survive the energy
 test back over the last step and compares with the forward sets there.
+
+This module owns :class:`EnergyTest`, the solver hook that composes the pieces and
+decides when to test (``RA(t)``, ``t*``), and the records it returns. The pieces:
+
+- :mod:`verified.consistency_graphs`: the energy, its rate claim and the constraints
+  lifted onto the integrated states (:class:`Constraint`, :class:`EnergyClaimError`,
+  :func:`prove_energy_rate` live there and are re-exported here);
+- :mod:`verified.energy_state`: ``h(0)`` correlated with the initial states, and
+  restarting ``h``;
+- :mod:`verified.branch_prune`: the pruning test and the cutting at ``t*``;
+- :mod:`verified.backward_test`: the backward test;
+- :mod:`verified.energy_contraction`: contracting the sets with ``H(x) - h = 0``.
 """
 
 from __future__ import annotations
@@ -38,7 +50,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import linalg
+from .backward_test import backward_test
+from .branch_prune import STRATEGIES, branch_and_prune
 from .consistency_graphs import Constraint, EnergyClaimError, lift_graphs, prove_energy_rate, refute_claim
 from .energy_contraction import EnergyContraction
 from .energy_state import assign, initial_sets, reset_h
@@ -50,10 +63,6 @@ from .sets import DoubletonSets
 
 __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES", "EnergyClaimError",
            "prove_energy_rate"]
-
-
-#: ways to split a set at ``t*`` (compared in benchmarks/bench_consistency.py)
-STRATEGIES = ("gradient", "widest", "grid")
 
 
 @dataclass
@@ -325,40 +334,6 @@ class EnergyTest(Hook):
         return initial_sets(self._lifted, sets)
 
     # ------------------------------------------------------------------ evaluation
-    def _checks(self, sets, t: Interval):
-        """Per set, the enclosure of every checked quantity and its allowed range:
-        a list of ``(enclosure (B, m), lower (m,), upper (m,), gradient-in-directions
-        (B, m, 2n))``."""
-        nb = sets.n_sets
-        X = sets.hull()
-        cols = sets.direction_columns()  # (B, n, 2n)
-        params = concatenate([sets.r0, sets.r], axis=1)  # (B, 2n): the set's parameters
-        widths = params.width()
-        out = []
-        todo = []
-        if self._lifted.energy is not None:
-            todo.append((self._lifted.residual, None, np.zeros(1), np.zeros(1)))
-        for c, g in self._lifted.constraints:
-            todo.append((g, t if c.time_dependent else None, np.array(c.lower), np.array(c.upper)))
-        for g, tt, lo, hi in todo:
-            extra = None if tt is None else Interval._from_bounds(np.full((nb, 1), tt.lo), np.full((nb, 1), tt.hi))
-            naive = self._lifted.eval(g, X, extra)  # (B, m)
-            D = self._lifted.jac(g, X.hull(point(sets.c)), extra)[..., : self._lifted.n_aug]  # (B, m, n)
-            Dcols = linalg.matmul(D, cols)  # (B, m, 2n)
-            centre = self._lifted.eval(g, point(sets.c), extra)
-            mv = centre + linalg.matvec(Dcols, params)
-            enc = naive.intersect(mv)
-            influence = Dcols.mag() * widths[:, None, :]  # (B, m, 2n)
-            out.append((enc, lo, hi, influence))
-        return out
-
-    def _inconsistent(self, checks) -> np.ndarray:
-        bad = None
-        for enc, lo, hi, _ in checks:
-            b = (enc.is_empty() | (enc.hi < lo) | (enc.lo > hi)).any(axis=1)
-            bad = b if bad is None else bad | b
-        return bad
-
     # ------------------------------------------------------------------ RA(t)
     def observe(self, t: float, sets) -> str | None:
         """Record ``RA(t)`` (eq. (16)) for the sets after a step and say whether to test:
@@ -422,18 +397,6 @@ class EnergyTest(Hook):
                 lst.pop()
 
     # ------------------------------------------------------------------ branch and prune
-    def _pick(self, sets, checks, k=1) -> np.ndarray:
-        """Directions (B, k) to cut, best first, by the chosen strategy."""
-        if self.strategy == "widest" or not checks:
-            score = sets.direction_widths()
-        else:
-            score = 0
-            for enc, _, _, infl in checks:
-                w = enc.width()
-                w = np.where(np.isfinite(w) & (w > 0), w, 1.0)
-                score = score + (infl / w[:, :, None]).sum(axis=1)
-        return np.argsort(-score, axis=1, kind="stable")[:, :k]
-
     def apply(self, t: float, t_iv: Interval, sets, previous=None):
         """Branch and prune all sets at time ``t`` (enclosed by ``t_iv``); returns the
         surviving sets.
@@ -442,43 +405,17 @@ class EnergyTest(Hook):
         inconsistent with a constraint are discarded between rounds. What survives
         is returned as the largest consistent subtrees: a node none of whose
         descendants was pruned stays one set (``refine="pruned"``), so splitting
-        costs integration time only where something was cut away.
+        costs integration time only where something was cut away
+        (:func:`verified.branch_prune.branch_and_prune`).
 
         ``previous``: ``(sets, h_step, make_stepper)`` of the step before, for the
         backward test (or None)."""
         w0 = time.perf_counter()
         nb0 = sets.n_sets
-        checks = self._checks(sets, t_iv)
-        alive = ~self._inconsistent(checks)
-        tested_hulls, tested_kept = [], []
-        # levels[l] = (kept parts at depth l, fan-out to them, ok mask over all children made)
-        idx = np.flatnonzero(alive)
-        levels = [(sets.take(idx), 1, alive)]
-        cur_checks = [(e[alive], lo, hi, inf[alive]) for e, lo, hi, inf in checks]
-        if self.strategy == "grid":
-            k = max(2, int(round(np.sqrt(self.test_splits))))
-            plan = [k * k]
-        else:
-            plan = [2] * max(1, int(round(np.log2(self.test_splits))))
-        for fan in plan:
-            cur = levels[-1][0]
-            if cur.n_sets == 0:
-                break
-            if fan == 2:
-                children = cur.subdivide_along(self._pick(cur, cur_checks, 1)[:, 0], 2)
-            else:
-                k = int(round(np.sqrt(fan)))
-                d = self._pick(cur, cur_checks, 2)
-                children = cur.subdivide_along(d[:, 0], k).subdivide_along(np.repeat(d[:, 1], k), k)
-            ch_checks = self._checks(children, t_iv)
-            ok = ~self._inconsistent(ch_checks)
-            tested_hulls.append(children.hull()[:, : self._lifted.n_x])
-            tested_kept.append(ok)
-            levels.append((children.take(np.flatnonzero(ok)), fan, ok))
-            cur_checks = [(e[ok], lo, hi, inf[ok]) for e, lo, hi, inf in ch_checks]
-        parts, root = self._largest_consistent_subtrees(levels)
-        if self.refine == "pruned" and parts.n_sets:
-            parts, root = self._worth_refining(sets, parts, root)
+        res = branch_and_prune(self._lifted, sets, t_iv, strategy=self.strategy, test_splits=self.test_splits,
+                               refine=self.refine, min_gain=self.min_gain)
+        parts, root = res.parts, res.root
+        tested_hulls, tested_kept = res.tested_hulls, res.tested_kept
         self.stats["test_s"] += time.perf_counter() - w0
         # backward consistency test on the parts the energy test could not decide
         removed_back = 0
@@ -492,8 +429,7 @@ class EnergyTest(Hook):
             self.stats["refinements_skipped"] += 1
             out = sets.take(np.unique(root))
         self.stats["tests"] += 1
-        n_pruned = int((~alive).sum()) + sum(int((~k).sum()) for k in tested_kept)
-        self.stats["pruned_boxes"] += n_pruned + removed_back
+        self.stats["pruned_boxes"] += res.n_pruned + removed_back
         n_s = self._lifted.n_s
         hv = hull(sets.hull()[:, n_s], axis=0) if self._lifted.energy is not None else None
         empty = Interval._from_bounds(np.zeros((0, self._lifted.n_x)), np.zeros((0, self._lifted.n_x)))
@@ -507,92 +443,21 @@ class EnergyTest(Hook):
         self.stats["test_s"] += time.perf_counter() - w1
         return out
 
-    def _worth_refining(self, sets, parts, root):
-        """Keep the parts of a set only where they narrow its hull by ``min_gain``."""
-        nb0 = sets.n_sets
-        ph = parts.hull()
-        lo = np.full((nb0, ph.shape[1]), np.inf)
-        hi = np.full((nb0, ph.shape[1]), -np.inf)
-        np.minimum.at(lo, root, ph.lo)
-        np.maximum.at(hi, root, ph.hi)
-        own = sets.hull().width()
-        kept_w = hi - lo
-        has = np.bincount(root, minlength=nb0) > 0
-        gain = ((own - kept_w) > self.min_gain * own).any(axis=1) & has
-        whole = has & ~gain
-        use_parts = gain[root]
-        out = DoubletonSets.concatenate([sets.take(np.flatnonzero(whole)), parts.take(np.flatnonzero(use_parts))])
-        return out, np.concatenate([np.flatnonzero(whole), root[use_parts]])
-
-    def _largest_consistent_subtrees(self, levels):
-        """From the pruned tree, the maximal nodes with no pruned descendant (all
-        kept leaves with ``refine="always"``). Returns the nodes to keep and the
-        index of the set each came from."""
-        depth = len(levels) - 1
-        roots = [np.flatnonzero(levels[0][2])]
-        for l in range(1, depth + 1):
-            _, fan, ok = levels[l]
-            parent_root = np.repeat(roots[-1], fan)
-            roots.append(parent_root[ok])
-        if self.refine == "always" or depth == 0:
-            return levels[-1][0], roots[-1]
-        clean = [None] * (depth + 1)
-        clean[depth] = np.ones(levels[depth][0].n_sets, dtype=bool)
-        for l in range(depth - 1, -1, -1):
-            _, fan, ok = levels[l + 1]
-            filtered = np.cumsum(ok) - 1  # index among kept children of each child made
-            child_clean = np.zeros(ok.size, dtype=bool)
-            child_clean[ok] = clean[l + 1][filtered[ok]]
-            clean[l] = child_clean.reshape(-1, fan).all(axis=1)
-        pick_sets, pick_root = [], []
-        for l in range(depth + 1):
-            if l == 0:
-                take = clean[0]
-            else:
-                _, fan, ok = levels[l]
-                parent_of_made = np.repeat(np.arange(ok.size // fan), fan)
-                take = clean[l] & ~clean[l - 1][parent_of_made[ok]]
-            pick_sets.append(levels[l][0].take(np.flatnonzero(take)))
-            pick_root.append(roots[l][take])
-        return DoubletonSets.concatenate(pick_sets), np.concatenate(pick_root)
-
     # ------------------------------------------------------------------ backward (cases A, B, C)
     def _backward_test(self, parts, root, previous):
-        """Integrate each part back over the last step (``h``) and compare with the
-        forward sets there (sec. 4): a part whose backward image meets none of them
-        holds no true state (case A, deleted); one inside a forward set is consistent
-        (case B, kept); the rest (case C) is bisected and retested down to
-        ``backward_depth``. A part is kept whole unless every one of its pieces ends
-        in case A (keeping pieces would multiply the sets). Returns the kept parts,
-        their root set indices, and the root index of each deleted part."""
+        """The backward test (:func:`verified.backward_test.backward_test`) on the parts
+        the energy test kept, with the negated ODE's stepper made once per run; returns
+        the kept parts, their root set indices, and the root index of each deleted part."""
         w0 = time.perf_counter()
         prev_sets, h_step, make_stepper = previous
         if self._backward is None:
             self._backward = make_stepper(negated(self._lifted.graph))
-        stepper = self._backward
-        F = prev_sets.hull()  # (P, n)
-        alive = np.zeros(parts.n_sets, dtype=bool)  # some piece not in case A
-        cur, owner = parts, np.arange(parts.n_sets)
-        for depth in range(self.backward_depth + 1):
-            if cur.n_sets == 0:
-                break
-            self.stats["backward_runs"] += cur.n_sets
-            back = _one_step(stepper, cur, h_step)
-            if back is None:  # no validated backward step: undecided, keep
-                alive[owner] = True
-                break
-            meets = _meets_any(back, F)  # (K,)
-            undecided = meets & ~_inside_any(back, F)
-            alive[owner[meets & ~undecided]] = True  # case B
-            if depth == self.backward_depth:
-                alive[owner[undecided]] = True
-                break
-            und = cur.take(np.flatnonzero(undecided))
-            cur = und.subdivide_along(np.argmax(und.direction_widths(), axis=1), 2)
-            owner = np.repeat(owner[undecided], 2)
-        self.stats["backward_deleted"] += int((~alive).sum())
+        parts, root, gone, runs = backward_test(parts, root, prev_sets, h_step, self._backward,
+                                                self.backward_depth)
+        self.stats["backward_runs"] += runs
+        self.stats["backward_deleted"] += int(gone.size)
         self.stats["backward_s"] += time.perf_counter() - w0
-        return parts.take(np.flatnonzero(alive)), root[alive], root[~alive]
+        return parts, root, gone
 
     # ------------------------------------------------------------------ results
     def finish(self) -> ConsistencyRecord:
@@ -605,28 +470,3 @@ class EnergyTest(Hook):
         self.record.h_v_set = concatenate([h.reshape((1,)) for h in self._hv_set], axis=0) if self._hv_set else empty
         return self.record
 
-
-def _one_step(stepper, sets, h):
-    """One verified Lohner step of size ``h`` (float or Interval) for all ``sets``, or None."""
-    X = sets.hull()
-    cX = stepper.coefficients(X)
-    if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
-        return None
-    hh = float(h.hi) if isinstance(h, Interval) else float(h)
-    validated = stepper.apriori(X, cX, hh)
-    if validated is None:
-        return None
-    E, cE = validated
-    return stepper.step(sets, h, X, E, cE).sets.hull()
-
-
-def _meets_any(boxes: Interval, F: Interval) -> np.ndarray:
-    """(K,) whether each box meets at least one of the boxes F (P, n)."""
-    lo = np.maximum(boxes.lo[:, None, :], F.lo[None, :, :])
-    hi = np.minimum(boxes.hi[:, None, :], F.hi[None, :, :])
-    return (lo <= hi).all(axis=2).any(axis=1)
-
-
-def _inside_any(boxes: Interval, F: Interval) -> np.ndarray:
-    """(K,) whether each box lies inside one of the boxes F."""
-    return ((boxes.lo[:, None, :] >= F.lo[None, :, :]) & (boxes.hi[:, None, :] <= F.hi[None, :, :])).all(axis=2).any(axis=1)
