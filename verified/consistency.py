@@ -20,7 +20,7 @@ naively on the hull and in mean-value form over the set's parameters,
 proves the part empty of true states.
 
 When to test (``t*``): the reduction area ``RA(t) = diam H_H - diam(H_H ∩ H_V)``
-(eq. (16)) is tracked after every step (summed over the sets of a batch); the test
+(eq. (16)) is tracked after every step (per set; the record keeps the largest); the test
 runs at its first local maximum after the previous test, and at the latest
 ``test_interval`` seconds after it.
 
@@ -30,8 +30,8 @@ and inequalities such as a kinetic-energy bound, see :class:`Constraint`.
 The backward test (sec. 4, cases A/B/C) integrates the parts that survive the energy
 test back over the last step and compares with the forward sets there.
 
-This module owns :class:`EnergyTest`, the solver hook that composes the pieces and
-decides when to test (``RA(t)``, ``t*``), and the records it returns. The pieces:
+This module owns :class:`EnergyTest`, the solver hook that composes the pieces
+below, keeps the statistics and hands the record to the Solution. The pieces:
 
 - :mod:`verified.consistency_graphs`: the energy, its rate claim and the constraints
   lifted onto the integrated states (:class:`Constraint`, :class:`EnergyClaimError`,
@@ -40,13 +40,15 @@ decides when to test (``RA(t)``, ``t*``), and the records it returns. The pieces
   restarting ``h``;
 - :mod:`verified.branch_prune`: the pruning test and the cutting at ``t*``;
 - :mod:`verified.backward_test`: the backward test;
+- :mod:`verified.reduction_area`: ``RA(t)`` and when to test (``t*``), and the
+  records (:class:`ConsistencyRecord`, :class:`TestRecord`, re-exported here);
 - :mod:`verified.energy_contraction`: contracting the sets with ``H(x) - h = 0``.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -59,38 +61,11 @@ from .graph import Graph
 from .graph_ops import negated
 from .hooks import Hook
 from .interval import Interval, concatenate, hull, point
+from .reduction_area import ConsistencyRecord, ReductionArea, TestRecord
 from .sets import DoubletonSets
 
 __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES", "EnergyClaimError",
            "prove_energy_rate"]
-
-
-@dataclass
-class TestRecord:
-    """One consistency test at time ``t`` (the paper's ``t*``)."""
-
-    t: float
-    candidates: Interval  # (k, n): hulls of the parts tested (state components only)
-    kept: np.ndarray  # (k,) bool
-    h_v: Interval  # scalar: H_V at t (hull over the sets), or empty without energy
-    sets_before: int
-    sets_after: int
-    backward_deleted: int = 0
-    backward_runs: int = 0
-
-
-@dataclass
-class ConsistencyRecord:
-    """What the tests saw: ``RA(t)`` and the energy enclosures per step, and each test."""
-
-    ra_t: np.ndarray
-    ra: np.ndarray
-    h_h: Interval
-    h_v: Interval
-    tests: list = field(default_factory=list)
-    #: ``H_H`` and ``H_V`` of the set with the largest ``RA`` at each step (``ra`` is its RA)
-    h_h_set: Interval | None = None
-    h_v_set: Interval | None = None
 
 
 def _renamed(value, old_value, name: str, old_name: str, default):
@@ -247,7 +222,7 @@ class EnergyTest(Hook):
         decision = self.observe(step.t, sets)
         only = None
         if decision == "previous":
-            only = self.peaked  # the sets whose RA peaked (same order before and after the step)
+            only = self._tracker.peaked  # the sets whose RA peaked (same order before and after the step)
             back = run.rollback() if not changed else None
             if back is not None:
                 # RA(t) peaked at the previous step: t* is there, roll back to it
@@ -257,7 +232,7 @@ class EnergyTest(Hook):
             decision = "now"
         if decision != "now" or not (self.prune or self.contract == "test"):
             if decision == "now":
-                self._last_test_t = step.t
+                self._tracker.tested(step.t)
             return sets if changed else None
         if self.contract == "test" and self._contraction is not None:
             sets, _ = self._contract(sets)
@@ -270,7 +245,7 @@ class EnergyTest(Hook):
             else:
                 sets = self.apply(step.t, step.t_enclosure, sets, prev)
         else:
-            self._last_test_t = step.t
+            self._tracker.tested(step.t)
         if sets.n_sets == 0:
             run.stop("the consistency test removed every set (inconsistent model or constraints?)", "breakdown")
         return sets
@@ -318,11 +293,8 @@ class EnergyTest(Hook):
         if lifted.energy is not None and self.contract != "off":
             self._contraction = EnergyContraction(lifted.residual)
         self._backward = None
-        self.record = ConsistencyRecord(np.zeros(0), np.zeros(0), Interval(np.zeros(0)), Interval(np.zeros(0)))
-        self._ra_t, self._ra, self._hh, self._hv = [], [], [], []
-        self._hh_set, self._hv_set, self._ra_sets, self._ra_sets_t = [], [], [], []
-        self.peaked = None
-        self._last_test_t = float(t0)  # the interval to the first test starts at t0
+        self._tracker = ReductionArea(lifted, self.test_interval, t0)
+        self.record = self._tracker.record
         self.stats = dict(tests=0, pruned_boxes=0, test_s=0.0, backward_s=0.0, backward_runs=0,
                           backward_deleted=0, refinements_skipped=0, contractions=0, contracted_empty=0,
                           contraction_s=0.0, contraction_ratio_min=1.0, h_resets=0)
@@ -333,68 +305,20 @@ class EnergyTest(Hook):
         (:func:`verified.energy_state.initial_sets`)."""
         return initial_sets(self._lifted, sets)
 
-    # ------------------------------------------------------------------ evaluation
     # ------------------------------------------------------------------ RA(t)
     def observe(self, t: float, sets) -> str | None:
-        """Record ``RA(t)`` (eq. (16)) for the sets after a step and say whether to test:
-        "previous" (some set's ``RA`` had its first local maximum at the previous step),
-        "now" (the longest interval has passed), or None.
-
-        ``RA`` is evaluated per set, ``diam H_H(S) - diam(H_H(S) ∩ H_V(S))`` with both
-        enclosures of the same set ``S`` (eq. (16) for that set; a sum over sets would
-        compare the energy spread *between* sets, which is no overestimation). The
-        record (Fig. 2) keeps the largest per-set value, ``H_H`` and ``H_V`` of that
-        set, and the hulls over all sets. ``t*`` is the first local maximum of that
-        record; the sets with ``RA > 0`` there are the ones tested (:attr:`peaked`)."""
-        self.peaked = None
-        if self._lifted.energy is not None:
-            X = sets.hull()
-            hh = self._lifted.eval(self._lifted.energy, X[:, : self._lifted.n_s])[:, 0]
-            hv = X[:, self._lifted.n_s]
-            inter = hh.intersect(hv)
-            wi = np.where(inter.is_empty(), 0.0, inter.width())
-            ra_b = np.nan_to_num(hh.width() - wi, nan=0.0, posinf=np.finfo(float).max)
-            k = int(np.argmax(ra_b)) if ra_b.size else 0
-            ra = float(ra_b[k]) if ra_b.size else 0.0
-            self._hh.append(hull(hh, axis=0))
-            self._hv.append(hull(hv, axis=0))
-            self._hh_set.append(hh[k] if ra_b.size else Interval(np.nan))
-            self._hv_set.append(hv[k] if ra_b.size else Interval(np.nan))
-        else:
-            ra_b = np.zeros(sets.n_sets)
-            ra = 0.0
-        self._ra_t.append(t)
-        self._ra.append(ra)
-        since = t - self._last_test_t
-        hist = self._ra_sets
-        if hist and hist[-1].shape != ra_b.shape:
-            hist.clear()  # the batch changed (pruned, split): start the per-set history again
-        hist.append(ra_b)
-        del hist[:-3]
-        self._ra_sets_t.append(t)
-        del self._ra_sets_t[:-3]
-        # t*: the first local maximum of the recorded RA (the largest per-set value)
-        # after the previous test; RA(t0) = 0 (H_V(0) is H_H(0)), so the first step can
-        # be one too. Tested then: the sets with overestimation (per-set RA > 0) at t*.
-        # (Testing every set at its own maximum tested at almost every step with 256
-        # sets: mode ii of the demo 3x slower, no narrower.)
-        ra_hist, t_hist = self._ra, self._ra_t
-        if len(ra_hist) >= 2 and t_hist[-2] > self._last_test_t:
-            before = ra_hist[-3] if len(ra_hist) >= 3 and t_hist[-3] > self._last_test_t else 0.0
-            if ra_hist[-2] > ra_hist[-1] and ra_hist[-2] >= before and ra_hist[-2] > 0:
-                if len(hist) >= 2:
-                    self.peaked = hist[-2] > 0
-                return "previous"
-        if since >= self.test_interval * (1 - 1e-12):
-            return "now"
-        return None
+        """Record ``RA(t)`` and say whether to test
+        (:meth:`verified.reduction_area.ReductionArea.observe`)."""
+        return self._tracker.observe(t, sets)
 
     def forget_last(self):
         """The solver rolled the last step back (the test runs at the step before)."""
-        for lst in (self._ra_t, self._ra, self._hh, self._hv, self._hh_set, self._hv_set, self._ra_sets,
-                    self._ra_sets_t):
-            if lst:
-                lst.pop()
+        self._tracker.forget_last()
+
+    @property
+    def peaked(self):
+        """The sets whose ``RA`` peaked at ``t*`` (:class:`verified.reduction_area.ReductionArea`)."""
+        return self._tracker.peaked
 
     # ------------------------------------------------------------------ branch and prune
     def apply(self, t: float, t_iv: Interval, sets, previous=None):
@@ -433,13 +357,12 @@ class EnergyTest(Hook):
         n_s = self._lifted.n_s
         hv = hull(sets.hull()[:, n_s], axis=0) if self._lifted.energy is not None else None
         empty = Interval._from_bounds(np.zeros((0, self._lifted.n_x)), np.zeros((0, self._lifted.n_x)))
-        self.record.tests.append(TestRecord(
+        self._tracker.tested(t, TestRecord(
             t=t,
             candidates=concatenate(tested_hulls, axis=0) if tested_hulls else empty,
             kept=np.concatenate(tested_kept) if tested_kept else np.zeros(0, bool),
             h_v=hv, sets_before=nb0, sets_after=out.n_sets,
             backward_deleted=removed_back))
-        self._last_test_t = t
         self.stats["test_s"] += time.perf_counter() - w1
         return out
 
@@ -461,12 +384,5 @@ class EnergyTest(Hook):
 
     # ------------------------------------------------------------------ results
     def finish(self) -> ConsistencyRecord:
-        self.record.ra_t = np.array(self._ra_t)
-        self.record.ra = np.array(self._ra)
-        empty = Interval._from_bounds(np.zeros(0), np.zeros(0))
-        self.record.h_h = concatenate([h.reshape((1,)) for h in self._hh], axis=0) if self._hh else empty
-        self.record.h_v = concatenate([h.reshape((1,)) for h in self._hv], axis=0) if self._hv else empty
-        self.record.h_h_set = concatenate([h.reshape((1,)) for h in self._hh_set], axis=0) if self._hh_set else empty
-        self.record.h_v_set = concatenate([h.reshape((1,)) for h in self._hv_set], axis=0) if self._hv_set else empty
-        return self.record
-
+        """The run's :class:`ConsistencyRecord` (:meth:`verified.reduction_area.ReductionArea.finish`)."""
+        return self._tracker.finish()
