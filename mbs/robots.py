@@ -93,7 +93,8 @@ def system_entry(name):
     """The registry's System factory for a model name (``models.registry.SYSTEMS``: the
     paper's models, :class:`models.paper.PaperModel`), or None: a name of a chain
     model, or not a name at all. The factory has ``chain(params=None)``,
-    ``system(mode, energy_rate, cparams=None)`` (None: integrate the chain) and
+    ``system(mode, energy_rate, cparams=None)`` (None: integrate the chain;
+    ``energy_rate`` one of :data:`verified.energy_rate.MODEL_RATES`) and
     ``param_names``."""
     if not isinstance(name, str):
         return None

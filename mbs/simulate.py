@@ -7,7 +7,8 @@
   differentiation of ``H`` along the ODE (the paper used FADBAD++);
 - mode ``"iii"``: the symbolic model (sympy) with symbolic constraints, ``dH/dt``
   left unsimplified as in the paper (``energy_rate="unsimplified"``) or simplified
-  (``"simplified"``: ``qd^T tau``, identically 0 for a conservative system).
+  (``"simplified"``: ``qd^T tau``, identically 0 for a conservative system). The
+  values of ``energy_rate`` in every layer: :mod:`verified.energy_rate`.
 
 Example::
 
@@ -30,6 +31,7 @@ import numpy as np
 
 from verified.affine_taylor import affine_range
 from verified.consistency import STRATEGIES, EnergyTest
+from verified.energy_rate import MODEL_RATES, check_energy_rate
 from verified.interval import Interval, _as_interval
 from verified.solver import Solution, solve
 
@@ -58,14 +60,14 @@ def _chain_system(chain, mode: Mode, energy_rate: str, name: str | None = None, 
         if not mode.energy_test:
             return System(name=name, rhs=rhs, params=cparams.as_dict(),
                           description="numeric model (crba/rnea) with parameters, no test")
-        return System(name=name, rhs=rhs, energy=cparams.energy_graph(), energy_rate=None, params=cparams.as_dict(),
+        return System(name=name, rhs=rhs, energy=cparams.energy_graph(), energy_rate="derive", params=cparams.as_dict(),
                       description="numeric model with parameters; dH/dt by forward-mode AD of H along the ODE")
     if not mode.symbolic:
         num = chain.numeric()
         rhs = num.rhs_graph()
         if not mode.energy_test:
             return System(name=name, rhs=rhs, description="numeric model (crba/rnea), no test")
-        return System(name=name, rhs=rhs, energy=num.energy_graph(), energy_rate=None,
+        return System(name=name, rhs=rhs, energy=num.energy_graph(), energy_rate="derive",
                       description="numeric model; dH/dt by forward-mode AD of H along the ODE")
     sym = chain.symbolic()
     rhs = sym.rhs_graph()
@@ -151,8 +153,7 @@ def _system_and_chain(model, mode: str | Mode, energy_rate: str, params=None):
     """(System, _MassMatrix of the chain behind it or None) -- the chain for the
     mass-matrix checks."""
     mode = get_mode(mode)
-    if energy_rate not in ("unsimplified", "simplified"):
-        raise ValueError(f"energy_rate must be 'unsimplified' or 'simplified', got {energy_rate!r}")
+    check_energy_rate(energy_rate, MODEL_RATES, "simulate")
     if isinstance(model, System):
         if not mode.energy_test:
             model = System(name=model.name, rhs=model.rhs, params=model.params, description=model.description)
@@ -283,7 +284,9 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         carries those with width as constant states. With parameters, ``simulate``
         uses ``error_basis="auto"`` unless told otherwise. ``sol.params`` lists them.
     order, tol, subdivision : solver settings (see :func:`verified.solver.solve`)
-    energy_rate : "unsimplified" or "simplified" (mode iii)
+    energy_rate : "unsimplified" or "simplified"
+        Which of the symbolic model's ``dH/dt`` mode iii integrates (modes i and ii
+        derive it; :mod:`verified.energy_rate`)
     test_interval, test_splits : longest time between energy tests (s) and parts per
         set at a test; defaults per mode in :data:`TEST_DEFAULTS` (the paper's)
     split_strategy : "gradient", "widest" or "grid" (see :class:`verified.consistency.EnergyTest`)
@@ -374,8 +377,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     mode = get_mode(mode)  # validated above (_system_and_chain, _controlled_system)
     test = None
     if mode.energy_test:
-        rate = "zero" if system.conservative else ("derive" if system.energy_rate is None else system.energy_rate)
-        test = EnergyTest(system.energy, rate, constraints,
+        test = EnergyTest(system.energy, system.energy_rate, constraints,
                           test_interval=mode.test_interval if test_interval is None else test_interval,
                           test_splits=mode.test_splits if test_splits is None else test_splits,
                           strategy=split_strategy, refine=refine, min_gain=min_gain, backward_depth=backward_depth,

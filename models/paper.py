@@ -60,7 +60,8 @@ class PaperModel:
     def system(self, mode, energy_rate: str, cparams=None) -> System | None:
         """The hand-written System of mode iii (``mode.symbolic``), else ``None``: modes
         i and ii integrate :meth:`chain` through the numeric model. ``energy_rate``:
-        "unsimplified" or "simplified"; ``cparams``: the
+        "unsimplified" or "simplified" (:mod:`verified.energy_rate`; "simplified" is
+        proved 0 here, so the System declares "zero"); ``cparams``: the
         :class:`mbs.uncertain.ChainParameters` of uncertain parameters, or None."""
         if not mode.symbolic:
             return None
@@ -75,7 +76,7 @@ class PaperModel:
         rate_expr = sum(sympy.diff(H, x) * fx for x, fx in zip(xs, f))  # eq. (7), not simplified
         if energy_rate == "simplified":
             self._prove_conservative(len(xs))
-            return System(name=name, rhs=rhs, energy=energy, conservative=True,
+            return System(name=name, rhs=rhs, energy=energy, energy_rate="zero",
                           description="paper's symbolic model, dH/dt simplified to 0")
         return System(name=name, rhs=rhs, energy=energy,
                       energy_rate=from_sympy([rate_expr], xs, output_names=["dHdt"]),
@@ -101,7 +102,7 @@ class PaperModel:
                        input_names=names, param_names=pnames, output_names=["H"])
         if energy_rate == "simplified":
             self._prove_conservative(n)
-            return System(name=name, rhs=rhs, energy=energy, conservative=True, params=cparams.as_dict(),
+            return System(name=name, rhs=rhs, energy=energy, energy_rate="zero", params=cparams.as_dict(),
                           description="paper's symbolic model with parameters, dH/dt simplified to 0")
         syms = [sympy.Symbol(k, positive=True) for k in pnames]
         kw = dict(zip(pnames, syms))

@@ -56,6 +56,7 @@ from .backward_test import backward_test
 from .branch_prune import STRATEGIES, branch_and_prune
 from .consistency_graphs import Constraint, EnergyClaimError, lift_graphs, prove_energy_rate, refute_claim
 from .energy_contraction import EnergyContraction
+from .energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
 from .energy_state import assign, initial_sets, reset_h
 from .graph import Graph
 from .graph_ops import negated
@@ -91,10 +92,12 @@ class EnergyTest(Hook):
     energy : Graph or None
         ``H(x, p)`` (1 output, J) over the ODE's states and parameters; ``None`` for
         constraints only.
-    energy_rate : Graph, "derive" or "zero"
-        ``dH/dt(x, p)`` integrated into ``H_V`` (eq. (12)); "derive" forms
-        ``grad H . f`` by forward-mode differentiation (mode (ii)); "zero" declares
-        the system conservative (``H_V = H(0)``; only sound if it is!).
+    energy_rate : "derive", "zero" or Graph
+        How ``dH/dt(x, p)``, integrated into ``H_V`` (eq. (12)), is obtained (the
+        vocabulary: :mod:`verified.energy_rate`): "derive" forms ``grad H . f`` by
+        forward-mode differentiation (mode (ii)); "zero" declares the system
+        conservative (``H_V = H(0)``; only sound if it is, so it is checked); a Graph
+        is the rate itself (checked too). ``None`` (deprecated) means "zero".
     constraints : sequence of Constraint
     test_interval : float
         Longest time (s) between two tests (the paper: 0.1 s in mode (ii), 0.01 s in (iii));
@@ -140,8 +143,11 @@ class EnergyTest(Hook):
             raise ValueError("EnergyTest needs an energy graph or at least one constraint")
         if energy is not None and (not isinstance(energy, Graph) or energy.n_outputs != 1):
             raise ValueError("energy must be a Graph with one output (H)")
-        if isinstance(energy_rate, str) and energy_rate not in ("derive", "zero"):
-            raise ValueError(f"energy_rate must be a Graph, 'derive' or 'zero', got {energy_rate!r}")
+        if energy_rate is None:
+            # None always reached lift_graphs as "no rate graph", i.e. a declared 0
+            deprecated("EnergyTest(energy, None)")
+            energy_rate = "zero"
+        check_energy_rate(energy_rate, SYSTEM_RATES, "EnergyTest", graph=True)
         if strategy not in STRATEGIES:
             raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
         if contract not in ("step", "test", "off"):

@@ -30,8 +30,8 @@ __all__ = ["Constraint", "EnergyClaimError", "LiftedGraphs", "lift_graphs", "pro
 
 
 class EnergyClaimError(ValueError):
-    """A declared energy rate (``conservative=True``, ``energy_rate="zero"`` or an
-    ``energy_rate`` graph) is refuted: ``grad H . f - rate`` excludes 0 somewhere.
+    """A declared energy rate (``energy_rate="zero"`` or an ``energy_rate`` graph;
+    :mod:`verified.energy_rate`) is refuted: ``grad H . f - rate`` excludes 0 somewhere.
     Pruning or contracting with it would remove true states."""
 
 
@@ -140,8 +140,8 @@ def lift_graphs(rhs: Graph, integrated: Graph, n_x: int, params: Interval | None
                 energy_rate, constraints, *, check_claim: bool = True) -> LiftedGraphs:
     """Bind the declared energy and constraints to one solve: ``rhs`` is the user's ODE
     over ``(x, p)``; ``integrated`` the graph the solver runs (its parameters possibly
-    turned into states after ``x``). ``energy_rate`` is a Graph, "derive" or "zero"
-    (see :class:`verified.consistency.EnergyTest`)."""
+    turned into states after ``x``). ``energy_rate`` is "derive", "zero" or a Graph
+    (:mod:`verified.energy_rate`)."""
     p_as_states = integrated.n_inputs > n_x
     n_s = integrated.n_inputs
 
@@ -208,7 +208,7 @@ def refute_claim(lifted: LiftedGraphs, boxes: Interval, points: np.ndarray, t: f
         bad = (d.lo > 0) | (d.hi < 0)
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
-            decl = "conservative=True (dH/dt = 0)" if energy_rate == "zero" else "the energy_rate graph"
+            decl = "energy_rate='zero' (dH/dt = 0)" if isinstance(energy_rate, str) and energy_rate == "zero" else "the energy_rate graph"
             names = lifted.graph.input_names[:lifted.n_x]
             where = ", ".join(f"{nm}={v}" for nm, v in zip(names, (X[k].mid() if what == "over the box" else X[k].lo)))
             raise EnergyClaimError(

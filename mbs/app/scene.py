@@ -79,7 +79,7 @@
     test_splits = 10
     split_strategy = "gradient"
     backward_depth = 0
-    energy_rate = "unsimplified"  # mode iii: "unsimplified" | "simplified"
+    energy_rate = "unsimplified"  # mode iii: "unsimplified" | "simplified" (verified.energy_rate)
 
 Numbers are enclosed rigorously, never rounded inward:
 
@@ -111,6 +111,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 import numpy as np
 
+from verified.energy_rate import MODEL_RATES
 from verified.exact import enclose_fraction, enclose_pi_multiple
 
 from ..errors import ModelError
@@ -133,7 +134,7 @@ _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_m
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str, "contract": str, "prune": bool}
 _CONTRACTS = ("step", "test", "off")
-_ENERGY_RATES = ("unsimplified", "simplified")
+_ENERGY_RATES = MODEL_RATES  # the scene's energy_rate: what simulate() takes (verified.energy_rate)
 
 
 class SceneError(ValueError):

@@ -1,0 +1,80 @@
+"""The one vocabulary for the energy rate ``dH/dt`` (``H_V' = dH/dt``, paper eqs. (7)/(12)).
+
+This module owns the names, and only the names: how ``dH/dt``, integrated into the
+energy state ``h`` (``H_V``), is obtained. Every layer calls the knob
+``energy_rate`` and takes its values from :data:`ENERGY_RATES`:
+
+============== ===========================================================================
+value          ``dH/dt`` is ...
+============== ===========================================================================
+"derive"       formed by the library: ``grad H . f`` by forward-mode differentiation of
+               the energy graph along the ODE (mode ii; the paper's FADBAD++)
+"unsimplified" the symbolic model's expression as the chain rule gives it, integrated as
+               a graph (mode iii, as in the paper)
+"simplified"   the symbolic model's expression simplified to ``qd^T tau``; identically
+               0 for the paper's conservative models, which then declare "zero"
+"zero"         declared 0 (a conservative system): ``H_V`` stays ``H(0)``, nothing is
+               integrated. Only sound if true, so the claim is checked
+               (:mod:`verified.consistency_graphs`)
+a ``Graph``    given by the caller (``x, p -> [dH/dt]``, W); checked like "zero"
+============== ===========================================================================
+
+Which layer takes which (a one-line ``ValueError`` names the allowed ones otherwise):
+
+- :data:`MODEL_RATES` ("unsimplified", "simplified"): a request to the model, in
+  :func:`mbs.simulate.simulate`, :func:`mbs.simulate.system_for`, the registry's
+  System factories and scene files (``[consistency] energy_rate``). It chooses
+  which symbolic expression mode iii integrates; modes i and ii always derive.
+- :data:`SYSTEM_RATES` ("derive", "zero") or a graph: what a model hands over, in
+  :class:`mbs.system.System` and :class:`verified.consistency.EnergyTest`.
+
+Old spellings (:data:`DEPRECATED`) still work and raise a ``DeprecationWarning``
+that names the new one.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+from .graph import Graph
+
+__all__ = ["DEPRECATED", "ENERGY_RATES", "MODEL_RATES", "SYSTEM_RATES", "check_energy_rate", "deprecated"]
+
+#: every value of the ``energy_rate`` knob (besides a graph), with what it means
+ENERGY_RATES = {
+    "derive": "grad H . f, derived by forward-mode differentiation of the energy graph along the ODE",
+    "unsimplified": "the symbolic model's dH/dt as the chain rule gives it, integrated",
+    "simplified": "the symbolic model's dH/dt simplified (qd^T tau; 'zero' for a conservative model)",
+    "zero": "declared 0 (conservative): H_V = H(0); checked",
+}
+
+#: what a model is asked for (simulate, system_for, registry factories, scenes)
+MODEL_RATES = ("unsimplified", "simplified")
+
+#: what a System and EnergyTest take besides a graph
+SYSTEM_RATES = ("derive", "zero")
+
+#: old spelling -> new spelling (each still works, with a DeprecationWarning)
+DEPRECATED = {
+    "System(conservative=True)": 'System(energy_rate="zero")',
+    "System(conservative=False)": 'System(energy_rate="derive") (the default) or a graph',
+    "System(energy_rate=None)": 'System(energy_rate="derive")',
+    "System.conservative": 'System.energy_rate == "zero"',
+    "EnergyTest(energy, None)": 'EnergyTest(energy, "zero")',
+}
+
+
+def deprecated(old: str, stacklevel: int = 3):
+    """Warn that ``old`` (a key of :data:`DEPRECATED`) is spelt differently now."""
+    warnings.warn(f"{old} is deprecated; use {DEPRECATED[old]}", DeprecationWarning, stacklevel=stacklevel)
+
+
+def check_energy_rate(value, allowed: tuple, where: str, graph: bool = False):
+    """``value`` if it is one of ``allowed`` (or a graph, when ``graph``); else a
+    one-line ``ValueError`` that names the allowed values."""
+    if graph and isinstance(value, Graph):
+        return value
+    if isinstance(value, str) and value in allowed:
+        return value
+    names = ", ".join(repr(a) for a in allowed) + (" or a Graph" if graph else "")
+    raise ValueError(f"{where}: energy_rate must be {names}, got {value!r}")
