@@ -307,11 +307,19 @@ def _unary_into(Z, x, m, kind, known_lo=-INF):
 # centre, 1..m the symbol coefficients, m + 1 the error radius. The solver runs the
 # batched interpreter below (_affine_kernel), which computes the same numbers faster;
 # this one is the plain statement of the rules that tests/verified/test_affine_taylor.py checks
-# it against, bit for bit. A change to a rule goes into both.
+# it against, bit for bit. A change to a rule goes into both. (Fresh symbols for
+# chosen slots, ``sel``, exist only here: AffineTaylorODE(fresh_slots=) runs this
+# kernel for them.)
 # --------------------------------------------------------------------------
 @njit(cache=True)
-def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh):
+def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh,
+                             sel=_NO_SLOTS, sel_base=0):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
+
+    ``sel`` (empty, or one entry per tape slot): where ``sel[s] >= 0`` the error radius
+    of slot ``s``'s order-0 form becomes the coefficient of symbol ``sel_base + sel[s]``
+    (a fresh symbol: ``[-e, e] = e * eps`` with ``eps`` used nowhere else, so sound),
+    and later operations carry it with its signs (see ``AffineTaylorODE(fresh_slots=)``).
 
     Returns the forms of the coefficients, (n, order + 1, B, m + 2), and those of every
     tape slot, (slots, order + 1, B, m + 2) (for diagnosis).
@@ -454,6 +462,10 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
                         _sqrconv(V, F, u, k, 0, b, m)
                         # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
                         _quotient_step(Z, F, s, u, vs, k, b, m, REC[s, b], T, S)
+                if k == 0 and sel.size > 0 and sel[s] >= 0:
+                    # this slot's error becomes a symbol of its own (fresh_slots)
+                    F[s, 0, b, sel_base + sel[s]] = F[s, 0, b, m + 1]
+                    F[s, 0, b, m + 1] = 0.0
         # x_[k+1] = f_[k] / (k + 1)
         for i in range(n):
             o = outputs[i]
@@ -465,6 +477,81 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
                     out[i, k + 1, b, 1 + m0 + k * n_fresh + i] = out[i, k + 1, b, m + 1]
                     out[i, k + 1, b, m + 1] = 0.0
     return out, F
+
+
+@njit(cache=True)
+def _created_errors(op, a0, a1, F, b, m):
+    """Per tape slot, the error its own rule added at order 0 for box ``b``: its error
+    radius minus what its operands' radii propagate to it (taken at the centres).
+    ``F`` (slots, K, B, m + 2) from :func:`_affine_kernel_reference`. Returns (slots,)."""
+    nslots = op.size
+    created = np.zeros(nslots)
+    for s in range(nslots):
+        o = op[s]
+        u = a0[s]
+        v = a1[s]
+        e = F[s, 0, b, m + 1]
+        c = 0.0
+        if o == T_MUL:
+            c = e - (abs(F[u, 0, b, 0]) * F[v, 0, b, m + 1] + abs(F[v, 0, b, 0]) * F[u, 0, b, m + 1])
+        elif o == T_DIV:
+            cv = F[v, 0, b, 0]
+            if cv != 0.0:
+                c = e - (F[u, 0, b, m + 1] / abs(cv) + abs(F[u, 0, b, 0]) * F[v, 0, b, m + 1] / (cv * cv))
+        elif o == T_SQR or o == T_SQRT or o == T_EXP or o == T_LOG or o == T_SIN or o == T_COS \
+                or o == T_TAN or o == T_ATAN:
+            c = e - F[u, 0, b, m + 1]
+        created[s] = c if c > 0.0 else 0.0
+    return created
+
+
+@njit(cache=True)
+def _weighted_attribution(op, a0, a1, F, m, outputs):
+    """How much of the outputs' error radii each tape slot creates (order 0), summed over
+    the boxes: :func:`_created_errors` times the sum over paths to the ``outputs`` of
+    ``|d output / d slot|`` at the centres (one reverse sweep: error radii propagate with
+    these absolute factors and never cancel). A heuristic that ranks slots for
+    ``AffineTaylorODE(fresh_slots=)``; it bounds nothing. Returns (slots,)."""
+    nslots = op.size
+    nb = F.shape[2]
+    total = np.zeros(nslots)
+    w = np.zeros(nslots)
+    for b in range(nb):
+        created = _created_errors(op, a0, a1, F, b, m)
+        w[:] = 0.0
+        for i in range(outputs.size):
+            w[outputs[i]] += 1.0
+        for s in range(nslots - 1, -1, -1):
+            ws = w[s]
+            if ws == 0.0:
+                continue
+            o = op[s]
+            u = a0[s]
+            v = a1[s]
+            if o == T_ADD or o == T_SUB:
+                w[u] += ws
+                w[v] += ws
+            elif o == T_NEG:
+                w[u] += ws
+            elif o == T_MUL:
+                w[u] += ws * abs(F[v, 0, b, 0])
+                w[v] += ws * abs(F[u, 0, b, 0])
+            elif o == T_DIV:
+                cv = F[v, 0, b, 0]
+                if cv != 0.0:
+                    w[u] += ws / abs(cv)
+                    w[v] += ws * abs(F[u, 0, b, 0]) / (cv * cv)
+            elif o == T_SQR:
+                w[u] += ws * 2.0 * abs(F[u, 0, b, 0])
+            elif o == T_SIN:
+                w[u] += ws * abs(math.cos(F[u, 0, b, 0]))
+            elif o == T_COS:
+                w[u] += ws * abs(math.sin(F[u, 0, b, 0]))
+            elif o == T_SQRT or o == T_EXP or o == T_LOG or o == T_TAN or o == T_ATAN:
+                w[u] += ws  # (a rough factor: this only ranks slots)
+        for s in range(nslots):
+            total[s] += created[s] * w[s]
+    return total
 
 
 @njit(cache=True)
@@ -1210,9 +1297,20 @@ class AffineTaylorODE:
 
     Same call and result shapes as ``TaylorODE.coefficients``; tighter over boxes of
     deep graphs, about ``m + 1`` times the work per operation for ``m`` symbols.
+
+    ``fresh_slots`` (for :meth:`series` over one set, default 0): at every call, the
+    order-0 errors of the ``fresh_slots`` tape slots that create the most error in the outputs
+    (:func:`_weighted_attribution`, from a first pass over the same forms) become symbols
+    of their own. A lumped error radius propagates through every later operation by
+    absolute values; as a symbol it propagates with its signs, and the paths that carry
+    it to an output cancel as the true derivatives do. Why: over a set of the UR5 PD
+    payload scene the Jacobian of a step came out 10x its sampled spread, and half of
+    that was the small error of ``sin(q3)``, carried to the output along hundreds of
+    paths; with fresh symbols for 16 / 24 / 32 slots 4.5x / 4.1x / 3.6x at ~1.2-1.4x
+    the cost (degree-2 Taylor models: 2.4x at 2.2x; ``benchmarks/bench_jacobian_spread.py``).
     """
 
-    def __init__(self, graph, fresh_symbols=None):
+    def __init__(self, graph, fresh_symbols=None, fresh_slots: int = 0):
         if graph.n_outputs != graph.n_inputs:
             raise ValueError(
                 f"an ODE right-hand side needs as many outputs as inputs, got {graph.n_inputs} "
@@ -1226,6 +1324,10 @@ class AffineTaylorODE:
         if not 0 <= n_fresh <= self.n:
             raise ValueError(f"fresh_symbols must be in [0, {self.n}], got {fresh_symbols!r}")
         self.n_fresh = n_fresh
+        if isinstance(fresh_slots, bool) or not isinstance(fresh_slots, (int, np.integer)) or fresh_slots < 0:
+            raise ValueError(f"fresh_slots must be an integer >= 0, got {fresh_slots!r}")
+        self.fresh_slots = int(fresh_slots)
+        self.last_fresh_slots = _NO_SLOTS  # the slots chosen at the last series() call
 
     def forms(self, x, order, params=None):
         """Affine forms of ``x_[0..order]``: array (B, order + 1, n, m + 2) and ``m``."""
@@ -1244,7 +1346,10 @@ class AffineTaylorODE:
         n, nb, m2 = X.shape
         m0 = m2 - 2
         order = int(order)
-        m = m0 + self.n_fresh * order
+        # (one set only: the batched kernel has no fresh slots, and the reference kernel
+        # over a batch cost 2.5x per step on the UR5 PD scene's 4 payload pieces)
+        k_sel = min(self.fresh_slots, self._tape.op.size) if nb == 1 else 0
+        m = m0 + self.n_fresh * order + k_sel
         Xf = np.zeros((n, nb, m + 2))
         Xf[..., : m0 + 1] = X[..., : m0 + 1]
         Xf[..., m + 1] = X[..., m0 + 1]
@@ -1253,8 +1358,30 @@ class AffineTaylorODE:
             P = box_forms(p.lo, p.hi, np.full(self.n_params, -1), m)
         else:
             P = np.zeros((0, nb, m + 2))
-        lo, hi = forms_to_interval(self._run(Xf, P, order, m0))
+        if k_sel and nb == 1:
+            F = self._run_fresh_slots(Xf, P, order, m0, k_sel)
+        else:
+            F = self._run(Xf, P, order, m0)
+        lo, hi = forms_to_interval(F)
         return Interval._from_bounds(lo, hi)
+
+    def _run_fresh_slots(self, X, P, order, m0, k_sel):
+        """:meth:`_run` with the ``k_sel`` slots of most attributed error on fresh symbols
+        (the last ``k_sel`` columns of the forms). One order-1 pass of the reference
+        kernel over the same forms ranks the slots; the reference kernel (batched over
+        the boxes inside numba) then runs with them."""
+        t = self._tape
+        m = X.shape[2] - 2
+        args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P)
+        _, F1 = _affine_kernel_reference(*args, 1, m0, self.n_fresh)
+        score = _weighted_attribution(t.op, t.a0, t.a1, F1, m, t.outputs)
+        top = np.argsort(-score, kind="stable")[:k_sel]
+        top = np.sort(top[score[top] > 0.0])
+        sel = np.full(t.op.size, -1, dtype=np.int64)
+        sel[top] = np.arange(top.size)
+        self.last_fresh_slots = top
+        F, _ = _affine_kernel_reference(*args, order, m0, self.n_fresh, sel, 1 + m0 + self.n_fresh * order)
+        return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
 
     def _run(self, X, P, order, m0):
         t = self._tape
