@@ -66,6 +66,7 @@ def test_pendulum_sampled_trajectories_inside():
     assert misses(sol, sols) == []
 
 
+@pytest.mark.slow  # (3.7 s: the default run's budget is thin)
 def test_pendulum_over_the_top_one_box_auto_basis_beats_the_cpp_widths():
     """The paper's pendulum box straddles the separatrix (part swings back, part goes
     over the top). One box, error basis "auto", T = 3: the run completes, every sampled
