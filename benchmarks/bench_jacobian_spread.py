@@ -12,9 +12,10 @@ its true spread therefore costs steps one for one, and the injected error feeds 
 set's growth. Each case runs the solver as its benchmark does, stops after ``--steps``
 steps (a hook keeps the set), and then, for that set:
 
-* ``J`` over the set's own forms, as the solver takes it: affine arithmetic (the
-  default) and degree-2 Taylor models with ``q`` quadratic symbols (``arithmetic=
-  "taylor_model"`` uses q = 12); the widest entry of the enclosure, and the time;
+* ``J`` over the set's own forms, as the solver takes it: affine arithmetic (without
+  and with ``fresh_slots``: the solver gives deep tapes 24) and degree-2 Taylor models
+  with ``q`` quadratic symbols (``arithmetic="taylor_model"`` uses q = 12); the widest
+  entry of the enclosure, and the time;
 * the sampled spread: ``J`` at 64 points of the set (the corners of its parameter box
   among them; interval evaluation at points), widest entry: a lower bound of the true
   spread, so the ratio is an upper bound of the overestimation;
@@ -117,6 +118,7 @@ def measure(label: str, cap: CaptureAt, order: int, quadratic=(0, 4, 8, 12), sta
     out("\n| Jacobian over the set | widest entry of the enclosure | / sampled spread | time (s) |")
     out("|---|---|---|---|")
     rows = [("affine", AffineTaylorODE(vg, fresh_symbols=0))]
+    rows += [(f"affine, {k} fresh slots", AffineTaylorODE(vg, fresh_symbols=0, fresh_slots=k)) for k in (12, 24, 48)]
     rows += [(f"Taylor models, q = {q}", TaylorModelODE(vg, quadratic_symbols=q)) for q in quadratic]
     for name, ev in rows:
         jacobian_over_set(ev, sets, order, h)  # (compile and warm up)
