@@ -165,8 +165,7 @@ def urdf_robot(T):
 
 def _test_for(system, **kw):
     from verified.consistency import EnergyTest
-    rate = "zero" if system.conservative else ("derive" if system.energy_rate is None else system.energy_rate)
-    return EnergyTest(system.energy, rate, **kw)
+    return EnergyTest(system.energy, system.energy_rate, **kw)  # "derive", "zero" or a graph (verified.energy_rate)
 
 
 def work_precision(out_json="work_precision.json", plot="work_precision.png", quick=False,
