@@ -307,9 +307,7 @@ def _unary_into(Z, x, m, kind, known_lo=-INF):
 # centre, 1..m the symbol coefficients, m + 1 the error radius. The solver runs the
 # batched interpreter below (_affine_kernel), which computes the same numbers faster;
 # this one is the plain statement of the rules that tests/verified/test_affine_taylor.py checks
-# it against, bit for bit. A change to a rule goes into both. (Fresh symbols for
-# chosen slots, ``sel``, exist only here: AffineTaylorODE(fresh_slots=) runs this
-# kernel for them.)
+# it against, bit for bit. A change to a rule goes into both.
 # --------------------------------------------------------------------------
 @njit(cache=True)
 def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh,
@@ -918,7 +916,7 @@ def _b_quotient_step(A, Af, s, ss, u, us, v, vs, L, k, rec, t, sc, Ls, m, cb, R)
 
 
 @njit(cache=True)
-def _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh):
+def _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh, sel, sel_base):
     """Bounds of the highest nonzero symbol: L[s, k] for the forms of slot s at order k
     (and of everything its recurrence reads and writes: operands at orders <= k, its
     own and its partner's earlier orders, its reciprocal, scratch) and Lo[i, k] for the
@@ -954,6 +952,8 @@ def _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh)
                     lv = max(lv, PT[k - 1, s])
                     if aux[s] >= 0:
                         lv = max(lv, PT[k - 1, aux[s]])
+            if k == 0 and sel.size > 0 and sel[s] >= 0:
+                lv = max(lv, sel_base + sel[s])  # its error's fresh symbol (fresh_slots)
             LT[k, s] = lv
             PT[k, s] = lv if k == 0 else max(PT[k - 1, s], lv)
             if aux[s] >= 0:
@@ -984,7 +984,8 @@ def _highest_nonzero(A):
 
 
 @njit(cache=True)
-def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes):
+def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
+                   sel=_NO_SLOTS, sel_base=0):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
 
     Returns the forms of the coefficients, (B, order + 1, n, m + 2), and the order-0
@@ -996,7 +997,7 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
     m = m2 - 2
     Lx = _highest_nonzero(X)
     Lp = _highest_nonzero(P)
-    L, Lo = _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh)
+    L, Lo = _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh, sel, sel_base)
     res = np.zeros((nb, order + 1, n, m2))
     kept = np.zeros((keep.size, nb, m2))
     CB = max(1, min(nb, lanes))
@@ -1164,6 +1165,11 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
                         _b_sqrconv(A, vs + k * m2, u, a0[s], L, k, 0, 0, m, cb, R)
                         # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
                         _b_quotient_step(A, Af, s0, s, u, a0[s], vs, aux[s], L, k, rec, TB, SB, Ls, m, cb, R)
+                if k == 0 and sel.size > 0 and sel[s] >= 0:
+                    # this slot's error becomes a symbol of its own (fresh_slots)
+                    for c in range(cb):
+                        A[z + sel_base + sel[s], c] = A[z + m + 1, c]
+                        A[z + m + 1, c] = 0.0
             # x_[k+1] = f_[k] / (k + 1)
             for i in range(n):
                 o = outputs[i]
@@ -1298,8 +1304,8 @@ class AffineTaylorODE:
     Same call and result shapes as ``TaylorODE.coefficients``; tighter over boxes of
     deep graphs, about ``m + 1`` times the work per operation for ``m`` symbols.
 
-    ``fresh_slots`` (for :meth:`series` over one set, default 0): at every call, the
-    order-0 errors of the ``fresh_slots`` tape slots that create the most error in the outputs
+    ``fresh_slots`` (for :meth:`series`, default 0): at every call, the order-0 errors
+    of the ``fresh_slots`` tape slots that create the most error in the outputs
     (:func:`_weighted_attribution`, from a first pass over the same forms) become symbols
     of their own. A lumped error radius propagates through every later operation by
     absolute values; as a symbol it propagates with its signs, and the paths that carry
@@ -1308,9 +1314,13 @@ class AffineTaylorODE:
     that was the small error of ``sin(q3)``, carried to the output along hundreds of
     paths; with fresh symbols for 16 / 24 / 32 slots 4.5x / 4.1x / 3.6x at ~1.2-1.4x
     the cost (degree-2 Taylor models: 2.4x at 2.2x; ``benchmarks/bench_jacobian_spread.py``).
+    Only for batches of at most ``fresh_slots_batch`` sets (default 1): the fresh symbols
+    make every later form as long as the longest, which the batched kernel otherwise
+    avoids; the UR5 PD scene's batch of 4 payload pieces paid 1.9x per step for 1.4x
+    longer steps (1.30 s reached in 60 s against 1.72 s without).
     """
 
-    def __init__(self, graph, fresh_symbols=None, fresh_slots: int = 0):
+    def __init__(self, graph, fresh_symbols=None, fresh_slots: int = 0, fresh_slots_batch: int = 1):
         if graph.n_outputs != graph.n_inputs:
             raise ValueError(
                 f"an ODE right-hand side needs as many outputs as inputs, got {graph.n_inputs} "
@@ -1327,6 +1337,10 @@ class AffineTaylorODE:
         if isinstance(fresh_slots, bool) or not isinstance(fresh_slots, (int, np.integer)) or fresh_slots < 0:
             raise ValueError(f"fresh_slots must be an integer >= 0, got {fresh_slots!r}")
         self.fresh_slots = int(fresh_slots)
+        if isinstance(fresh_slots_batch, bool) or not isinstance(fresh_slots_batch, (int, np.integer)) \
+                or fresh_slots_batch < 1:
+            raise ValueError(f"fresh_slots_batch must be an integer >= 1, got {fresh_slots_batch!r}")
+        self.fresh_slots_batch = int(fresh_slots_batch)
         self.last_fresh_slots = _NO_SLOTS  # the slots chosen at the last series() call
 
     def forms(self, x, order, params=None):
@@ -1346,9 +1360,7 @@ class AffineTaylorODE:
         n, nb, m2 = X.shape
         m0 = m2 - 2
         order = int(order)
-        # (one set only: the batched kernel has no fresh slots, and the reference kernel
-        # over a batch cost 2.5x per step on the UR5 PD scene's 4 payload pieces)
-        k_sel = min(self.fresh_slots, self._tape.op.size) if nb == 1 else 0
+        k_sel = min(self.fresh_slots, self._tape.op.size) if nb <= self.fresh_slots_batch else 0
         m = m0 + self.n_fresh * order + k_sel
         Xf = np.zeros((n, nb, m + 2))
         Xf[..., : m0 + 1] = X[..., : m0 + 1]
@@ -1358,7 +1370,7 @@ class AffineTaylorODE:
             P = box_forms(p.lo, p.hi, np.full(self.n_params, -1), m)
         else:
             P = np.zeros((0, nb, m + 2))
-        if k_sel and nb == 1:
+        if k_sel:
             F = self._run_fresh_slots(Xf, P, order, m0, k_sel)
         else:
             F = self._run(Xf, P, order, m0)
@@ -1367,9 +1379,9 @@ class AffineTaylorODE:
 
     def _run_fresh_slots(self, X, P, order, m0, k_sel):
         """:meth:`_run` with the ``k_sel`` slots of most attributed error on fresh symbols
-        (the last ``k_sel`` columns of the forms). One order-1 pass of the reference
-        kernel over the same forms ranks the slots; the reference kernel (batched over
-        the boxes inside numba) then runs with them."""
+        (the last ``k_sel`` columns of the forms), the same slots for every set of the
+        batch. One order-1 pass of the reference kernel over the same forms ranks the
+        slots (attribution summed over the sets); then the kernel :meth:`_run` would use."""
         t = self._tape
         m = X.shape[2] - 2
         args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P)
@@ -1380,8 +1392,13 @@ class AffineTaylorODE:
         sel = np.full(t.op.size, -1, dtype=np.int64)
         sel[top] = np.arange(top.size)
         self.last_fresh_slots = top
-        F, _ = _affine_kernel_reference(*args, order, m0, self.n_fresh, sel, 1 + m0 + self.n_fresh * order)
-        return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
+        base = 1 + m0 + self.n_fresh * order
+        if X.shape[1] == 1 and self.n_fresh == 0:
+            F, _ = _affine_kernel_reference(*args, order, m0, self.n_fresh, sel, base)
+            return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
+        F, _ = _affine_kernel(*args, order, m0, self.n_fresh, _NO_SLOTS, _lanes(t, order, m, self.n, X.shape[1]),
+                              sel, base)
+        return F
 
     def _run(self, X, P, order, m0):
         t = self._tape
