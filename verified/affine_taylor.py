@@ -311,10 +311,12 @@ def _unary_into(Z, x, m, kind, known_lo=-INF):
 # --------------------------------------------------------------------------
 @njit(cache=True)
 def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh,
-                             sel=_NO_SLOTS, sel_base=0):
+                             sel, sel_base):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
 
-    ``sel`` (empty, or one entry per tape slot): where ``sel[s] >= 0`` the error radius
+    ``sel`` (empty ``_NO_SLOTS``, or one entry per tape slot; passed explicitly, as every
+    argument: numba cannot cache a signature with an omitted default, and every process
+    would compile the kernel again): where ``sel[s] >= 0`` the error radius
     of slot ``s``'s order-0 form becomes the coefficient of symbol ``sel_base + sel[s]``
     (a fresh symbol: ``[-e, e] = e * eps`` with ``eps`` used nowhere else, so sound),
     and later operations carry it with its signs (see ``AffineTaylorODE(fresh_slots=)``).
@@ -985,7 +987,7 @@ def _highest_nonzero(A):
 
 @njit(cache=True)
 def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
-                   sel=_NO_SLOTS, sel_base=0):
+                   sel, sel_base):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
 
     Returns the forms of the coefficients, (B, order + 1, n, m + 2), and the order-0
@@ -1292,7 +1294,7 @@ def affine_range(graph, x, params=None) -> Interval:
     # kernel's "state outputs" are not used here, any valid slots will do
     dummy = np.full(n, tape.outputs[0] if tape.outputs.size else 0, dtype=np.int64)
     _, G = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo, tape.chi, dummy, X, P,
-                          1, m, 0, tape.outputs, _lanes(tape, 1, m, n, X.shape[1]))
+                          1, m, 0, tape.outputs, _lanes(tape, 1, m, n, X.shape[1]), _NO_SLOTS, 0)
     lo, hi = forms_to_interval(G.transpose(1, 0, 2))
     return Interval._from_bounds(lo, hi)
 
@@ -1385,7 +1387,7 @@ class AffineTaylorODE:
         t = self._tape
         m = X.shape[2] - 2
         args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P)
-        _, F1 = _affine_kernel_reference(*args, 1, m0, self.n_fresh)
+        _, F1 = _affine_kernel_reference(*args, 1, m0, self.n_fresh, _NO_SLOTS, 0)
         score = _weighted_attribution(t.op, t.a0, t.a1, F1, m, t.outputs)
         top = np.argsort(-score, kind="stable")[:k_sel]
         top = np.sort(top[score[top] > 0.0])
@@ -1407,9 +1409,9 @@ class AffineTaylorODE:
             # one box, no fresh symbols (the variational series of a single set): nothing
             # to skip and no lanes to fill, and on big tapes (a 6-dof arm's variational
             # graph: 28k slots) the per-box reference measured 1.2-1.4x faster. Same bits.
-            F, _ = _affine_kernel_reference(*args)
+            F, _ = _affine_kernel_reference(*args, _NO_SLOTS, 0)
             return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
-        F, _ = _affine_kernel(*args, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1]))
+        F, _ = _affine_kernel(*args, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1]), _NO_SLOTS, 0)
         return F
 
     def coefficients(self, x, order, params=None):

@@ -624,8 +624,8 @@ def _both_kernels(graph, X, P, order, m0, n_fresh, lanes):
 
     t = _Tape(graph)
     args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order, m0, n_fresh)
-    ref, F = at._affine_kernel_reference(*args)
-    new, kept = at._affine_kernel(*args, t.outputs, lanes)
+    ref, F = at._affine_kernel_reference(*args, at._NO_SLOTS, 0)
+    new, kept = at._affine_kernel(*args, t.outputs, lanes, at._NO_SLOTS, 0)
     return new, kept, ref.transpose(2, 1, 0, 3), F[t.outputs, 0]
 
 
@@ -830,7 +830,7 @@ def test_fresh_slots_contain_exact_coefficients_and_tighten():
     X = _arm_set_forms(0.1, 2.0)
     ev = AffineTaylorODE(g, fresh_symbols=0, fresh_slots=24)
     C = ev.series(X.copy(), 2)
-    check_series_contains(g, X, C, 2, n_random=6, seed=1)
+    check_series_contains(g, X, C[:, :2], 1, n_random=6, seed=1)  # (order 1: arb at order 2 takes 5 s)
     assert 0 < ev.last_fresh_slots.size <= 24
     C0 = AffineTaylorODE(g, fresh_symbols=0).series(X.copy(), 2)
     assert C.width()[0, 1].max() < 0.5 * C0.width()[0, 1].max()
@@ -871,7 +871,7 @@ def test_batched_kernel_equals_reference_with_fresh_slots(n_fresh):
     ref, _ = at._affine_kernel_reference(*args, sel, base)
     new, _ = at._affine_kernel(*args, at._NO_SLOTS, 2, sel, base)
     assert_same_forms(new, ref.transpose(2, 1, 0, 3))
-    plain, _ = at._affine_kernel_reference(*args)
+    plain, _ = at._affine_kernel_reference(*args, at._NO_SLOTS, 0)
     assert not np.array_equal(plain, ref)  # (the chosen slots did move their errors)
 
 
@@ -892,7 +892,7 @@ def test_oracle_catches_dropped_fresh_slot_errors(monkeypatch):
     monkeypatch.setattr(at, "_affine_kernel_reference", dropped)
     C = AffineTaylorODE(g, fresh_symbols=0, fresh_slots=24).series(X.copy(), 2)
     with pytest.raises(AssertionError, match="outside"):
-        check_series_contains(g, X, C, 2, n_random=12, seed=1)
+        check_series_contains(g, X, C[:, :2], 1, n_random=12, seed=1)
 
 
 @pytest.mark.parametrize("bad", [-1, 1.5, True, "8"])
