@@ -1372,46 +1372,38 @@ class AffineTaylorODE:
             P = box_forms(p.lo, p.hi, np.full(self.n_params, -1), m)
         else:
             P = np.zeros((0, nb, m + 2))
-        if k_sel:
-            F = self._run_fresh_slots(Xf, P, order, m0, k_sel)
-        else:
-            F = self._run(Xf, P, order, m0)
-        lo, hi = forms_to_interval(F)
+        sel = self._rank_fresh_slots(Xf, P, m0, k_sel) if k_sel else _NO_SLOTS
+        lo, hi = forms_to_interval(self._run(Xf, P, order, m0, sel, 1 + m0 + self.n_fresh * order))
         return Interval._from_bounds(lo, hi)
 
-    def _run_fresh_slots(self, X, P, order, m0, k_sel):
-        """:meth:`_run` with the ``k_sel`` slots of most attributed error on fresh symbols
-        (the last ``k_sel`` columns of the forms), the same slots for every set of the
-        batch. One order-1 pass of the reference kernel over the same forms ranks the
-        slots (attribution summed over the sets); then the kernel :meth:`_run` would use."""
+    def _rank_fresh_slots(self, X, P, m0, k_sel):
+        """``sel`` for the kernels: the ``k_sel`` slots of most attributed error over the
+        forms ``X`` (summed over the sets), numbered 0.. in tape order (their symbols are
+        the last ``k_sel`` columns of the forms), -1 elsewhere. One order-1 pass of the
+        reference kernel over the same forms gives the slots' centres and errors."""
         t = self._tape
-        m = X.shape[2] - 2
-        args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P)
-        _, F1 = _affine_kernel_reference(*args, 1, m0, self.n_fresh, _NO_SLOTS, 0)
-        score = _weighted_attribution(t.op, t.a0, t.a1, F1, m, t.outputs)
+        _, F1 = _affine_kernel_reference(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P,
+                                         1, m0, self.n_fresh, _NO_SLOTS, 0)
+        score = _weighted_attribution(t.op, t.a0, t.a1, F1, X.shape[2] - 2, t.outputs)
         top = np.argsort(-score, kind="stable")[:k_sel]
         top = np.sort(top[score[top] > 0.0])
         sel = np.full(t.op.size, -1, dtype=np.int64)
         sel[top] = np.arange(top.size)
         self.last_fresh_slots = top
-        base = 1 + m0 + self.n_fresh * order
-        if X.shape[1] == 1 and self.n_fresh == 0:
-            F, _ = _affine_kernel_reference(*args, order, m0, self.n_fresh, sel, base)
-            return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
-        F, _ = _affine_kernel(*args, order, m0, self.n_fresh, _NO_SLOTS, _lanes(t, order, m, self.n, X.shape[1]),
-                              sel, base)
-        return F
+        return sel
 
-    def _run(self, X, P, order, m0):
+    def _run(self, X, P, order, m0, sel=_NO_SLOTS, sel_base=0):
+        """The coefficient forms (B, order + 1, n, m + 2) by the kernel that suits the
+        batch; ``sel``/``sel_base``: fresh symbols for chosen slots (:meth:`_rank_fresh_slots`)."""
         t = self._tape
         args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order, m0, self.n_fresh)
         if X.shape[1] == 1 and self.n_fresh == 0:
             # one box, no fresh symbols (the variational series of a single set): nothing
             # to skip and no lanes to fill, and on big tapes (a 6-dof arm's variational
             # graph: 28k slots) the per-box reference measured 1.2-1.4x faster. Same bits.
-            F, _ = _affine_kernel_reference(*args, _NO_SLOTS, 0)
+            F, _ = _affine_kernel_reference(*args, sel, sel_base)
             return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
-        F, _ = _affine_kernel(*args, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1]), _NO_SLOTS, 0)
+        F, _ = _affine_kernel(*args, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1]), sel, sel_base)
         return F
 
     def coefficients(self, x, order, params=None):
