@@ -86,8 +86,7 @@ def jacobian_over_set(evaluator, sets, order: int, h: float) -> Interval:
     n = sets.c.shape[1]
     one = sets.take(slice(0, 1))
     own = one.C.shape[2] if getattr(evaluator, "all_symbols", False) else None
-    forms = one.affine_forms(extra=n * n, own_symbols=own) if own is not None or not hasattr(one, "S") \
-        else one.affine_forms(extra=n * n)
+    forms = one.affine_forms(extra=n * n, own_symbols=own)  # (second-order sets accept and ignore own_symbols)
     forms[n:, :, 0] = np.eye(n).reshape(-1)[:, None]
     vc = evaluator.series(forms, order - 1, None)
     return horner(vc[:, :, n:].reshape((1, order, n, n)), h)[0]
