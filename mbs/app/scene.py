@@ -59,6 +59,7 @@
     h_max = 0.05
     max_boxes = 4096
     energy_shell = true     # chains without control: hold the sets inside H <= hmax
+    invariant_after = 1.0   # PD holding a pose: from 1 s on, every later time in one proof
 
     [control]               # optional: joint torques (modes i, ii; see mbs.control)
     type = "pd"             # "pd" or "computed_torque"
@@ -130,7 +131,7 @@ _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_m
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
            "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
            "set_order": int, "merge_slack": float, "param_subdivision": None, "absorb": bool,
-           "params_per_state": int, "energy_shell": bool}
+           "params_per_state": int, "energy_shell": bool, "invariant_after": float}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str, "contract": str, "prune": bool}
 _CONTRACTS = ("step", "test", "off")

@@ -205,6 +205,12 @@ def test_solver_arithmetic():
     _err(GOOD.replace("order = 12\n", "order = 12\narithmetic = 'taylor'\n"), "arithmetic", "'taylor_model'")
 
 
+def test_solver_invariant_after():
+    kw = loads_scene(GOOD.replace("order = 12\n", "order = 12\ninvariant_after = 0.5\n")).simulate_kwargs(NAMES)
+    assert kw["invariant_after"] == 0.5
+    _err(GOOD.replace("order = 12\n", "order = 12\ninvariant_after = 'soon'\n"), "invariant_after")
+
+
 def test_control_scenes_parse():
     """[control] tables are kept for simulate; structure errors name the file and key."""
     from mbs.control import parse_control
