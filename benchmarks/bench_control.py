@@ -9,7 +9,9 @@ arm2_computed_torque}.toml, run through mbs.simulate exactly as the CLI does):
 3. a 2-link arm under computed torque with a 10% mass error in the nominal model
    (set_order 1 and 2);
 4. case 1 in mode ii (the energy test's cost with inputs);
-5. case 1 without the payload (modes i and ii).
+5. case 1 without the payload (modes i and ii);
+6. case 1 with ``invariant_after`` = 1 s: from then on every later time is enclosed at
+   once by the closed loop's energy (``mbs.lyapunov``).
 
 Oracle: Pinocchio ``aba`` with the sampled payload on the plant, the controller
 evaluated in floats (the same control law objects over floats), DOP853 at rtol =
@@ -166,7 +168,7 @@ def fmt(row):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--only", default="1,2,3,4,5", help="cases, e.g. 1,3")
+    ap.add_argument("--only", default="1,2,3,4,5,6", help="cases, e.g. 1,3")
     ap.add_argument("--cap", type=float, default=60.0, help="wall-clock cap per run [s]")
     ap.add_argument("--samples", type=int, default=24)
     a = ap.parse_args(argv)
@@ -189,6 +191,10 @@ def main(argv=None):
     if 5 in only:  # the payload is what is hard: the same scene without it
         cases += [("UR5 PD hold, no payload, T = 5", "ur5_pd_payload", "i", {"error_basis": "auto"}),
                   ("UR5 PD hold, no payload, T = 5 (energy test)", "ur5_pd_payload", "ii", {"error_basis": "auto"})]
+    if 6 in only:  # the closed loop's energy as a Lyapunov function (mbs.lyapunov): T = 5 at once
+        # (after 2 s instead: the integration itself reaches only 1.98 s in 60 s)
+        cases += [("UR5 PD hold, payload, T = 5, invariant after 1 s", "ur5_pd_payload", "i",
+                   {"invariant_after": 1.0})]
     for label, scene, mode, extra in cases:
         frame = "link2" if scene.startswith("arm2") else "tool0"
         row = run_case(label, scene, a.cap, mode, extra, a.samples, frame, drop_payload="no payload" in label)
