@@ -872,6 +872,7 @@ class InvariantHook(Hook):
         self.t_eval = np.asarray(t_eval, float)
         self.result = None  # (t, InvariantBoxes)
         self.attempts = 0
+        self._wait = 0
         self._reason = None
 
     def before_run(self, setup):
@@ -917,7 +918,13 @@ class InvariantHook(Hook):
     def after_step(self, step, sets, run):
         if self.result is not None or step.t < self.t_switch * (1 - 1e-12) - 1e-300:
             return None
+        # after a failed attempt wait 1, 2, 4, ... steps: an attempt costs about a step
+        # (the UR5 PD scene, before the decay was added: 255 attempts, none verified)
+        self._wait -= 1
+        if self._wait > 0:
+            return None
         self.attempts += 1
+        self._wait = 2 ** self.attempts
         c = self.lyap.level_over(self._sets_y(sets), None if self.params is None else self.params)
         res = self.lyap.boxes(c, self._y_hull(sets))
         if res.verified.all():

@@ -132,6 +132,9 @@ def test_loops_without_a_proof_are_refused_in_one_line(control, match):
 def test_bad_invariant_after_values():
     with pytest.raises(ValueError, match="needs control"):
         simulate("planar2", box(Q0), 1.0, mode="i", progress=False, invariant_after=0.5)
+    with pytest.raises(ValueError, match="one process"):
+        simulate("planar2", box(Q0), 1.0, mode="i", progress=False, invariant_after=0.5, workers=2,
+                 control=PD(bandwidth=4.0, q_ref=Q0))
     for bad in (2.0, -1.0, float("nan"), "soon", True):
         with pytest.raises(ValueError, match="invariant_after must be a time"):
             simulate("planar2", box(Q0), 1.0, mode="i", progress=False, invariant_after=bad,
