@@ -120,20 +120,6 @@ def _potential_difference(loop, nom):
     return dV
 
 
-def _position_gradient(f, n: int):
-    """The graph of ``(x, p) -> d f / d q`` (the first ``n`` inputs), forward mode."""
-    from verified.graph import GraphBuilder
-    from verified.graph_ops import forward_mode
-
-    b = GraphBuilder(f.n_inputs, f.n_params, input_names=f.input_names, param_names=f.param_names)
-    x = [b.input(i) for i in range(f.n_inputs)]
-    p = [b.param(k) for k in range(f.n_params)]
-    one = b.const(1.0)
-    seeds = [[one if i == k else None for k in range(n)] for i in range(f.n_inputs)]
-    _, (d,) = forward_mode(b, f, x, p, seeds)
-    return b.build([b.const(0) if v is None else v for v in d], [f"G{i + 1}" for i in range(n)])
-
-
 def _compose(T_g, dV_g, G_g, K, centre, qref):
     """Graphs of ``L``, ``e*(p)`` and ``rho(p)`` (module docstring) from ``T``, ``dV``,
     ``G = grad_q dV`` and ``centre(b, p) -> e*`` node ids, all over the loop's ``(x, p)``."""
@@ -250,6 +236,7 @@ def pd_hold_lyapunov(loop: ClosedLoop, samples=None):
     rounding); by default points about ``q_ref`` and the parameter box.
     """
     from verified.evaluate import eval_float, jacobian_float
+    from verified.graph_ops import gradient_graph
     from verified.invariant import QuadraticLyapunov
 
     pd, K = _check_loop(loop)
@@ -282,7 +269,7 @@ def pd_hold_lyapunov(loop: ClosedLoop, samples=None):
     dV_g = tr(lambda x, p: [dV(loop.split(x)[0], p)], ["dV"])
     A_g = tr(mass, [f"A{i}{j}" for i in range(n) for j in range(n)])
     D_g = tr(dissipation, [f"D{i}{j}" for i in range(n) for j in range(n)])
-    G_g = _position_gradient(dV_g, n)
+    G_g = gradient_graph(dV_g, n, [f"G{i + 1}" for i in range(n)])  # grad_q dV
     centre = _equilibrium_fit(G_g, K, qref, loop.lo, loop.hi)
     level, center, residual = _compose(T_g, dV_g, G_g, K, centre, qref)
     ly = QuadraticLyapunov(level, A_g, G_g, center, residual, K, qref, dissipation=D_g)

@@ -144,6 +144,34 @@ def forward_mode(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: S
     return [val[o] for o in graph.outputs], [der[o] for o in graph.outputs]
 
 
+def gradient_graph(func: Graph, n_wrt: int | None = None, names=None) -> Graph:
+    """The graph of ``(x, p) -> d func / d x_i``, ``i < n_wrt`` (default: every input), for
+    a scalar ``func``, by forward mode with one unit seed per input; same inputs and
+    parameters as ``func``."""
+    if func.n_outputs != 1:
+        raise ValueError(f"gradient_graph needs a scalar function, got {func.n_outputs} outputs")
+    n = func.n_inputs if n_wrt is None else int(n_wrt)
+    b = GraphBuilder(func.n_inputs, func.n_params, input_names=func.input_names, param_names=func.param_names)
+    x = [b.input(i) for i in range(func.n_inputs)]
+    p = [b.param(k) for k in range(func.n_params)]
+    one = b.const(1.0)
+    seeds = [[one if i == k else None for k in range(n)] for i in range(func.n_inputs)]
+    _, (d,) = forward_mode(b, func, x, p, seeds)
+    return b.build([b.const(0) if v is None else v for v in d],
+                   list(names) if names is not None else [f"d{nm}" for nm in func.input_names[:n]])
+
+
+def params_to_inputs(graph: Graph) -> Graph:
+    """``graph(x, p)`` as a graph of ``y = (x, p)`` without parameters (as the solver
+    carries uncertain parameters: constant states after the ODE's)."""
+    if graph.n_params == 0:
+        return graph
+    n, p = graph.n_inputs, graph.n_params
+    b = GraphBuilder(n + p, 0, input_names=list(graph.input_names) + list(graph.param_names))
+    outs = embed(b, graph, [b.input(i) for i in range(n)], [b.input(n + k) for k in range(p)])
+    return b.build(outs, list(graph.output_names))
+
+
 def _check_same_inputs(a: Graph, b: Graph, what: str):
     if a.n_inputs != b.n_inputs:
         raise ValueError(f"{what}: the graphs take {a.n_inputs} and {b.n_inputs} inputs")

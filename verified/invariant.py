@@ -56,35 +56,13 @@ from . import interval as iv
 from . import linalg
 from .evaluate import eval_float, eval_interval, jacobian_float, jacobian_interval
 from .graph import Graph, GraphBuilder
-from .graph_ops import embed
+from .graph_ops import embed, gradient_graph, params_to_inputs
 from .hooks import Hook
 from .interval import Interval, concatenate
 
 __all__ = ["QuadraticLyapunov", "InvariantBoxes", "InvariantHook"]
 
 _UP = 1.0 + 2.0 ** -40  # one-sided widening of float results that feed a bound
-
-
-def _params_to_inputs(g: Graph) -> Graph:
-    """``g(x, p)`` as a graph of ``y = (x, p)`` without parameters."""
-    if g.n_params == 0:
-        return g
-    n, p = g.n_inputs, g.n_params
-    b = GraphBuilder(n + p, 0, input_names=list(g.input_names) + list(g.param_names))
-    outs = embed(b, g, [b.input(i) for i in range(n)], [b.input(n + k) for k in range(p)])
-    return b.build(outs, list(g.output_names))
-
-
-def _gradient_graph(g: Graph) -> Graph:
-    """The graph of ``y -> grad g(y)`` (a scalar ``g`` without parameters), forward mode."""
-    from .graph_ops import forward_mode
-    N = g.n_inputs
-    b = GraphBuilder(N, 0, input_names=list(g.input_names))
-    y = [b.input(i) for i in range(N)]
-    one = b.const(1.0)
-    seeds = [[one if i == k else None for k in range(N)] for i in range(N)]
-    _, (d,) = forward_mode(b, g, y, [], seeds)
-    return b.build([b.const(0) if v is None else v for v in d], [f"d{nm}" for nm in g.input_names])
 
 
 def _I(lo, hi=None) -> Interval:
@@ -183,7 +161,7 @@ class QuadraticLyapunov:
         self.graphs = {name: g for name, g, _ in named}
         self.n_x, self.n_p = level.n_inputs, level.n_params
         # over y = (x, p): the parameters become inputs, as the solver carries them
-        self._y = {k: _params_to_inputs(g) for k, g in self.graphs.items()}
+        self._y = {k: params_to_inputs(g) for k, g in self.graphs.items()}
         self._grad_level = None  # built on first use (second-order level bound)
         self._decay_graphs = None  # built on first use (decay certificate)
 
@@ -232,7 +210,7 @@ class QuadraticLyapunov:
         of the mean-value form and the second-order form over ``c + C r0 + Q r`` for
         first-order sets, over the hull otherwise."""
         if self._grad_level is None:
-            self._grad_level = _gradient_graph(self._y["level"])
+            self._grad_level = gradient_graph(self._y["level"])
         return self._upper_over(self._y["level"], self._grad_level, sets, params)
 
     def _upper_over(self, gy: Graph, grad: Graph, sets, params=None) -> np.ndarray:
@@ -338,13 +316,7 @@ class QuadraticLyapunov:
         """A graph of ``(u, p)`` over ``Y``: the natural enclosure intersected with the
         mean-value form about ``Y``'s midpoint (the parameters of ``rho`` and ``e*`` appear
         more than once: the natural form loses their correlation)."""
-        g = self._y[name]
-        nat = eval_interval(g, Y)
-        m = Y.mid()
-        fm = eval_interval(g, _I(m))
-        J = jacobian_interval(g, Y)  # (B, k, N)
-        mv = fm + (J * (Y - m)[:, None, :]).sum(axis=-1)
-        return nat.intersect(mv)
+        return self._mean_value_graph(self._y[name], Y)
 
     def _centre(self, Y: Interval) -> Interval:
         return self._mean_value("center", Y)
@@ -434,7 +406,7 @@ class QuadraticLyapunov:
         ``w(y) = (u - u_c(p))^T A(u, p) z``."""
         if self._decay_graphs is None:
             if self._grad_level is None:
-                self._grad_level = _gradient_graph(self._y["level"])
+                self._grad_level = gradient_graph(self._y["level"])
             gy, n = self._y, self.n
             N = gy["level"].n_inputs
             b = GraphBuilder(N, 0, input_names=list(gy["level"].input_names))
@@ -570,15 +542,17 @@ class QuadraticLyapunov:
         for eps in np.unique(out.eps[ok]):
             idx = ok[out.eps[ok] == eps]
             vg = self._vtilde(float(eps))
-            out.v1[idx] = self._upper_over(vg, _gradient_graph(vg), _select(sets, idx), params)
+            out.v1[idx] = self._upper_over(vg, gradient_graph(vg), _select(sets, idx), params)
 
     def _sets_hull(self, sets, params) -> Interval:
+        """The sets' hulls over ``y``: the states, then the parameters, carried by the sets
+        (``params`` None) or given (graph parameters, point or interval)."""
         H = sets.hull()
-        if params is None or self.n_p == 0 or H.shape[1] >= self.n_x + self.n_p:
+        if params is None or self.n_p == 0:
             return H[:, :self.n_x + self.n_p]
         P = params if isinstance(params, Interval) else _I(params)
         P = P.broadcast_to((H.shape[0], self.n_p)) if P.ndim == 1 else P
-        return concatenate([H, P], axis=1)
+        return concatenate([H[:, :self.n_x], P], axis=1)
 
     def chain(self, first: "Decay", region: Interval, horizon: float, stages: int = 12):
         """Certificates one after another: ``[(dt_k, Decay_k)]``, ``dt_0 = 0`` the first.
@@ -897,22 +871,15 @@ class InvariantHook(Hook):
             ly.check_dynamics(setup.user_graph, x, p)
         return None
 
-    def _y_hull(self, sets) -> Interval:
-        H = sets.hull()
-        if self.params is None:
-            return H[:, :self.n_y]
-        P = self.params if isinstance(self.params, Interval) else _I(self.params)
-        P = P.broadcast_to((H.shape[0], self.lyap.n_p)) if P.ndim == 1 else P
-        return concatenate([H[:, :self.lyap.n_x], P], axis=1)
-
     def _sets_y(self, sets):
         """The sets restricted to ``y`` (states and carried parameters; appended states of
         other hooks dropped)."""
         from .sets import DoubletonSets
-        if type(sets) is DoubletonSets and sets.c.shape[1] > self.n_y:
-            return _Projected(sets, self.n_y)  # states other hooks appended (h) dropped
-        if type(sets) is not DoubletonSets and sets.hull().shape[1] > self.n_y:
-            return _HullOnly(sets.hull()[:, :self.n_y])
+        k = self.n_y if self.params is None else self.lyap.n_x  # graph parameters are not in the sets
+        if type(sets) is DoubletonSets and sets.c.shape[1] > k:
+            return _Projected(sets, k)  # states other hooks appended (h) dropped
+        if type(sets) is not DoubletonSets and sets.hull().shape[1] > k:
+            return _HullOnly(sets.hull()[:, :k])
         return sets
 
     def after_step(self, step, sets, run):
@@ -926,7 +893,7 @@ class InvariantHook(Hook):
         self.attempts += 1
         self._wait = 2 ** self.attempts
         c = self.lyap.level_over(self._sets_y(sets), None if self.params is None else self.params)
-        res = self.lyap.boxes(c, self._y_hull(sets))
+        res = self.lyap.boxes(c, self.lyap._sets_hull(sets, self.params))
         if res.verified.all():
             dec = None
             if "dissipation" in self.lyap.graphs:

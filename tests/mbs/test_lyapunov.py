@@ -139,3 +139,28 @@ def test_bad_invariant_after_values():
         with pytest.raises(ValueError, match="invariant_after must be a time"):
             simulate("planar2", box(Q0), 1.0, mode="i", progress=False, invariant_after=bad,
                      control=PD(bandwidth=4.0, q_ref=Q0))
+
+
+def test_point_parameters_are_not_carried_as_states():
+    """A point damping is a graph parameter, not a state of the sets: the hook reads it
+    from the run (mode ii adds the energy state h beside it)."""
+    from scipy.integrate import solve_ivp
+    chain = get("planar2")
+    for mode in ("i", "ii"):
+        sol = simulate("planar2", box(Q0), 5.0, mode=mode, output_dt=0.5, order=10, progress=False,
+                       params={"damping": 0.05}, control=PD(bandwidth=4.0, q_ref=Q0, gravity_compensation=True),
+                       invariant_after=0.5)
+        assert sol.status == "completed" and sol.stats["invariant_from"] == 0.5, sol.reason
+        pd = sol.control.controllers[0]
+        plant = pin.Model(chain.to_pinocchio())
+        data = plant.createData()
+
+        def f(t, x):
+            q, qd = x[:2], x[2:]
+            tau = pd.Kp @ (Q0 - q) - pd.Kd @ qd + pin.computeGeneralizedGravity(plant, data, q) - 0.05 * qd
+            return np.r_[qd, pin.aba(plant, data, q, qd, tau)]
+        x0 = box(Q0)
+        trajs = [solve_ivp(f, (0.0, 5.0), np.where(s, x0.hi, x0.lo), method="DOP853", rtol=1e-12, atol=1e-12,
+                           dense_output=True).sol for s in np.random.default_rng(5).integers(0, 2, (6, 4)).astype(bool)]
+        assert not misses(sol, trajs, per_step=3, states=4)
+        assert (sol.boxes[-1].width() < 1e-4).all()   # the decay: 6e-7..6e-6 at T = 5

@@ -618,3 +618,17 @@ def test_select_fingerprint_and_pickle():
     assert len(g.fingerprint()) == 64
     g2 = pickle.loads(pickle.dumps(g))
     assert g2 == g and hash(g2) == hash(g)
+
+
+def test_gradient_graph_and_params_to_inputs():
+    from verified.evaluate import eval_float
+    from verified.graph import trace
+    from verified.graph_ops import gradient_graph, params_to_inputs
+    g = trace(lambda x, p: [x[0] * x[0] * x[1] + x[1].sin() * p[0]], 2, 1)
+    x, p = np.array([[0.3, -1.2]]), np.array([[2.0]])
+    d = eval_float(gradient_graph(g), x, p)[0]
+    assert np.allclose(d, [2 * 0.3 * -1.2, 0.3 ** 2 + np.cos(-1.2) * 2.0], rtol=1e-14)
+    assert np.allclose(eval_float(gradient_graph(g, 1), x, p)[0], d[:1], rtol=1e-14)
+    y = params_to_inputs(g)
+    assert y.n_inputs == 3 and y.n_params == 0
+    assert eval_float(y, np.c_[x, p])[0, 0] == eval_float(g, x, p)[0, 0]
