@@ -261,6 +261,7 @@ class QuadraticLyapunov:
         r0 = np.sqrt(2.0 * s0[:, None] * self.kinv_diag[None, :])
         glo = np.minimum(ulo, self.u_ref + est.lo - r0)
         ghi = np.maximum(uhi, self.u_ref + est.hi + r0)
+        centre = self._centre_terms(Y)  # depends on the parameters only: once per call
         verified = np.zeros(B, bool)
         out_lo, out_hi = Y.lo.copy(), Y.hi.copy()
         slack = np.full(B, np.inf)
@@ -271,7 +272,7 @@ class QuadraticLyapunov:
             if todo.size == 0:
                 break
             Yk = self._with_u(Y[todo], Ulo[todo], Uhi[todo])
-            plo, phi, s = self._position_bound(c[todo], Yk)
+            plo, phi, s = self._position_bound(c[todo], Yk, tuple(v[todo] for v in centre))
             inside = (plo > Ulo[todo]).all(axis=1) & (phi < Uhi[todo]).all(axis=1) & np.isfinite(s)
             ok = todo[inside]
             verified[ok] = True
@@ -290,7 +291,7 @@ class QuadraticLyapunov:
             if idx.size == 0:
                 break
             Yk = self._with_u(Y[idx], out_lo[idx][:, iu], out_hi[idx][:, iu])
-            plo, phi, s = self._position_bound(c[idx], Yk)
+            plo, phi, s = self._position_bound(c[idx], Yk, tuple(v[idx] for v in centre))
             ok = np.isfinite(s)
             cur_lo, cur_hi = out_lo[np.ix_(idx, iu)], out_hi[np.ix_(idx, iu)]
             out_lo[np.ix_(idx, iu)] = np.where(ok[:, None], np.maximum(plo, cur_lo), cur_lo)
@@ -321,26 +322,49 @@ class QuadraticLyapunov:
     def _centre(self, Y: Interval) -> Interval:
         return self._mean_value("center", Y)
 
-    def _position_bound(self, c, Y: Interval):
-        """``(lo, hi, s)`` of the position bound over ``Y``'s positions (see the module
-        docstring); ``s`` is inf where it cannot be bounded."""
-        iu, n = self.iu, self.n
-        U = Y[:, iu]
-        ux_lo = np.minimum(U.lo, self.u_ref)
-        ux_hi = np.maximum(U.hi, self.u_ref)
-        Yx = self._with_u(Y, ux_lo, ux_hi)
-        H = jacobian_interval(self._y["grad"], Yx)[:, :, iu]  # (B, n, n): hess_u W over the segment hull
-        E = U - self.u_ref
+    def _half_quad(self, H: Interval, E: Interval) -> Interval:
+        """``1/2 E^T H E`` over interval ``H`` (B, n, n) and ``E`` (B, n), squares on the
+        diagonal (``sqr`` keeps them >= 0 where ``E_i * E_i`` would not)."""
+        n = self.n
         quad = None
         for i in range(n):
             term = H[:, i, i] * iv.sqr(E[:, i])
             for j in range(i + 1, n):
                 term = term + (H[:, i, j] + H[:, j, i]) * (E[:, i] * E[:, j])
             quad = term if quad is None else quad + term
+        return quad * 0.5
+
+    def _centre_terms(self, Y: Interval):
+        """``(b, l_c, u_c)`` over ``Y``'s parameters: ``W``'s slope and value at the centre
+        ``u_c(p) = u_ref + e*(p)`` (``W(u_c) = l_c``, ``grad W(u_c) = b``), and the centre."""
+        parts = self._parts_over(Y)
+        return parts[:, :self.n], parts[:, self.n], self._centre(Y) + self.u_ref
+
+    def _position_bound(self, c, Y: Interval, centre=None):
+        """``(lo, hi, s)`` of the position bound over ``Y``'s positions (see the module
+        docstring); ``s`` is inf where it cannot be bounded.
+
+        ``W``'s lower bound is the better of its Taylor expansions about ``u_ref``
+        (``rho . E + 1/2 E^T H E``) and, given ``centre`` (:meth:`_centre_terms`), about the
+        centre ``u_c(p)`` (``l_c + b . D + 1/2 D^T H D``, ``D = U - u_c(P)``): with a centre
+        that tracks the equilibria, ``rho`` is the second-order offset ``-H e*`` (UR5 PD
+        scene: its term ~5e-3 J, the largest part of the slack) while ``b`` nearly vanishes."""
+        iu = self.iu
+        U = Y[:, iu]
+        Yx = self._with_u(Y, np.minimum(U.lo, self.u_ref), np.maximum(U.hi, self.u_ref))
+        H = jacobian_interval(self._y["grad"], Yx)[:, :, iu]  # (B, n, n): hess_u W over the segment hull
+        E = U - self.u_ref
         rho = self._mean_value("residual", Y)
-        w = quad * 0.5 + (rho * E).sum(axis=-1)
+        wlo = (self._half_quad(H, E) + (rho * E).sum(axis=-1)).lo
+        if centre is not None:
+            b, lc, uc = centre
+            Yc = self._with_u(Y, np.minimum(U.lo, uc.lo), np.maximum(U.hi, uc.hi))
+            Hc = jacobian_interval(self._y["grad"], Yc)[:, :, iu]
+            D = U - uc
+            w2 = (lc + (b * D).sum(axis=-1) + self._half_quad(Hc, D)).lo
+            wlo = np.where(np.isfinite(w2), np.maximum(wlo, w2), wlo)
         with np.errstate(invalid="ignore"):
-            s = (_I(c) - w).hi
+            s = (_I(c) - _I(wlo)).hi
             s = np.where(np.isfinite(s), np.maximum(s, 0.0), np.inf)
             r = iv.sqrt(_I(2.0 * s[:, None] * self.kinv_diag[None, :] * _UP)).hi * _UP
         est = self._centre(Y)
@@ -479,7 +503,7 @@ class QuadraticLyapunov:
         Nm = (Nm + Nm.swapaxes(-1, -2)) * 0.5
         Dm = eval_interval(self._y["dissipation"], Om).reshape(B, n, n)
         Ds = (Dm + Dm.swapaxes(-1, -2)) * 0.5
-        bsq = self._b_squares(parts, Om)  # (B, n): bounds of b_i^2 over the set's parameters
+        bsq = self._b_squares(Om)  # (B, n): bounds of b_i^2 over the set's parameters
         out = Decay(B, n)
         out.uc_lo, out.uc_hi = uc.lo, uc.hi
         out.beta = np.sqrt(bsq.sum(axis=1)) * _UP
@@ -628,17 +652,18 @@ class QuadraticLyapunov:
                 box = self._decay_box(dec, t_since - t_k, box)
         return box
 
-    def _b_squares(self, parts: Graph, Om: Interval, pieces: int = 32) -> np.ndarray:
-        """Upper bounds (B, n) of ``b_i(p)^2`` over each box's parameters: the mean-value
-        form over ``pieces`` slices of the widest parameter (``b`` depends on ``p`` only and
-        nearly vanishes: its natural enclosure is all dependency)."""
+    def _parts_over(self, Om: Interval, pieces: int = 32) -> Interval:
+        """The decay parts (``b(p)``, ``l_c(p)``, ``w``) over each box (B, n + 2): the hull of
+        their mean-value forms over ``pieces`` slices of the parameter ``b`` spreads most
+        along (``b`` and ``l_c`` depend on ``p`` only and nearly vanish: their natural
+        enclosures are all dependency)."""
+        parts = self._decay_parts()
         B, N = Om.shape
         n = self.n
         pcols = np.setdiff1d(np.arange(N), np.concatenate([self.iu, self.iz]))
         lo, hi = Om.lo, Om.hi
         if pcols.size == 0 or not np.any(hi[:, pcols] > lo[:, pcols]):
-            bv = self._mean_value_graph(parts, Om)[:, :n]
-            return np.maximum(bv.lo ** 2, bv.hi ** 2)
+            return self._mean_value_graph(parts, Om)
         # slice the parameter b spreads most along (its Jacobian column times the width)
         J = jacobian_interval(parts, Om)[:, :n, :]  # (B, n, N)
         mag = np.maximum(np.abs(J.lo), np.abs(J.hi))
@@ -649,8 +674,14 @@ class QuadraticLyapunov:
         slo = np.repeat(lo[:, None, :], pieces, axis=1)
         shi = np.repeat(hi[:, None, :], pieces, axis=1)
         slo[:, :, k], shi[:, :, k] = edges[:, :-1], edges[:, 1:]
-        bv = self._mean_value_graph(parts, _I(slo.reshape(-1, N), shi.reshape(-1, N)))[:, :n]
-        return np.maximum(bv.lo ** 2, bv.hi ** 2).reshape(B, pieces, n).max(axis=1) * _UP
+        v = self._mean_value_graph(parts, _I(slo.reshape(-1, N), shi.reshape(-1, N)))
+        m = v.shape[-1]
+        return _I(v.lo.reshape(B, pieces, m).min(axis=1), v.hi.reshape(B, pieces, m).max(axis=1))
+
+    def _b_squares(self, Om: Interval) -> np.ndarray:
+        """Upper bounds (B, n) of ``b_i(p)^2`` over each box's parameters."""
+        bv = self._parts_over(Om)[:, :self.n]
+        return np.maximum(bv.lo ** 2, bv.hi ** 2) * _UP
 
     def _mean_value_graph(self, g: Graph, Y: Interval) -> Interval:
         nat = eval_interval(g, Y)
