@@ -409,6 +409,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [_energy_shell_hook(masses, loop, box)]
     t_eval = output_times(t0, t_end, output_dt)
     if invariant_after is not None:
+        if solver_kwargs.get("workers") == "auto" and solver_kwargs.get("client") is None:
+            solver_kwargs.pop("workers")  # "every core when worthwhile": here it is not
         if any(solver_kwargs.get(k) is not None for k in ("workers", "client", "chunks")):
             raise ValueError("invariant_after runs in one process (no workers, client or chunks): the "
                              "invariant is proven for every set at once")

@@ -954,9 +954,10 @@ class InvariantHook(Hook):
         solution.boxes = list(solution.boxes) + [at(t) for t in later]
         solution.hull = _stack_hulls(solution.boxes)
         if self.t_end > t1:
-            # one tube piece per output interval, each the box at its start (the bound of
-            # V~ only falls with time; the energy box holds throughout)
-            edges = np.unique(np.concatenate([[t1], later, [self.t_end]]))
+            # tube pieces at the output times and on a grid of 100 (each the box at its
+            # start: the bound of V~ only falls with time; the energy box holds throughout)
+            edges = np.unique(np.concatenate([[t1], later, np.linspace(t1, self.t_end, 101)[1:-1],
+                                              [self.t_end]]))
             solution.tube = list(solution.tube) + [at(a) for a in edges[:-1]]
             solution.tube_t = np.concatenate([solution.tube_t, edges[1:]])
             solution.tube_hull = _stack_hulls(solution.tube)

@@ -256,3 +256,28 @@ def test_bad_control_is_one_line_exit_2(tmp_path, control, words, capsys):
     assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--no-figures"]) == 2
     err = capsys.readouterr().err.strip()
     assert words in err and len(err.splitlines()) == 1, err
+
+
+INVARIANT = CONTROL.replace("t_end = 0.3\noutput_dt = 0.1\nmode = \"ii\"", "t_end = 6.0\noutput_dt = 0.5\nmode = \"i\"") \
+    .replace("order = 10\n", "order = 10\ninvariant_after = 0.5\n")
+
+
+def test_invariant_after_runs_from_a_scene(tmp_path, capsys):
+    """A PD hold with `invariant_after`: the run answers to t_end, the runner's own sampled
+    trajectories are inside, result.json has every output time."""
+    scene = tmp_path / "c.toml"
+    scene.write_text(INVARIANT.format(control='type = "pd"\nbandwidth = 4.0\ngravity_compensation = true'))
+    out = tmp_path / "o"
+    assert main(["simulate", str(scene), "--out", str(out), "--samples", "8", "--no-figures"]) == 0
+    d = read_result(out / "result.json")
+    assert d["status"] == "completed" and d["t_reached"] == 6.0
+    assert [o["t"] for o in d["outputs"]][-1] == 6.0 and len(d["outputs"]) == 13
+    assert "all inside" in capsys.readouterr().out
+
+
+def test_invariant_after_with_a_controller_it_cannot_prove_is_one_line_exit_2(tmp_path, capsys):
+    scene = tmp_path / "c.toml"
+    scene.write_text(INVARIANT.format(control='type = "computed_torque"\nkp = 25\nkd = 10'))
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--no-figures"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "one PD controller" in err and len(err.splitlines()) == 1, err
