@@ -164,3 +164,14 @@ def test_point_parameters_are_not_carried_as_states():
                            dense_output=True).sol for s in np.random.default_rng(5).integers(0, 2, (6, 4)).astype(bool)]
         assert not misses(sol, trajs, per_step=3, states=4)
         assert (sol.boxes[-1].width() < 1e-4).all()   # the decay: 6e-7..6e-6 at T = 5
+
+
+def test_certificates_over_cut_regions_hold(monkeypatch):
+    """Every certificate over the region cut in 27 pieces (one rate and floor for all, the
+    box as the hull of each piece's bound): the oracle stays inside."""
+    real = invariant.QuadraticLyapunov.certify
+    monkeypatch.setattr(invariant.QuadraticLyapunov, "certify", lambda self, region, splits=3: real(self, region, 3))
+    sol = run()
+    assert sol.status == "completed" and sol.stats["decay_rates"][0][1][0] > 0
+    assert not misses(sol, oracle(sol, 1), per_step=3, states=4)
+    assert (sol.boxes[-1].width()[0][2:] < 0.05 * sol.stats["invariant_box"].width()[0][2:]).all()
