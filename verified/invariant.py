@@ -376,11 +376,25 @@ class QuadraticLyapunov:
         lo[bad], hi[bad] = -np.inf, np.inf
         return lo, hi, s
 
+    def _mass_over(self, Y: Interval, dA: Interval | None = None) -> Interval:
+        """``A`` over each box (B, n, n): its natural enclosure intersected with its
+        mean-value form. The natural one of the composite-rigid-body sum carries every
+        product's dependency (UR5 PD scene at 1 s: ``A_11`` +-0.62 of 2.14 over the outer
+        payload piece's box, +-0.23 in mean-value form; with it all 4 pieces certify a
+        decay, 1.24-1.55 /s, against 3 of 4 at 0.82-1.24)."""
+        n, B = self.n, Y.shape[0]
+        g = self._y["mass"]
+        if dA is None:
+            dA = jacobian_interval(g, Y)
+        m = Y.mid()
+        mv = eval_interval(g, _I(m)) + (dA * (Y - m)[:, None, :]).sum(axis=-1)
+        return eval_interval(g, Y).intersect(mv).reshape(B, n, n)
+
     def _rate_bound(self, s, Y: Interval):
         """``|z_i| <= sqrt(2 s max (A^-1)_ii)`` over ``Y`` (B, n); inf where ``A(Y)`` is not
         verified regular."""
         n, B = self.n, Y.shape[0]
-        A = eval_interval(self._y["mass"], Y).reshape(B, n, n)
+        A = self._mass_over(Y)
         As = (A + A.swapaxes(-1, -2)) * 0.5
         rhs = np.broadcast_to(np.eye(n), (B, n, n))
         with np.errstate(all="ignore"):
@@ -563,9 +577,10 @@ class QuadraticLyapunov:
         Hl = jacobian_interval(self._grad_level, _zero_rates(Om, iz))
         Kb = Hl[:, iu][:, :, iu]
         Kb = (Kb + Kb.swapaxes(-1, -2)) * 0.5
-        A = eval_interval(self._y["mass"], Om).reshape(P, n, n)
+        dAy = jacobian_interval(self._y["mass"], Om)  # (P, n n, N)
+        A = self._mass_over(Om, dAy)
         A = (A + A.swapaxes(-1, -2)) * 0.5
-        dA = jacobian_interval(self._y["mass"], Om)[:, :, iu].reshape(P, n, n, n)
+        dA = dAy[:, :, iu].reshape(P, n, n, n)
         Nm = (dA * (pieces[:, iu] - uc)[:, None, None, :]).sum(axis=-1)
         Nm = (Nm + Nm.swapaxes(-1, -2)) * 0.5
         Dm = eval_interval(self._y["dissipation"], Om).reshape(P, n, n)
