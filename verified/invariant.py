@@ -484,7 +484,7 @@ class QuadraticLyapunov:
         v = b.add(b.sub(L, out[self.n]), b.mul(b.const(float(eps)), out[self.n + 1]))
         return b.build([v], ["V"])
 
-    def certify(self, region: Interval, splits=(1, 2, 3)) -> "Decay":
+    def certify(self, region: Interval, splits=(1, 2, 3), eps=None) -> "Decay":
         """A decay certificate per box of ``region`` (Interval (B, N) over ``y``: boxes that
         every later state of a set stays in, e.g. :meth:`boxes`), without its starting
         level (``v1`` is inf; :meth:`decay` and :meth:`chain` fill it in).
@@ -499,6 +499,9 @@ class QuadraticLyapunov:
         structure :meth:`check_dynamics` checks. Enclosing ``Kb``, ``A``, ``dA/du`` and
         ``Dm`` over the region and verifying ``Q - lam P >= margin D^-2`` for every member
         gives ``dV~/dt <= -lam V~ + gamma``, ``gamma = (lam + eps)^2 |D b|^2 / (4 margin)``.
+
+        ``eps``: None (try a few multiples of the damping rate ``A^-1 Dm``) or one value per
+        box (a restart keeps its certificate's ``eps``: the metric ``P`` then barely changes).
 
         ``splits``: the region is also tried cut into ``k^d`` pieces (``k`` in ``splits``,
         ``d <= 3`` positions, those the mass matrix varies most along), each certified with
@@ -522,7 +525,7 @@ class QuadraticLyapunov:
             mats = self._matrices(pieces, uc[owner])
             for j in range(B):
                 mine = np.flatnonzero(owner == j)
-                best = self._certify_pieces(mats, mine, bsq[j])
+                best = self._certify_pieces(mats, mine, bsq[j], None if eps is None else [float(eps[j])])
                 if best is not None and best["lam"] > out.lam[j]:
                     best["boxes"] = (pieces.lo[mine], pieces.hi[mine])
                     out.set(j, **best)
@@ -587,7 +590,7 @@ class QuadraticLyapunov:
         Ds = (Dm + Dm.swapaxes(-1, -2)) * 0.5
         return Kb, A, Nm, Dm, Ds
 
-    def _certify_pieces(self, mats, mine, bsq):
+    def _certify_pieces(self, mats, mine, bsq, eps_values=None):
         """The best common certificate over the pieces ``mine`` (dict for :meth:`Decay.set`
         without ``boxes``), or None: for each ``eps`` every piece must certify; the rate is
         the smallest (a piece's inequality holds at any smaller rate, ``P >= 0``), ``gamma``
@@ -600,8 +603,7 @@ class QuadraticLyapunov:
             return None
         r = float(np.median(rate)) if np.all(np.isfinite(rate)) and np.median(rate) > 0 else 0.0
         best = None
-        for f in (0.05, 0.1, 0.2, 0.3, 0.45):
-            eps = f * r
+        for eps in (eps_values if eps_values is not None else [f * r for f in (0.05, 0.1, 0.2, 0.3, 0.45)]):
             if not eps > 0:
                 continue
             certs = []
@@ -681,13 +683,15 @@ class QuadraticLyapunov:
 
         Certificate ``k`` holds from ``dt_k`` on; its box at ``dt_(k+1)`` (one e-fold of
         its bound later) holds for all later times, so certificate ``k + 1`` is certified
-        over that smaller box (a larger rate) and started from what ``k`` bounds there:
-        ``V~_(k+1) <= beta |y| + y^T P_hi y <= beta Y_k + mu w_k`` with ``y^T P_low,k y <= w_k``,
-        ``|y| <= Y_k`` and ``mu`` a verified bound of ``max y^T P_hi y / y^T P_low,k y``."""
+        over that smaller box (a larger rate) and started from what ``k`` bounds there
+        (:meth:`_chain_levels`). Per set the new one is kept where its box at the horizon
+        is narrower; candidates: a free ``eps`` and the old one's (the metric barely
+        changes, so little is lost in the restart)."""
         out = [(0.0, first)]
         cur, box, t = first, region, 0.0
+        cols = np.concatenate([self.iu, self.iz])  # what a certificate bounds
         for _ in range(max(0, int(stages))):
-            ok = cur.lam > 0
+            ok = (cur.lam > 0) & np.isfinite(cur.v1)
             if not ok.any():
                 break
             step = float(np.max(1.0 / cur.lam[ok]))
@@ -695,25 +699,17 @@ class QuadraticLyapunov:
                 break
             t += step
             box = self._decay_box(cur, step, box)
-            nxt = self.certify(box)
-            for j in np.flatnonzero((nxt.lam > 0) & ok):
-                # the state is in some old piece (its bounds) and some new piece (its P)
-                _, ymax, wv = self._level_at(cur, j, step)
-                v1 = 0.0
-                for hi_new in nxt.p_hi[j]:
-                    for low_old, y_o, w_o in zip(cur.p_low[j], ymax, wv):
-                        mu = _max_ratio(hi_new, low_old)
-                        v1 = np.inf if mu is None else max(v1, (nxt.beta[j] * y_o + mu * w_o) * _UP)
-                if not np.isfinite(v1):
-                    nxt.lam[j] = 0.0
-                    continue
-                nxt.v1[j] = v1
             rest = horizon - t
+            candidates = []
+            for eps in (None, np.where(ok, cur.eps, 1.0)):
+                cand = self.certify(box, eps=eps)
+                self._chain_levels(cand, cur, ok, step)
+                candidates.append(cand)
+            nxt = self._narrowest(candidates, rest, box)
             free = _I(np.full_like(box.lo, -np.inf), np.full_like(box.hi, np.inf))
-            cols = np.concatenate([self.iu, self.iz])  # what a certificate bounds
             w_new = _scaled_width(self._decay_box(nxt, rest, free)[:, cols], box[:, cols])
             w_old = _scaled_width(self._decay_box(cur, step + rest, free)[:, cols], box[:, cols])
-            worse = ~np.isfinite(nxt.v1) | (nxt.lam <= 0) | ~(w_new < w_old)
+            worse = ~np.isfinite(nxt.v1) | (nxt.lam <= 0) | ~self._better(w_new, w_old)
             if worse.all():
                 break
             nxt.keep_from(cur, worse)
@@ -722,6 +718,28 @@ class QuadraticLyapunov:
             out.append((t, nxt))
             cur = nxt
         return out
+
+    @staticmethod
+    def _better(w_new, w_old):
+        """Where a restart is kept: its box at the horizon is narrower."""
+        return w_new < w_old
+
+    def _chain_levels(self, nxt: "Decay", cur: "Decay", ok, step: float) -> None:
+        """``nxt.v1`` from what ``cur`` bounds ``step`` after its start: the state lies in
+        some old piece (``y^T P_low y <= w``, ``|y| <= Y``) and some new piece (its
+        ``P <= P_hi``), so ``V~ <= beta Y + mu w`` with ``mu`` a verified bound of
+        ``max y^T P_hi y / y^T P_low y``, over every pair of pieces."""
+        for j in np.flatnonzero((nxt.lam > 0) & ok):
+            _, ymax, wv = self._level_at(cur, j, step)
+            v1 = 0.0
+            for hi_new in nxt.p_hi[j]:
+                for low_old, y_o, w_o in zip(cur.p_low[j], ymax, wv):
+                    mu = _max_ratio(hi_new, low_old)
+                    v1 = np.inf if mu is None else max(v1, (nxt.beta[j] * y_o + mu * w_o) * _UP)
+            if np.isfinite(v1):
+                nxt.v1[j] = v1
+            else:
+                nxt.lam[j] = 0.0
 
     def _level_at(self, dec: "Decay", j: int, t_since: float):
         """``(v, Y, w)`` for set ``j`` at ``t_since`` after the certificate's start:
@@ -832,7 +850,7 @@ class QuadraticLyapunov:
             return None
         if not lam_mid > 0:
             return None
-        for theta in (0.9, 0.75, 0.6, 0.45, 0.3, 0.15):
+        for theta in (0.9, 0.75, 0.6, 0.45, 0.3, 0.15):  # (a finer grid: larger rates, smaller margins, higher floors; measured worse)
             lam = theta * lam_mid
             got = _psd_margin(*_mid_rad(Q - P * lam))
             if got is None:

@@ -170,8 +170,18 @@ def test_certificates_over_cut_regions_hold(monkeypatch):
     """Every certificate over the region cut in 27 pieces (one rate and floor for all, the
     box as the hull of each piece's bound): the oracle stays inside."""
     real = invariant.QuadraticLyapunov.certify
-    monkeypatch.setattr(invariant.QuadraticLyapunov, "certify", lambda self, region, splits=3: real(self, region, 3))
+    monkeypatch.setattr(invariant.QuadraticLyapunov, "certify",
+                        lambda self, region, splits=3, eps=None: real(self, region, 3, eps))
     sol = run()
     assert sol.status == "completed" and sol.stats["decay_rates"][0][1][0] > 0
     assert not misses(sol, oracle(sol, 1), per_step=3, states=4)
     assert (sol.boxes[-1].width()[0][2:] < 0.05 * sol.stats["invariant_box"].width()[0][2:]).all()
+
+
+def test_restarted_certificates_hold(monkeypatch):
+    """Every restart of the certificate kept (they are kept only where narrower, and on
+    this arm none is): the levels carried across restarts keep the oracle inside."""
+    monkeypatch.setattr(invariant.QuadraticLyapunov, "_better", staticmethod(lambda w_new, w_old: np.isfinite(w_new)))
+    sol = run()
+    assert sol.status == "completed" and len(sol.stats["decay_rates"]) > 2
+    assert not misses(sol, oracle(sol, 1), per_step=3, states=4)
