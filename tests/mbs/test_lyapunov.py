@@ -178,6 +178,7 @@ def test_certificates_over_cut_regions_hold(monkeypatch):
     assert (sol.boxes[-1].width()[0][2:] < 0.05 * sol.stats["invariant_box"].width()[0][2:]).all()
 
 
+@pytest.mark.slow  # (2 s; the default run is at 164 of its 180 s in CI)
 def test_restarted_certificates_hold(monkeypatch):
     """Every restart of the certificate kept (they are kept only where narrower, and on
     this arm none is): the levels carried across restarts keep the oracle inside."""
