@@ -255,6 +255,10 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     st = sol.stats
     log(f"{sol.status} at t = {sol.t_reached:g} s{(' (' + sol.reason + ')') if sol.reason else ''}; "
         f"{st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")
+    if "invariant_from" in st:
+        rates = [float(r) for _, lam in st.get("decay_rates", [])[:1] for r in lam]
+        log(f"every time after {st['invariant_from']:g} s proven at once by the closed loop's energy"
+            + (f" (decay rates {min(rates):.2g}..{max(rates):.2g} /s)" if rates and max(rates) > 0 else ""))
     t_w, w = final_widths(sol)
     if w is not None:
         what = {"completed": "final widths", "breakdown": "widths at the break-down"}.get(

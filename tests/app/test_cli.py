@@ -48,7 +48,8 @@ def test_simulate_writes_result_and_figures(tmp_path, mode, capsys):
     assert (out / "enclosures.png").stat().st_size > 1000
     if mode != "i":
         assert (out / "reduction_area.png").is_file() and (out / "consistency_plane.png").is_file()
-    assert "all inside" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "all inside" in printed and "every time after 0.5 s proven at once" in printed
 
 
 def test_overrides(tmp_path):
@@ -272,7 +273,8 @@ def test_invariant_after_runs_from_a_scene(tmp_path, capsys):
     d = read_result(out / "result.json")
     assert d["status"] == "completed" and d["t_reached"] == 6.0
     assert [o["t"] for o in d["outputs"]][-1] == 6.0 and len(d["outputs"]) == 13
-    assert "all inside" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "all inside" in printed and "every time after 0.5 s proven at once" in printed
 
 
 def test_invariant_after_with_a_controller_it_cannot_prove_is_one_line_exit_2(tmp_path, capsys):
