@@ -722,11 +722,8 @@ class EnergyShell:
         Ms = (Mq + Mq.swapaxes(-1, -2)) * 0.5
         Vq = eval_interval(self.V_graph, Q, prm)[..., 0]
         slack = _I(hm, hm) - Vq  # hmax - V(q) over each piece
-        rhs = np.broadcast_to(np.eye(nq), (BP, nq, nq))  # row i: e_i
         with np.errstate(all="ignore"):
-            cols = linalg.solve(Ms.reshape(BP, 1, nq, nq).broadcast_to((BP, nq, nq, nq)), rhs,
-                                on_failure="entire")
-            dhi = np.diagonal(cols.hi, axis1=1, axis2=2)  # (BP, nq): max of (M^-1)_ii
+            dhi = linalg.inverse_diagonal(Ms).hi  # (BP, nq): max of (M^-1)_ii
             s_hi = slack.hi
             sp = np.maximum(s_hi, 0.0)[:, None]
             dp = np.maximum(dhi, 0.0)

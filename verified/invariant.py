@@ -86,13 +86,21 @@ def _second_order_upper(gy: Graph, grad: Graph, c, A, R) -> np.ndarray:
     gA = linalg.matmul(g.reshape(B, 1, N), A).reshape(B, m)
     H = jacobian_interval(grad, X)  # (B, N, N)
     S = linalg.matmul(linalg.matmul(np.swapaxes(A, 1, 2), H), A)  # (B, m, m)
-    RR = R[:, :, None] * R[:, None, :]
-    sq = iv.sqr(R)
-    idx = np.arange(m)
-    lo, hi = RR.lo.copy(), RR.hi.copy()
-    lo[:, idx, idx], hi[:, idx, idx] = sq.lo, sq.hi
-    quad = (S * _I(lo, hi)).reshape(B, m * m).sum(axis=-1)
-    return (L0 + (gA * R).sum(axis=-1) + quad * 0.5).hi
+    return (L0 + (gA * R).sum(axis=-1) + _half_form(S, R)).hi
+
+
+def _half_form(S: Interval, R: Interval) -> Interval:
+    """``1/2 r^T S r`` over every ``r`` in ``R`` (B, m) and ``S`` in the interval matrices
+    (B, m, m): squares on the diagonal (``sqr`` keeps them >= 0 where ``r_i r_i`` would
+    not) and each off-diagonal pair once, ``(S_ij + S_ji) r_i r_j``."""
+    m = R.shape[1]
+    i, j = np.triu_indices(m, 1)
+    d = np.arange(m)
+    diag = (S[:, d, d] * iv.sqr(R)).sum(axis=-1)
+    if i.size == 0:
+        return diag * 0.5
+    off = ((S[:, i, j] + S[:, j, i]) * (R[:, i] * R[:, j])).sum(axis=-1)
+    return (diag + off) * 0.5
 
 
 class InvariantBoxes:
@@ -139,8 +147,7 @@ class QuadraticLyapunov:
                              f"K of shape {K.shape}")
         if not np.array_equal(K, K.T):
             raise ValueError("K must be exactly symmetric")
-        kinv = linalg.solve(_I(np.broadcast_to(K, (n, n, n)).copy()), _I(np.eye(n)), on_failure="entire")
-        dk = np.diagonal(kinv.hi) if kinv.ndim == 2 else kinv.hi.diagonal()
+        dk = linalg.inverse_diagonal(K).hi
         # (K^-1)_ii from a verified solve; positive definiteness from the float spectrum
         # with a margin far above its backward error (n eps |K|)
         lam = np.linalg.eigvalsh(K)
@@ -166,6 +173,8 @@ class QuadraticLyapunov:
         self._y = {k: params_to_inputs(g) for k, g in self.graphs.items()}
         self._grad_level = None  # built on first use (second-order level bound)
         self._decay_graphs = None  # built on first use (decay certificate)
+        self._vtilde_graphs = {}  # eps -> (V~, grad V~)
+        self._bounded = np.concatenate([self.iu, self.iz])  # the columns a certificate bounds
 
     # ------------------------------------------------------------------ checks
     def check(self, x, p=None, rtol: float = 1e-8) -> None:
@@ -211,9 +220,13 @@ class QuadraticLyapunov:
         inputs; ``params`` the graph parameters when not carried as states): the smaller
         of the mean-value form and the second-order form over ``c + C r0 + Q r`` for
         first-order sets, over the hull otherwise."""
+        return self._upper_over(self._y["level"], self._level_gradient(), sets, params)
+
+    def _level_gradient(self) -> Graph:
+        """``grad L`` over ``y`` (built on first use)."""
         if self._grad_level is None:
             self._grad_level = gradient_graph(self._y["level"])
-        return self._upper_over(self._y["level"], self._grad_level, sets, params)
+        return self._grad_level
 
     def _upper_over(self, gy: Graph, grad: Graph, sets, params=None) -> np.ndarray:
         from .contractor import mean_value_row
@@ -324,18 +337,6 @@ class QuadraticLyapunov:
     def _centre(self, Y: Interval) -> Interval:
         return self._mean_value("center", Y)
 
-    def _half_quad(self, H: Interval, E: Interval) -> Interval:
-        """``1/2 E^T H E`` over interval ``H`` (B, n, n) and ``E`` (B, n), squares on the
-        diagonal (``sqr`` keeps them >= 0 where ``E_i * E_i`` would not)."""
-        n = self.n
-        quad = None
-        for i in range(n):
-            term = H[:, i, i] * iv.sqr(E[:, i])
-            for j in range(i + 1, n):
-                term = term + (H[:, i, j] + H[:, j, i]) * (E[:, i] * E[:, j])
-            quad = term if quad is None else quad + term
-        return quad * 0.5
-
     def _centre_terms(self, Y: Interval):
         """``(b, l_c, u_c)`` over ``Y``'s parameters: ``W``'s slope and value at the centre
         ``u_c(p) = u_ref + e*(p)`` (``W(u_c) = l_c``, ``grad W(u_c) = b``), and the centre."""
@@ -357,21 +358,21 @@ class QuadraticLyapunov:
         H = jacobian_interval(self._y["grad"], Yx)[:, :, iu]  # (B, n, n): hess_u W over the segment hull
         E = U - self.u_ref
         rho = self._mean_value("residual", Y)
-        wlo = (self._half_quad(H, E) + (rho * E).sum(axis=-1)).lo
+        wlo = (_half_form(H, E) + (rho * E).sum(axis=-1)).lo
         if centre is not None:
             b, lc, uc = centre
             Yc = self._with_u(Y, np.minimum(U.lo, uc.lo), np.maximum(U.hi, uc.hi))
             Hc = jacobian_interval(self._y["grad"], Yc)[:, :, iu]
             D = U - uc
-            w2 = (lc + (b * D).sum(axis=-1) + self._half_quad(Hc, D)).lo
+            w2 = (lc + (b * D).sum(axis=-1) + _half_form(Hc, D)).lo
             wlo = np.where(np.isfinite(w2), np.maximum(wlo, w2), wlo)
         with np.errstate(invalid="ignore"):
             s = (_I(c) - _I(wlo)).hi
             s = np.where(np.isfinite(s), np.maximum(s, 0.0), np.inf)
             r = iv.sqrt(_I(2.0 * s[:, None] * self.kinv_diag[None, :] * _UP)).hi * _UP
-        est = self._centre(Y)
-        lo = (est + self.u_ref - r).lo
-        hi = (est + self.u_ref + r).hi
+        uc = centre[2] if centre is not None else self._centre(Y) + self.u_ref  # depends on p only
+        lo = (uc - r).lo
+        hi = (uc + r).hi
         bad = ~np.isfinite(s)
         lo[bad], hi[bad] = -np.inf, np.inf
         return lo, hi, s
@@ -395,11 +396,8 @@ class QuadraticLyapunov:
         verified regular."""
         n, B = self.n, Y.shape[0]
         A = self._mass_over(Y)
-        As = (A + A.swapaxes(-1, -2)) * 0.5
-        rhs = np.broadcast_to(np.eye(n), (B, n, n))
         with np.errstate(all="ignore"):
-            cols = linalg.solve(As.reshape(B, 1, n, n).broadcast_to((B, n, n, n)), rhs, on_failure="entire")
-            d = np.diagonal(cols.hi, axis1=1, axis2=2)
+            d = linalg.inverse_diagonal((A + A.swapaxes(-1, -2)) * 0.5).hi
             ok = np.isfinite(d) & (d > 0)
             dd = np.where(ok, d, 1.0)
             b = iv.sqrt(_I(2.0 * np.asarray(s, float)[:, None] * dd * _UP)).hi * _UP
@@ -445,8 +443,6 @@ class QuadraticLyapunov:
         ``u_c(p) = u_ref + e*(p)``, z = 0), ``l_c(p) = L(u_c(p), 0, p)`` and
         ``w(y) = (u - u_c(p))^T A(u, p) z``."""
         if self._decay_graphs is None:
-            if self._grad_level is None:
-                self._grad_level = gradient_graph(self._y["level"])
             gy, n = self._y, self.n
             N = gy["level"].n_inputs
             b = GraphBuilder(N, 0, input_names=list(gy["level"].input_names))
@@ -458,7 +454,7 @@ class QuadraticLyapunov:
                 yc[i] = uc[k]
             for i in self.iz:
                 yc[i] = b.const(0.0)
-            gl = embed(b, self._grad_level, yc)
+            gl = embed(b, self._level_gradient(), yc)
             (lc,) = embed(b, gy["level"], yc)
             A = embed(b, gy["mass"], y)
             w = None
@@ -473,8 +469,16 @@ class QuadraticLyapunov:
                                          [f"b{k + 1}" for k in range(n)] + ["l_c", "w"])
         return self._decay_graphs
 
-    def _vtilde(self, eps: float) -> Graph:
-        """``V~(y) = L(y) + eps w(y) - l_c(p)`` (the strict Lyapunov function, shifted)."""
+    def _vtilde(self, eps: float):
+        """``(V~, grad V~)`` over ``y``, ``V~ = L + eps w - l_c(p)`` (the strict Lyapunov
+        function, shifted); kept per ``eps`` (candidates and restarts share them)."""
+        key = float(eps)
+        if key not in self._vtilde_graphs:
+            g = self._vtilde_graph(key)
+            self._vtilde_graphs[key] = (g, gradient_graph(g))
+        return self._vtilde_graphs[key]
+
+    def _vtilde_graph(self, eps: float) -> Graph:
         parts = self._decay_parts()
         N = parts.n_inputs
         b = GraphBuilder(N, 0, input_names=list(parts.input_names))
@@ -536,9 +540,8 @@ class QuadraticLyapunov:
         ``t_since`` after its start is narrowest relative to ``ref``: a larger rate can come
         with a larger floor or a weaker ``P_low`` (smaller pieces), so the rate alone does
         not decide."""
-        free = _I(np.full_like(ref.lo, -np.inf), np.full_like(ref.hi, np.inf))
-        cols = np.concatenate([self.iu, self.iz])  # what a certificate bounds
-        widths = np.array([_scaled_width(self._decay_box(c, t_since, free)[:, cols], ref[:, cols])
+        cols = self._bounded
+        widths = np.array([_scaled_width(self._decay_box(c, t_since, _unbounded(ref))[:, cols], ref[:, cols])
                            for c in candidates])
         out = candidates[0]
         for j, k in enumerate(np.argmin(widths, axis=0)):
@@ -577,7 +580,7 @@ class QuadraticLyapunov:
         lo, hi = pieces.lo.copy(), pieces.hi.copy()
         lo[:, iu], hi[:, iu] = np.minimum(lo[:, iu], uc.lo), np.maximum(hi[:, iu], uc.hi)
         Om = _I(lo, hi)  # holds every segment from u_c(p) to a state of the piece
-        Hl = jacobian_interval(self._grad_level, _zero_rates(Om, iz))
+        Hl = jacobian_interval(self._level_gradient(), _zero_rates(Om, iz))
         Kb = Hl[:, iu][:, :, iu]
         Kb = (Kb + Kb.swapaxes(-1, -2)) * 0.5
         dAy = jacobian_interval(self._y["mass"], Om)  # (P, n n, N)
@@ -650,7 +653,7 @@ class QuadraticLyapunov:
             own = self.certify(R)
             self._start_levels(own, _select(sets, todo), params)
             ok = (own.lam > 0) & np.isfinite(own.v1) & (own.v1 > own.gamma / np.where(own.lam > 0, own.lam, 1))
-            Bx = self._decay_box(_scaled_level(own, 1.001), 0.0, _I(np.full_like(lo, -np.inf), np.full_like(hi, np.inf)))
+            Bx = self._decay_box(_scaled_level(own, 1.001), 0.0, _unbounded(R))
             inside = ok & np.all((Bx.lo >= lo) & (Bx.hi <= hi), axis=1)
             for k in np.flatnonzero(inside):
                 out.take_row(todo[k], own, k)
@@ -665,8 +668,7 @@ class QuadraticLyapunov:
         ok = np.flatnonzero(out.lam > 0)
         for eps in np.unique(out.eps[ok]):
             idx = ok[out.eps[ok] == eps]
-            vg = self._vtilde(float(eps))
-            out.v1[idx] = self._upper_over(vg, gradient_graph(vg), _select(sets, idx), params)
+            out.v1[idx] = self._upper_over(*self._vtilde(eps), _select(sets, idx), params)
 
     def _sets_hull(self, sets, params) -> Interval:
         """The sets' hulls over ``y``: the states, then the parameters, carried by the sets
@@ -689,7 +691,7 @@ class QuadraticLyapunov:
         changes, so little is lost in the restart)."""
         out = [(0.0, first)]
         cur, box, t = first, region, 0.0
-        cols = np.concatenate([self.iu, self.iz])  # what a certificate bounds
+        cols = self._bounded
         for _ in range(max(0, int(stages))):
             ok = (cur.lam > 0) & np.isfinite(cur.v1)
             if not ok.any():
@@ -706,9 +708,8 @@ class QuadraticLyapunov:
                 self._chain_levels(cand, cur, ok, step)
                 candidates.append(cand)
             nxt = self._narrowest(candidates, rest, box)
-            free = _I(np.full_like(box.lo, -np.inf), np.full_like(box.hi, np.inf))
-            w_new = _scaled_width(self._decay_box(nxt, rest, free)[:, cols], box[:, cols])
-            w_old = _scaled_width(self._decay_box(cur, step + rest, free)[:, cols], box[:, cols])
+            w_new = _scaled_width(self._decay_box(nxt, rest, _unbounded(box))[:, cols], box[:, cols])
+            w_old = _scaled_width(self._decay_box(cur, step + rest, _unbounded(box))[:, cols], box[:, cols])
             worse = ~np.isfinite(nxt.v1) | (nxt.lam <= 0) | ~self._better(w_new, w_old)
             if worse.all():
                 break
@@ -792,7 +793,7 @@ class QuadraticLyapunov:
         parts = self._decay_parts()
         B, N = Om.shape
         n = self.n
-        pcols = np.setdiff1d(np.arange(N), np.concatenate([self.iu, self.iz]))
+        pcols = np.setdiff1d(np.arange(N), self._bounded)
         lo, hi = Om.lo, Om.hi
         if pcols.size == 0 or not np.any(hi[:, pcols] > lo[:, pcols]):
             return self._mean_value_graph(parts, Om)
@@ -856,9 +857,7 @@ class QuadraticLyapunov:
             if got is None:
                 continue
             d2s, margin, _ = got  # Q - lam P >= margin D^-2 for every member
-            kinv = linalg.solve(_I(np.broadcast_to(p_low, (m2, m2, m2)).copy()), _I(np.eye(m2)),
-                                on_failure="entire")
-            pinv = np.diagonal(kinv.hi) * _UP
+            pinv = linalg.inverse_diagonal(p_low).hi * _UP
             if not np.all(np.isfinite(pinv) & (pinv > 0)):
                 return None
             return dict(eps=eps, lam=lam, margin=margin * (1 - 1e-9), d2=d2s[:n], p_min=p_min, pinv=pinv,
@@ -897,6 +896,11 @@ class Decay:
         """Take ``other``'s certificates for ``rows`` (where this one is no better)."""
         for j in np.flatnonzero(rows):
             self.take_row(j, other, j)
+
+
+def _unbounded(like: Interval) -> Interval:
+    """Boxes of ``like``'s shape with no bounds (what a certificate's box narrows)."""
+    return _I(np.full_like(like.lo, -np.inf), np.full_like(like.hi, np.inf))
 
 
 def _scaled_level(dec: Decay, f: float) -> Decay:

@@ -22,7 +22,7 @@ from numba import njit
 from . import _kernels as _k
 from .interval import Interval, _as_interval, _flatten, matmul, matvec  # noqa: F401 (re-exported)
 
-__all__ = ["matmul", "matvec", "solve", "SingularMatrixError"]
+__all__ = ["matmul", "matvec", "solve", "inverse_diagonal", "SingularMatrixError"]
 
 
 class SingularMatrixError(np.linalg.LinAlgError, ValueError):
@@ -210,3 +210,15 @@ def solve(a, b, *, on_failure="raise"):
         xhi[bad] = np.inf
     shape = batch + (n,)
     return Interval._from_bounds(xlo.reshape(shape), xhi.reshape(shape))
+
+
+def inverse_diagonal(a, *, on_failure="entire"):
+    """Enclose the diagonal of ``a^-1`` for every matrix in ``a`` (Interval or float,
+    shape ``(..., n, n)``): Interval ``(..., n)``, ``[-inf, inf]`` where a system cannot be
+    verified (``on_failure`` as for :func:`solve`). Solves ``a x = e_i`` for every ``i``;
+    the ``i``-th entry of the ``i``-th solution is ``(a^-1)_ii``."""
+    a = _as_interval(a)
+    n = a.shape[-1]
+    cols = solve(a.reshape(a.shape[:-2] + (1, n, n)), np.eye(n), on_failure=on_failure)
+    return Interval._from_bounds(np.diagonal(cols.lo, axis1=-2, axis2=-1).copy(),
+                                 np.diagonal(cols.hi, axis1=-2, axis2=-1).copy())

@@ -117,3 +117,18 @@ def test_shape_errors_are_clear():
         solve(Interval(np.eye(2)), Interval(np.ones(3)))
     with pytest.raises(ValueError, match="align"):
         matmul(Interval(np.ones((2, 3))), Interval(np.ones((2, 3))))
+
+
+def test_inverse_diagonal_encloses_every_member():
+    from verified.linalg import inverse_diagonal
+    rng = np.random.default_rng(2)
+    G = rng.normal(size=(4, 3, 3))
+    mid = G @ G.transpose(0, 2, 1) + 3 * np.eye(3)
+    box = Interval(mid - 0.05, mid + 0.05)
+    d = inverse_diagonal(box)
+    assert d.shape == (4, 3)
+    for _ in range(50):
+        M = mid + rng.uniform(-0.05, 0.05, mid.shape)
+        assert (d.lo <= np.diagonal(np.linalg.inv(M), axis1=1, axis2=2)).all()
+        assert (np.diagonal(np.linalg.inv(M), axis1=1, axis2=2) <= d.hi).all()
+    assert not np.isfinite(inverse_diagonal(np.zeros((2, 2))).hi).any()   # singular: entire
