@@ -13,13 +13,14 @@ has ``dL/dt = qd^T (tau - D qd - g) + qd^T Kp e + qd^T (g - g_nom)
 ``phi(p)``: the parameters do not change along a solution. That needs ``Kp`` symmetric,
 ``Kd + Kd^T`` positive semidefinite and ``D >= 0``, all checked here.
 
-The choice ``phi(p) = dV(q_ref, p) - 1/2 e*^T Kp e*`` with ``e*(p) = -Kp^-1 G(q_ref, p)``,
-``G = grad_q dV`` (the offset at which the controller balances the gravity it does not
-compensate, to first order) puts ``L``'s minimum near zero for every ``p``, and gives the
+The choice ``phi(p) = dV(q_ref, p) - 1/2 e*^T Kp e*``, with ``e*(p)`` a quadratic in the
+parameters fitted to the offsets at which the controller balances the gravity it does not
+compensate (:func:`_equilibrium_fit`; any function of ``p`` is sound, a close one keeps
+the floor of the decay low), puts ``L``'s minimum near zero for every ``p`` and gives the
 structure :class:`verified.invariant.QuadraticLyapunov` bounds: ``A = M(q, p)``,
-``K = Kp``, centre ``e*(p)``, ``grad = G`` (``hess_q dV = dG/dq``) and
-``rho(p) = G(q_ref, p) + Kp e*(p)`` (zero up to rounding: ``Kp^-1`` is a float inverse,
-so ``e*`` is only a centre, and ``rho`` carries what it misses).
+``K = Kp``, centre ``e*(p)``, ``grad = G = grad_q dV`` (``hess_q dV = dG/dq``),
+``rho(p) = G(q_ref, p) + Kp e*(p)`` (the second-order offset between ``q_ref`` and the
+equilibrium) and the dissipation ``Kd + D``.
 """
 from __future__ import annotations
 
@@ -31,14 +32,14 @@ from .scalar import add, mul, neg, sub, total
 __all__ = ["pd_hold_lyapunov"]
 
 
-def _gain_matrix(K, n: int, name: str) -> np.ndarray:
+def _gain_matrix(K, n: int) -> np.ndarray:
     K = np.asarray(K, float)
     return np.diag(K) if K.ndim == 1 else K.reshape(n, n)
 
 
 def _check_loop(loop: ClosedLoop):
-    """The controller and plant for which ``dL/dt <= 0`` is proven; else a ControlError
-    naming what is not covered."""
+    """``(pd, Kp, Kd)`` (gains as matrices) of the controller and plant for which
+    ``dL/dt <= 0`` is proven; else a ControlError naming what is not covered."""
     if not isinstance(loop, ClosedLoop):
         raise ControlError(f"an invariant set needs a closed loop (mbs.control.ClosedLoop), got {type(loop).__name__}")
     ctrls = loop.controllers
@@ -50,7 +51,7 @@ def _check_loop(loop: ClosedLoop):
     if pd.ref.time_dependent or loop.timed:
         raise ControlError("an invariant set needs a constant reference q_ref (a moving reference adds energy)")
     n = loop.n
-    Kp, Kd = _gain_matrix(pd.Kp, n, "kp"), _gain_matrix(pd.Kd, n, "kd")
+    Kp, Kd = _gain_matrix(pd.Kp, n), _gain_matrix(pd.Kd, n)
     if not np.array_equal(Kp, Kp.T):
         raise ControlError("an invariant set needs a symmetric Kp (a skew part is not a potential force)")
     S = Kd + Kd.T
@@ -66,7 +67,7 @@ def _check_loop(loop: ClosedLoop):
         lo = np.asarray(cp.lo, float)
         if any(lo[k] < 0 for k in cp._damping.values()):
             raise ControlError("an invariant set needs joint damping >= 0 (an uncertain damping reaches below 0)")
-    return pd, Kp
+    return pd, Kp, Kd
 
 
 def _inertial_data(m):
@@ -226,20 +227,21 @@ def _equilibrium_fit(G_g, K, qref, lo, hi):
     return centre
 
 
-def pd_hold_lyapunov(loop: ClosedLoop, samples=None):
+def pd_hold_lyapunov(loop: ClosedLoop, samples=None, rhs=None):
     """The :class:`verified.invariant.QuadraticLyapunov` of ``loop`` (one PD controller
     holding a constant pose; see the module docstring), with graphs over the loop's states
     and parameters (``loop.state_names``, ``loop.param_names``).
 
     ``samples``: optional ``(x (S, 2n), p (S, n_p))`` floats at which the structure and
     ``dL/dt <= 0`` are checked (a ControlError when ``dL/dt`` comes out positive beyond
-    rounding); by default points about ``q_ref`` and the parameter box.
+    rounding); by default points about ``q_ref`` and the parameter box. ``rhs``: the
+    loop's :meth:`~mbs.control.ClosedLoop.rhs_graph`, if the caller has it (traced once).
     """
     from verified.evaluate import eval_float, jacobian_float
     from verified.graph_ops import gradient_graph
     from verified.invariant import QuadraticLyapunov
 
-    pd, K = _check_loop(loop)
+    pd, K, Kd = _check_loop(loop)
     n = loop.n
     qref = np.asarray(pd.ref.q, float)
     nom = pd.model if pd.gravity_compensation else None
@@ -255,8 +257,6 @@ def pd_hold_lyapunov(loop: ClosedLoop, samples=None):
         s = getattr(m, "energy_scale", 1)
         M = m._crba(m.joint_transforms(q))
         return [mul(s, M[i][j]) for i in range(n) for j in range(n)]
-
-    Kd = _gain_matrix(pd.Kd, n, "kd")
 
     def dissipation(x, p):  # Kd + D(p): the Rayleigh matrix of the closed loop
         m = loop._plant(p)
@@ -281,12 +281,13 @@ def pd_hold_lyapunov(loop: ClosedLoop, samples=None):
         p = rng.uniform(np.broadcast_to(loop.lo, (S, loop.lo.size)), np.broadcast_to(loop.hi, (S, loop.hi.size)))
     else:
         x, p = (np.atleast_2d(np.asarray(a, float)) for a in samples)
+    rhs = loop.rhs_graph() if rhs is None else rhs
     try:
         ly.check(x, p)
-        ly.check_dynamics(loop.rhs_graph(), x, p)
+        ly.check_dynamics(rhs, x, p)
     except ValueError as e:  # a builder bug or a loop this proof does not cover
         raise ControlError(f"the closed-loop energy does not fit this loop: {e}") from None
-    f = eval_float(loop.rhs_graph(), x, p)
+    f = eval_float(rhs, x, p)
     dL = np.einsum("si,si->s", jacobian_float(ly.graphs["level"], x, p)[:, 0, :], f)
     qd = x[:, n:2 * n]
     bound = np.abs(np.einsum("si,ij,sj->s", qd, Kd, qd)) + np.abs(f).sum(axis=1) + 1.0

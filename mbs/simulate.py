@@ -415,7 +415,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
             raise ValueError("invariant_after runs in one process (no workers, client or chunks): the "
                              "invariant is proven for every set at once")
         solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [
-            _invariant_hook(loop, invariant_after, t0, t_end, t_eval)]
+            _invariant_hook(loop, invariant_after, t0, t_end, t_eval, system.rhs)]
     if max_wall is not None:
         from verified.hooks import StopAfterWall
         if isinstance(max_wall, bool) or not isinstance(max_wall, (int, float)) or not max_wall > 0 \
@@ -449,7 +449,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     return sol
 
 
-def _invariant_hook(loop, t_switch, t0: float, t_end: float, t_eval):
+def _invariant_hook(loop, t_switch, t0: float, t_end: float, t_eval, rhs=None):
     """The InvariantHook of a PD loop holding a pose (:mod:`mbs.lyapunov`): from
     ``t_switch`` on, the run ends as soon as every set lies in a verified invariant box."""
     from verified.invariant import InvariantHook
@@ -460,7 +460,7 @@ def _invariant_hook(loop, t_switch, t0: float, t_end: float, t_eval):
     if loop is None:
         raise ValueError("invariant_after needs control: a PD controller holding a pose (its closed-loop "
                          "energy is the Lyapunov function)")
-    return InvariantHook(pd_hold_lyapunov(loop), float(t_switch), t_eval, t_end)
+    return InvariantHook(pd_hold_lyapunov(loop, rhs=rhs), float(t_switch), t_eval, t_end)
 
 
 def _energy_shell_hook(masses, loop, box: Interval):
