@@ -141,6 +141,7 @@ def test_bad_invariant_after_values():
                      control=PD(bandwidth=4.0, q_ref=Q0))
 
 
+@pytest.mark.slow  # (1-1.5 s; the default run is at its 180 s budget in CI)
 def test_point_parameters_are_not_carried_as_states():
     """A point damping is a graph parameter, not a state of the sets: the hook reads it
     from the run (mode ii adds the energy state h beside it)."""
@@ -166,6 +167,7 @@ def test_point_parameters_are_not_carried_as_states():
         assert (sol.boxes[-1].width() < 1e-4).all()   # the decay: 6e-7..6e-6 at T = 5
 
 
+@pytest.mark.slow  # (1-1.5 s; the default run is at its 180 s budget in CI)
 def test_certificates_over_cut_regions_hold(monkeypatch):
     """Every certificate over the region cut in 27 pieces (one rate and floor for all, the
     box as the hull of each piece's bound): the oracle stays inside."""
