@@ -83,6 +83,44 @@ def quadratic_range(S, u: Interval) -> Interval:
     return total
 
 
+def _linear_quadratic_range(C: np.ndarray, S: np.ndarray, u: Interval) -> Interval:
+    """Enclosure of ``C u + u^T S_i u`` over the boxes ``u`` (B, m), shape (B, n), with
+    ``C`` (B, n, m) and ``S`` (B, n, m, m) float (symmetric in its last two axes).
+
+    Per parameter ``j`` the terms ``a u_j + s u_j^2`` (``a = C_ij``, ``s = S_ijj``) form
+    one quadratic whose range over ``[l, h]`` is the hull of its values at ``l``, ``h``
+    and, where the vertex ``-a / (2 s)`` may lie inside, ``-a^2 / (4 s)`` (all in
+    outward-rounded interval arithmetic); the cross terms are bounded as in
+    :func:`quadratic_range`."""
+    B, n, m = C.shape
+    jj = np.arange(m)
+    a = point(C)
+    s = point(np.ascontiguousarray(S[:, :, jj, jj]))
+    lo = Interval._from_bounds(np.broadcast_to(u.lo[:, None, :], (B, n, m)).copy(),
+                               np.broadcast_to(u.lo[:, None, :], (B, n, m)).copy())
+    hi = Interval._from_bounds(np.broadcast_to(u.hi[:, None, :], (B, n, m)).copy(),
+                               np.broadcast_to(u.hi[:, None, :], (B, n, m)).copy())
+    f_lo = a * lo + s * sqr(lo)
+    f_hi = a * hi + s * sqr(hi)
+    r_lo = np.minimum(f_lo.lo, f_hi.lo)
+    r_hi = np.maximum(f_lo.hi, f_hi.hi)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        nz = s.lo != 0.0
+        safe = point(np.where(nz, s.lo, 1.0))
+        v = -(a / (safe * 2.0))  # the vertex (where s != 0)
+        inside = nz & (v.hi >= u.lo[:, None, :]) & (v.lo <= u.hi[:, None, :])
+        top = -(sqr(a) / (safe * 4.0))  # the value there
+    r_lo = np.where(inside, np.minimum(r_lo, top.lo), r_lo)
+    r_hi = np.where(inside, np.maximum(r_hi, top.hi), r_hi)
+    total = Interval._from_bounds(r_lo, r_hi).sum(axis=-1)
+    if m > 1:
+        j, k = np.triu_indices(m, 1)
+        off = point(S[:, :, j, k]) + point(S[:, :, k, j])  # (B, n, pairs)
+        prod = Interval._from_bounds(u.lo[:, j], u.hi[:, j]) * Interval._from_bounds(u.lo[:, k], u.hi[:, k])
+        total = total + linalg.matvec(off, prod)
+    return total
+
+
 def _bilinear(H: Interval, a: Interval, b: Interval) -> Interval:
     """``sum_jk H_ijk a_j b_k`` for H (B, n, n, n), a, b (B, n): shape (B, n)."""
     B, n = a.shape
@@ -124,7 +162,12 @@ class QuadraticSets:
         return quadratic_range(self.S, self.r0)
 
     def hull(self) -> Interval:
-        return self.doubleton().hull() + self.q_range()
+        """Interval hull of each set, shape (B, n): ``C u + q(u)`` per parameter as one
+        quadratic in ``u_j`` (its exact range: ends and vertex), the cross terms
+        ``u_j u_k`` bounded, plus ``c + Q r``. (Bounding ``C u`` and ``q(u)`` apart lost
+        the cancellation between ``a u_j`` and ``s u_j^2``: on x' = x^2 from [0.5, 1.5],
+        2.8 % of the width at t = 0.1.)"""
+        return _linear_quadratic_range(self.C, self.S, self.r0) + linalg.matvec(self.Q, self.r) + self.c
 
     def affine_forms(self, extra: int = 0, own_symbols: int | None = None) -> np.ndarray:
         """Affine forms of the sets over their own ``m + n`` parameters (each its own

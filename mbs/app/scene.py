@@ -131,7 +131,7 @@ _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_m
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
            "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
            "set_order": int, "merge_slack": float, "param_subdivision": None, "absorb": bool,
-           "params_per_state": int, "energy_shell": bool, "invariant_after": float}
+           "params_per_state": int, "energy_shell": bool, "invariant_after": float, "set_step": str}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str, "contract": str, "prune": bool}
 _CONTRACTS = ("step", "test", "off")
@@ -557,6 +557,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         raise SceneError(f"{where} order: must be >= 2")
     if "set_order" in solver and solver["set_order"] not in (1, 2):
         raise SceneError(f"{where} set_order: {solver['set_order']!r} is not 1 or 2")
+    if "set_step" in solver and solver["set_step"] not in ("mean_value", "composition"):
+        raise SceneError(f"{where} set_step: {solver['set_step']!r} is not 'mean_value' or 'composition'")
 
     # [consistency]
     where = f"{source}: [consistency]"

@@ -268,3 +268,36 @@ def test_double_pendulum_one_box_past_one_second_with_more_parameters():
     assert sol.status == "completed", sol
     sols = trajectories(lambda x: dp.rhs(x), sample_initial_points(lo, hi, 40), T)
     assert misses(sol, sols) == []
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10**6), n=st.integers(1, 3), m=st.integers(1, 4))
+def test_set_hull_encloses_exact_values_and_is_no_wider(seed, n, m):
+    """QuadraticSets.hull (one quadratic per parameter, ends and vertex) holds the set's
+    points (exact rationals) and is never wider than bounding C u and q(u) apart."""
+    rng = np.random.default_rng(seed)
+    nb = 2
+    C = rng.normal(size=(nb, n, m))
+    S = rng.normal(size=(nb, n, m, m)) * rng.choice([0.0, 0.1, 3.0])
+    S = 0.5 * (S + S.transpose(0, 1, 3, 2))
+    lo = -rng.uniform(0, 1, (nb, m)) * rng.choice([0.0, 1.0])
+    hi = rng.uniform(0, 1, (nb, m))
+    sets = quadratic.QuadraticSets(c=rng.normal(size=(nb, n)), C=C, r0=Interval(lo, hi), S=S,
+                                   Q=np.broadcast_to(np.eye(n), (nb, n, n)).copy(),
+                                   r=Interval(np.zeros((nb, n)), np.zeros((nb, n))))
+    box = sets.hull()
+    old = sets.doubleton().hull() + sets.q_range()
+    assert (box.width() <= old.width() * (1 + 1e-12) + 1e-300).all()
+    F = Fraction
+    for _ in range(20):
+        b = int(rng.integers(nb))
+        u = lo[b] + rng.uniform(0, 1, m) * (hi[b] - lo[b])
+        if rng.uniform() < 0.3:  # a vertex of some component's quadratic, when inside
+            j = int(rng.integers(m))
+            i = int(rng.integers(n))
+            if S[b, i, j, j] != 0:
+                u[j] = min(max(-C[b, i, j] / (2 * S[b, i, j, j]), lo[b, j]), hi[b, j])
+        for i in range(n):
+            x = (F(float(sets.c[b, i])) + sum(F(float(C[b, i, j])) * F(float(u[j])) for j in range(m))
+                 + sum(F(float(S[b, i, j, k])) * F(float(u[j])) * F(float(u[k])) for j in range(m) for k in range(m)))
+            assert F(float(box.lo[b, i])) <= x <= F(float(box.hi[b, i]))

@@ -1,0 +1,356 @@
+"""Second-order sets advanced by composing the Taylor map with the set in Taylor models.
+
+:class:`verified.quadratic.QuadraticStepper` advances a set ``c + C u + q(u) + Q r``
+by the Taylor map's derivatives at the centre (second variational equations) and
+bounds the third-order rest by the Hessian's spread over the set,
+``1/2 (H(U) - H(c))[v, v]``. Over a deep model graph that spread is taken in affine
+or degree-2 Taylor-model arithmetic over the whole set, and it is what stops the
+robots (issue 17: on a 3-link arm at 0.35 s, 33-209x the sampled spread).
+
+Here the step is the composition itself, as COSY-VI, Flow* and TaylorModels.jl do
+it: the set is written as a degree-2 Taylor model over its own symbols,
+
+    x  =  c + sum_j a_j eps_j + sum_{j <= k} s_jk eps_j eps_k + sum_l b_l delta_l,
+
+``eps`` the set's parameters ``u = rho eps`` (``rho`` = the magnitude of ``r0``) and
+``delta`` the error vector ``r = mid r + rad r delta``, every symbol in ``[-1, 1]``
+(the floats' rounding in a remainder). The Taylor coefficients ``x_[k]``, ``k < K``,
+of the solutions from that model are computed in degree-2 Taylor-model arithmetic
+(:mod:`verified.taylor_model`: the graph's Taylor recursion, quadratic terms exact,
+third and fourth order and rounding in a rigorous remainder per operation), and
+
+    phi(h, x)  in  sum_{k<K} x_[k](x) h^k  +  h^K x_[K](E)
+
+with the Lagrange remainder over the a-priori enclosure ``E`` (as every step here).
+The result is again a degree-2 model: its linear and quadratic parts in ``eps``
+become ``C'`` and ``S'`` (the new parameter box is ``[-1, 1]`` per live symbol), its
+linear part in ``delta`` (the step's Jacobian acting on the error, a float matrix)
+carries the error part into the new basis (Lohner's QR or a plain box, by
+``error_basis``), and the rest (remainder, quadratic terms in ``delta``, the Lagrange
+term) is the error the step injects. No variational equations are integrated and no
+Jacobian or Hessian is enclosed over the set: third-order effects are bounded where
+they arise, operation by operation, on the set's own symbols.
+
+Rigor: the input models enclose the set (every float product's rounding is added
+to the remainder), the model kernel is checked against arb
+(``tests/verified/test_taylor_model.py``), the Horner sum in models rounds into the
+remainder (:func:`_horner_models`), and the conversion back is exact up to the
+halving of off-diagonal quadratic coefficients (exact for normal floats; a tiny
+absolute term covers subnormals).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from . import linalg
+from .affine_taylor import box_forms
+from .interval import Interval, point
+from .lohner import LohnerStepper
+from .quadratic import QuadraticSets
+from .stepper import StepResult
+from .taylor_model import _acc_add, _pairs, _scale_into, forms_to_models, model_length, models_to_interval
+
+__all__ = ["TaylorModelFlowStepper", "set_models"]
+
+#: default cap on the symbols with quadratic monomials (the set's widest parameters
+#: first, then the widest error directions); a product costs O(cap^2)
+QUADRATIC_CAP = 16
+
+
+def _k_up(x):
+    """Round nonnegative float results upward (one ulp, and past underflow)."""
+    return x + (np.abs(x) * 2.0**-52 + 1e-300)
+
+
+def _inflate_box(x: Interval, factor=0.1, absolute=1e-14) -> Interval:
+    """``x`` widened by ``factor`` of its radius plus an absolute margin, and made to hold 0."""
+    x = x.hull(0.0)
+    r = x.rad() * factor + absolute * (1.0 + x.mag())
+    return Interval._from_bounds(x.lo - r, x.hi + r)
+
+
+def _spread_about(rng: Interval, centre: np.ndarray) -> np.ndarray:
+    """Upper bound of ``|x - centre|`` over the intervals ``rng`` (same shape)."""
+    return np.maximum(_k_up(centre - rng.lo), _k_up(rng.hi - centre))
+
+
+def _unit_bounds(lo, hi):
+    """Interval from bounds (shape-preserving helper)."""
+    return Interval._from_bounds(np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
+
+
+def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP):
+    """Degree-2 Taylor models enclosing the sets ``c + C u + q(u) + Q r`` (module
+    docstring), over ``M = mu + n`` symbols: the ``mu`` live parameters (widest first)
+    and the ``n`` components of ``r``.
+
+    Returns ``(X, live, rho, mq)``: ``X`` (n, B, L) the models (``L =
+    model_length(M, mq)``), ``live`` (mu,) the parameter columns in symbol order,
+    ``rho`` (B, m) the magnitudes of ``r0`` (``u = rho eps``), ``mq`` the symbols with
+    quadratic monomials (the first ``mq``). Quadratic terms of parameters past ``mq``
+    are bounded into the remainder."""
+    nb, n = sets.c.shape
+    m = sets.C.shape[2]
+    rho = sets.r0.mag()  # r0 within [-rho, rho]: u = rho eps covers it
+    reach = np.abs(sets.C) * rho[:, None, :] + np.einsum("bijk,bk->bij", np.abs(sets.S), rho) * rho[:, None, :]
+    width = reach.sum(axis=1).max(axis=0)  # (m,)
+    live = np.flatnonzero(width > 0)
+    live = live[np.argsort(-width[live], kind="stable")]
+    mu = live.size
+    M = mu + n
+    mq = min(M, max(int(quadratic_cap), 0))
+    mqu = min(mu, mq)  # parameters with quadratic monomials
+    L = model_length(M, mq)
+    X = np.zeros((n, nb, L))
+    err = np.zeros((nb, n))
+
+    # centre: c + Q mid(r)
+    mr = sets.r.mid()
+    centre = point(sets.c) + linalg.matvec(sets.Q, point(mr))
+    X[:, :, 0] = centre.mid().T
+    err += centre.rad()
+    # linear in eps: C rho (live columns)
+    if mu:
+        a = Interval(sets.C[:, :, live]) * point(rho[:, None, live])  # (B, n, mu)
+        X[:, :, 1: mu + 1] = a.mid().transpose(1, 0, 2)
+        err += a.rad().sum(axis=-1)
+    # linear in delta: Q rad(r)
+    rr = sets.r.rad()
+    b = Interval(sets.Q) * point(rr[:, None, :])  # (B, n, n)
+    X[:, :, mu + 1: M + 1] = b.mid().transpose(1, 0, 2)
+    err += b.rad().sum(axis=-1)
+    # quadratic in eps: S_jj rho_j^2 on the diagonal, (S_jk + S_kj) rho_j rho_k off it
+    if mu:
+        Sl = sets.S[:, :, live][:, :, :, live]  # (B, n, mu, mu)
+        rl = rho[:, live]
+        pi, pj = _pairs(mq)
+        inside = pj < mqu  # pairs among the quadratic parameters (pi <= pj)
+        qi, qj = pi[inside], pj[inside]
+        sym = Interval(Sl[:, :, qi, qj]) + Interval(np.where(qi == qj, 0.0, Sl[:, :, qj, qi]))
+        coef = sym * point(rl[:, None, qi] * 1.0) * point(rl[:, None, qj] * 1.0)
+        # (rho_j rho_k as a product of two points: each multiplication rounds outward)
+        idx = M + 1 + np.flatnonzero(inside)
+        X[:, :, idx] = coef.mid().transpose(1, 0, 2)
+        err += coef.rad().sum(axis=-1)
+        if mqu < mu:
+            # quadratic terms with a parameter past mq: |S_jk| rho_j rho_k into the remainder
+            outside = np.ones((mu, mu), dtype=bool)
+            outside[:mqu, :mqu] = False
+            absS = np.abs(Sl) * outside
+            bound = Interval(absS) * point(rl[:, None, :, None]) * point(rl[:, None, None, :])
+            err += bound.hi.sum(axis=(-1, -2)) * (1.0 + 2.0**-50)
+    X[:, :, -1] = (err * (1.0 + 2.0**-50) + 1e-300).T
+    bad = ~(np.isfinite(X).all(axis=(0, 2)))
+    if bad.any():
+        X[:, bad, :] = 0.0
+        X[:, bad, -1] = np.inf
+    return X, live, rho, mq
+
+
+@njit(cache=True)
+def _horner_models(out, h):
+    """``sum_k out[:, k] h^k`` in model arithmetic (float ``h``), rounding into the
+    remainder: out (n, K, B, L) -> (n, B, L)."""
+    n, K, nb, L = out.shape
+    y = np.zeros((n, nb, L))
+    Z = np.zeros(L)
+    T = np.zeros(L)
+    for i in range(n):
+        for b in range(nb):
+            Z[:] = out[i, K - 1, b]
+            for k in range(K - 2, -1, -1):
+                _scale_into(T, Z, h)
+                _acc_add(T, out[i, k, b], 1.0)
+                Z[:] = T
+            y[i, b] = Z
+    return y
+
+
+class TaylorModelFlowStepper(LohnerStepper):
+    """Verified steps of :class:`~verified.quadratic.QuadraticSets` by composition in
+    degree-2 Taylor models (module docstring).
+
+    ``taylor``: the evaluator of Taylor coefficients over boxes (step size and a-priori
+    enclosure, as every stepper); ``models``: a
+    :class:`verified.taylor_model.TaylorModelODE` of the same graph. The error part is
+    absorbed into parameters as :class:`~verified.quadratic.QuadraticStepper` does
+    (``absorb_ratio``, up to ``max_params``, then merged)."""
+
+    def __init__(self, taylor, models, order: int, params=None, error_basis="qr", max_params: int | None = None,
+                 quadratic_cap: int = QUADRATIC_CAP, absorb_ratio: float = 0.1):
+        super().__init__(taylor, None, order, params, error_basis, absorb=bool(np.isfinite(absorb_ratio)),
+                         max_params=4 * taylor.n if max_params is None else max_params)
+        self.absorb_ratio = float(absorb_ratio)
+        self.models = models
+        self.quadratic_cap = int(quadratic_cap)
+
+    def _param_models(self, nb, M, mq):
+        p = self._params(nb)
+        np_ = self.models.n_params
+        if not np_:
+            return np.zeros((0, nb, model_length(M, mq)))
+        return forms_to_models(box_forms(p.lo, p.hi, np.full(np_, -1), M), mq)
+
+    # ------------------------------------------------------------------ per step
+    def begin(self, sets: QuadraticSets) -> None:
+        """Called by the driver before each step: the sets' models and their Taylor
+        coefficients ``x_[0..K]`` as models, which the step suggestion, the a-priori
+        enclosure and the step itself use (instead of coefficients over the hull box:
+        on a 3-link arm at 0.3 s the order-8 coefficient over the hull was 1e15-1e36)."""
+        K = self.order
+        nb = sets.n_sets
+        work = sets.recentred() if self.recentre else sets
+        Xm, live, rho, mq = set_models(work, self.quadratic_cap)
+        M = live.size + self.n
+        out = self.models._run(Xm, self._param_models(nb, M, mq), K, M, mq)  # (n, K + 1, B, L)
+        self._cur = dict(sets=sets, work=work, live=live, mq=mq, M=M, out=out)
+        self._fresh = True
+
+    def _ranges(self, out, M, mq) -> Interval:
+        lo, hi = models_to_interval(out, M, mq)  # (n, K + 1, B)
+        return Interval._from_bounds(np.ascontiguousarray(lo.transpose(2, 1, 0)),
+                                     np.ascontiguousarray(hi.transpose(2, 1, 0)))
+
+    def coefficients(self, x: Interval) -> Interval:
+        """The driver's first call of a step (after :meth:`begin`): the ranges of the
+        coefficient models over the sets (B, K + 1, N); otherwise over boxes ``x``."""
+        cur = getattr(self, "_cur", None)
+        if getattr(self, "_fresh", False) and cur is not None and x.shape[0] == cur["sets"].n_sets:
+            self._fresh = False
+            return self._ranges(cur["out"], cur["M"], cur["mq"])
+        return super().coefficients(x)
+
+    def apriori(self, X: Interval, cX: Interval, h: float, tries: int = 4):
+        """A-priori enclosure over ``[0, h]`` of the solutions from the sets, as a model
+        (the high-order enclosure test of Nedialkov, Jackson & Pryce over a set that is
+        not a box, see below); ``(E, cE)`` with ``E`` its range (B, N) and ``cE`` (B, K +
+        1, N) the coefficient ranges over it, or None (the driver shrinks ``h``).
+
+        The candidate is ``E~ = {sum_{i<K} P_i(x0) s^i : x0 in the set, s in [0, h]} + B``,
+        ``P_i`` the coefficient models over the set and ``B`` a box. With ``s^i = h^i
+        sigma_i``, ``sigma_i = (1 + tau_i) / 2`` a symbol of its own per power (``tau_i``
+        in [-1, 1]), ``P_i sigma_i = P_i / 2 + c_i tau_i / 2 + (P_i - c_i) tau_i / 2``, the
+        last bounded by the model's range about its centre ``c_i``: a model over the
+        set's symbols and ``K - 1`` more. If ``[0, h^K] x_[K](E~)`` lies inside the
+        interior of ``B``, then no solution from the set leaves ``E~`` on ``[0, h]`` (at a
+        first exit time ``t*``, the Taylor expansion with its Lagrange remainder,
+        componentwise over ``[0, t*]`` where the solution is in ``E~``, puts ``x(t*)``
+        in the interior of ``E~``) and ``x_[K]`` over ``E~`` bounds the remainder."""
+        cur = getattr(self, "_cur", None)
+        if cur is None or cur["sets"].n_sets != X.shape[0]:
+            return super().apriori(X, cX, h, tries)
+        K = self.order
+        out, M, mq = cur["out"], cur["M"], cur["mq"]
+        n, _, nb, L = out.shape
+        M2 = M + K - 1
+        L2 = model_length(M2, mq)
+        # sum_i h^i P_i (1/2 for i >= 1) and the tau coefficients h^i c_i / 2
+        half = np.ascontiguousarray(out[:, :K].copy())
+        half[:, 1:] *= 0.5  # (exact, barring underflow: covered below)
+        base = _horner_models(half, float(h))  # (n, B, L)
+        Em = np.zeros((n, nb, L2))
+        Em[:, :, : M + 1] = base[:, :, : M + 1]
+        Em[:, :, M2 + 1:] = base[:, :, M + 1:]
+        rng = self._ranges(out[:, 1:K], M, mq)  # (B, K - 1, n)
+        cen = out[:, 1:K, :, 0].transpose(2, 1, 0)  # (B, K - 1, n)
+        W = _spread_about(rng, cen)
+        hp = np.array([float(h) ** i for i in range(1, K)])
+        tau = 0.5 * cen * hp[None, :, None]  # (B, K - 1, n)
+        Em[:, :, M + 1: M2 + 1] = tau.transpose(2, 0, 1)
+        slack = (np.abs(tau).sum(axis=1) * 2.0**-44 + (0.5 * W * hp[None, :, None] * (1.0 + 2.0**-44)).sum(axis=1)
+                 + 1e-300)  # (B, n): rounding of h^i c_i / 2, and the bounded parts
+        HK = Interval(0.0, float(h)) ** K
+        Bx = _inflate_box(HK * cX[:, K])
+        P = self._param_models(nb, M2, mq)
+        for _ in range(tries):
+            if not (np.isfinite(Bx.lo).all() and np.isfinite(Bx.hi).all()):
+                return None
+            trial = Em.copy()
+            bm, br = Bx.mid(), Bx.rad()
+            with np.errstate(over="ignore", invalid="ignore"):
+                trial[:, :, 0] += bm.T
+                trial[:, :, -1] = _k_up(_k_up(trial[:, :, -1] + (slack + br).T) + np.abs(trial[:, :, 0]) * 2.0**-52)
+            co = self.models._run(np.ascontiguousarray(trial), P, K, M2, mq)
+            cE = self._ranges(co, M2, mq)
+            new = HK * cE[:, K]
+            if new.interior_subset(Bx).all():
+                lo, hi = models_to_interval(trial, M2, mq)
+                E = Interval._from_bounds(np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T))
+                return E, cE
+            Bx = _inflate_box(Bx.hull(new), factor=0.5)
+        return None
+
+    def step(self, sets: QuadraticSets, h, X: Interval, E: Interval, cE: Interval) -> StepResult:
+        K, n, nb = self.order, self.n, sets.n_sets
+        cur = getattr(self, "_cur", None)
+        if cur is None or cur["sets"] is not sets:
+            self.begin(sets)
+            cur = self._cur
+        self._cur = None  # (used once: the next step begins with its own sets)
+        work, live, mq, M = cur["work"], cur["live"], cur["mq"], cur["M"]
+        mu = live.size
+        out = cur["out"][:, :K]
+        h_iv = h if isinstance(h, Interval) else Interval(h)
+        hm = float(h_iv.mid()) if isinstance(h, Interval) else float(h)
+        y = _horner_models(np.ascontiguousarray(out), hm)  # (n, B, L)
+        # Lagrange remainder over E, and (h an interval) the distance from h to hm
+        extra = cE[:, K] * (h_iv ** K)
+        if isinstance(h, Interval):
+            lo, hi = models_to_interval(out, M, mq)  # (n, K, B)
+            rng = Interval._from_bounds(np.ascontiguousarray(lo.transpose(2, 1, 0)),
+                                        np.ascontiguousarray(hi.transpose(2, 1, 0)))  # (B, K, n)
+            for k in range(1, K):
+                extra = extra + rng[:, k] * (h_iv ** k - Interval(hm) ** k)
+        # split the model: centre, linear in eps / delta, quadratic, remainder
+        centre = y[:, :, 0].T  # (B, n)
+        lin_u = y[:, :, 1: mu + 1].transpose(1, 0, 2)  # (B, n, mu)
+        A = np.ascontiguousarray(y[:, :, mu + 1: M + 1].transpose(1, 0, 2))  # (B, n, n)
+        quad = y[:, :, M + 1: -1].transpose(1, 0, 2)  # (B, n, pairs)
+        rem = y[:, :, -1].T  # (B, n)
+        pi, pj = _pairs(mq)
+        on_u = pj < min(mu, mq)  # both symbols parameters (pi <= pj)
+        qd = quad[:, :, ~on_u]
+        diag = (pi == pj)[~on_u]
+        # quadratic terms with an error symbol: eps_j delta_l in [-1, 1], delta_l^2 in [0, 1]
+        q_lo = np.where(diag, np.minimum(qd, 0.0), -np.abs(qd)).sum(axis=-1)
+        q_hi = np.where(diag, np.maximum(qd, 0.0), np.abs(qd)).sum(axis=-1)
+        bump = (np.abs(q_lo) + np.abs(q_hi)) * 2.0**-50 + 1e-300
+        nonlinear = _unit_bounds(q_lo - bump - rem, q_hi + bump + rem)  # (B, n)
+        incoming_all = point(centre) + extra + nonlinear
+        bad = ~(np.isfinite(incoming_all.lo).all(axis=1) & np.isfinite(incoming_all.hi).all(axis=1)
+                & np.isfinite(y).all(axis=(0, 2)))
+        c_new = incoming_all.mid()
+        incoming = incoming_all - c_new
+        # new parameters: eps on [-1, 1] for the live columns, their images in C and S
+        m = sets.C.shape[2]
+        C_new = np.zeros((nb, n, m))
+        C_new[:, :, live] = lin_u
+        S_new = np.zeros((nb, n, m, m))
+        qi, qj = pi[on_u], pj[on_u]
+        qu = quad[:, :, on_u]
+        cols_i, cols_j = live[qi], live[qj]
+        half = np.where(qi == qj, qu, 0.5 * qu)
+        S_new[:, :, cols_i, cols_j] = half
+        S_new[:, :, cols_j, cols_i] = half
+        # (halving a subnormal may round: cover it)
+        incoming = incoming + _unit_bounds(np.full((nb, n), -1e-300), np.full((nb, n), 1e-300)) * float(max(1, qi.size))
+        r0_lo = np.zeros((nb, m))
+        r0_hi = np.zeros((nb, m))
+        r0_lo[:, live] = -1.0
+        r0_hi[:, live] = 1.0
+        r0_new = _unit_bounds(r0_lo, r0_hi)
+        # the error part: A delta + incoming, delta in [-1, 1] (0 where r had no width)
+        has = work.r.rad() > 0
+        unit = _unit_bounds(np.where(has, -1.0, 0.0), np.where(has, 1.0, 0.0))
+        Q_out, r_new = self.basis.update(work.Q, unit, point(A), incoming)
+        if bad.any():
+            # a model that broke down (an operation left its domain): the set is lost,
+            # which the driver reports as a break-down
+            r_new = Interval._from_bounds(np.where(bad[:, None], -np.inf, r_new.lo),
+                                          np.where(bad[:, None], np.inf, r_new.hi))
+        new = QuadraticSets(c=c_new, C=C_new, r0=r0_new, S=S_new, Q=Q_out, r=r_new)
+        if self.absorb:
+            new = self.absorb_error(new)
+        return StepResult(sets=new, previous=sets, h=h, hull=X, tube=E, nonlinear_width=nonlinear.width())
