@@ -31,6 +31,14 @@ Cases (issue 17's targets table):
 7. ``qdd``: enclosure of qdd over the 3-link +-0.01 box (qd = 0) in the evaluators
    the solver uses (order-1 Taylor coefficient of the numeric rhs graph, modes i/ii,
    and of the symbolic one, mode iii) against the sampled range (target: within 2x).
+8. ``composition``: second-order sets (``set_order=2``, Taylor-model arithmetic,
+   ``error_basis="auto"``, order 8, tol 1e-10, 12 parameters per state) advanced by
+   the mean-value step (``set_step="mean_value"``) and by composition in Taylor models
+   (``set_step="composition"``, :mod:`verified.tm_flow`) side by side, through ``solve``
+   on the numeric rhs graph: the 3-link arm (eps 0.01, 1e-3), the UR5 and the Panda
+   (eps 1e-3), chains n = 4..7 and the double pendulum from one box; the wall cap is
+   ``--cap`` except where a row states its own. Also the worst ratio at every output
+   time of the composition runs.
 
 Oracle: trajectories from all corners of the box (over its wide components), random
 points and the centre (the pendulum: also 250 points per edge), integrated together as
@@ -94,7 +102,7 @@ from verified.solver import Solution, VerifiedODE, solve  # noqa: E402
 ARITHMETICS = ("interval", "affine")
 SLACK = 1e-9  # relative (to max(1, |x|)); DOP853 at 1e-12 is far more accurate
 TUBE_CHECKS = 200  # steps whose tube boxes are checked (evenly spread)
-CASES = {1: "arm3", 2: "ur5", 3: "panda", 4: "chains", 5: "dp", 6: "pendulum", 7: "qdd"}
+CASES = {1: "arm3", 2: "ur5", 3: "panda", 4: "chains", 5: "dp", 6: "pendulum", 7: "qdd", 8: "composition"}
 Q0_ARM3 = (0.5, -0.3, 0.2)
 Q0_UR5 = (0.0, -1.0, 1.0, -0.5, 0.5, 0.0)
 Q0_PANDA = (0.0, -math.pi / 4, 0.0, -3 * math.pi / 4, 0.0, math.pi / 2, math.pi / 4)
@@ -406,6 +414,21 @@ def sweep(case, settings, run_one, log):
     return out
 
 
+def _ratio_history(sol, oracle, every=2):
+    """'t: ratio (component)' at every ``every``-th output time > 0 up to the oracle's end."""
+    cells = []
+    for k, (t, boxes) in enumerate(zip(sol.t, sol.boxes)):
+        if t <= 0 or t > oracle.t_end + 1e-12 or k % every:
+            continue
+        w = boxes.hi.reshape(-1, boxes.shape[-1]).max(axis=0) - boxes.lo.reshape(-1, boxes.shape[-1]).min(axis=0)
+        true = oracle.hull_width(float(t))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.where(true > 0, w / true, np.inf)
+        i = int(np.argmax(r))
+        cells.append(f"{t:.2g}: {r[i]:.3g} ({oracle.names[i]})")
+    return ", ".join(cells)
+
+
 def chain_box(q0, eps):
     q0 = np.asarray(q0, float)
     z = np.zeros_like(q0)
@@ -501,7 +524,7 @@ def all_runs_table(labelled):
     for label, by_arith in labelled:
         for a in ARITHMETICS:
             for r in by_arith[a]:
-                rows.append([label, a, r.setting, r.reached(), r.ratio_cell(), r.comp, f"{r.wall:.1f}",
+                rows.append([label, r.arithmetic, r.setting, r.reached(), r.ratio_cell(), r.comp, f"{r.wall:.1f}",
                              r.sol.stats.get("steps", ""), "SOUND" if r.sound else f"UNSOUND {r.misses}/{r.checks}",
                              (r.sol.reason or "")[:90].replace("|", "/")])
     return md_table(["run", "arithmetic", "setting", "reached", "ratio @ t", "comp", "wall s", "steps",
@@ -795,6 +818,79 @@ class Bench:
                 "sampled range.\n\n"
                 + md_table(["model graph", "evaluator", "qdd1 width", "qdd2 width", "qdd3 width",
                             "width / sampled", "sound"], rows))
+
+    # 8 -------------------------------------------------------------------------
+    def composition(self):
+        from models.planar import planar_chain
+        from models.robots import panda_arm, ur5
+        base = dict(order=8, tol=1e-10, error_basis="auto", set_order=2, params_per_state=12)
+        if self.quick:
+            plan = [("3-link arm, eps 1e-3", planar_chain(3), Q0_ARM3, 1e-3, 0.2, None)]
+        else:
+            plan = [("3-link arm, eps 0.01", planar_chain(3), Q0_ARM3, 0.01, 2.0, None),
+                    ("3-link arm, eps 1e-3", planar_chain(3), Q0_ARM3, 1e-3, 2.0, None),
+                    ("UR5, eps 1e-3", ur5(), Q0_UR5, 1e-3, 1.0, None),
+                    ("UR5, eps 1e-3 (cap 150 s)", ur5(), Q0_UR5, 1e-3, 1.0, 150.0),
+                    ("Panda, eps 1e-3", panda_arm(), Q0_PANDA, 1e-3, 1.0, None)]
+            plan += [(f"chain n = {n}, eps 1e-3", planar_chain(n), chain_q0(n), 1e-3, 1.0, None) for n in (4, 5, 6, 7)]
+        rows, labelled, history = [], [], []
+        oracles = {}
+        for label, chain, q0, eps, T, cap in plan:
+            lo, hi = chain_box(q0, eps)
+            names = chain_names(chain)
+            key = (chain.name, eps, T)
+            if key not in oracles:
+                oracles[key] = Oracle(pinocchio_rhs(chain), sample_points(lo, hi, 40 if self.quick else 60), T, names)
+            oracle = oracles[key]
+            by = {}
+            for step in ("mean_value", "composition"):
+                opts = dict(base, set_step=step)
+                if cap is not None:
+                    opts["cap"] = cap
+                sol, wall = run_chain_solver(chain, lo, hi, T, "taylor_model", opts, self.cap)
+                r = measure("composition", step, setting_label(opts), T, sol, wall, oracle, names)
+                self.log(r)
+                by[step] = r
+                if step == "composition":
+                    history.append([label] + [_ratio_history(sol, oracle)])
+            rows.append([label, f"{T:g}"] + [c for s in ("mean_value", "composition") for c in
+                                             (by[s].reached(), by[s].ratio_cell(), f"{by[s].wall:.1f}",
+                                              str(by[s].sol.stats.get("steps")))]
+                        + ["SOUND" if all(r.sound for r in by.values()) else "**UNSOUND**"])
+            labelled.append((label, {"interval": [by["mean_value"]], "affine": [by["composition"]]}))
+        # the double pendulum from one box (closed-form rhs; its own oracle)
+        if not self.quick:
+            g = VerifiedODE(trace(dp.rhs, 4), "taylor_model")
+            lo, hi = dp.initial_box()
+            oracle = Oracle(closed_form_rhs(dp), sample_points(lo, hi, 100), 1.5, ["x1", "x2", "x3", "x4"])
+            by = {}
+            for step in ("mean_value", "composition"):
+                opts = dict(base, set_step=step, order=6)
+
+                def call(progress, opts=opts):
+                    return solve(g, Interval(lo, hi), (0.0, 3.0), t_eval=np.arange(61) / 20, progress=progress,
+                                 **opts)
+
+                sol, wall = capped(call, self.cap)
+                r = measure("composition", step, setting_label(opts), 3.0, sol, wall, oracle, oracle.names)
+                self.log(r)
+                by[step] = r
+            rows.append(["double pendulum, one box", "3"] + [c for s in ("mean_value", "composition") for c in
+                                                             (by[s].reached(), by[s].ratio_cell(), f"{by[s].wall:.1f}",
+                                                              str(by[s].sol.stats.get("steps")))]
+                        + ["SOUND" if all(r.sound for r in by.values()) else "**UNSOUND**"])
+            labelled.append(("double pendulum, one box", {"interval": [by["mean_value"]],
+                                                          "affine": [by["composition"]]}))
+        self.results["composition"] = labelled
+        head = ["case", "T"] + [f"{s}: {c}" for s in ("mean_value", "composition")
+                                for c in ("reached", "ratio @ t", "wall s", "steps")] + ["sound"]
+        return ("### 8. Second-order sets: mean-value step against composition in Taylor models\n\n"
+                "`solve(..., set_order=2, arithmetic=\"taylor_model\", error_basis=\"auto\", order=8, tol=1e-10, "
+                "params_per_state=12, set_step=...)` on the numeric rhs graph (the double pendulum: eq. 22 "
+                f"traced, order 6). Wall cap {self.cap:g} s unless the row says otherwise.\n\n"
+                + md_table(head, rows)
+                + "\n\nWorst ratio (component) at every output time, composition:\n\n"
+                + md_table(["case", "t: ratio"], history))
 
     def runs(self):
         """Every Run measured (for tests)."""
