@@ -309,10 +309,12 @@ def solve(
         step's Taylor coefficients, its a-priori enclosure and the step-size choice are
         taken over that model instead of the set's hull box
         (:mod:`verified.tm_flow`): no variational equations, third-order effects bounded
-        where they arise. Measured (``python benchmarks/bench_robots.py --only tmflow``):
-        UR5, q0 +- 1e-3, ``params_per_state=12``: T = 1 verified in ~85 s (ratio <= 1.12
-        up to 0.5 s; "mean_value": break-down at 0.55 s); 3-link arm +- 0.01: the same
-        reach as "mean_value" (0.33 s) at 1/13 of the time.
+        where they arise. Measured (``python benchmarks/bench_robots.py --only 8,9``):
+        UR5, q0 +- 1e-3, ``params_per_state=12``: T = 1 verified in 90 s (ratio <= 1.31
+        up to 0.6 s, 45 at 1 s; "mean_value": 0.4 s in 150 s); the pendulum over the top
+        from one box to T = 10 (the C++ QR-Lohner solver breaks down at 3.67 s); the
+        double pendulum from one box to 1.09 s; 3-link arm +- 0.01: 0.34 s in 5 s
+        ("mean_value": 0.38 s in 60 s).
     absorb : False (default) or True. With
         ``set_order=1``, turn the error part ``Q r`` into new parameters of the set once
         it is 10 % of the exactly carried part (:meth:`verified.sets.DoubletonSets.absorb_error`;
