@@ -190,6 +190,14 @@ def test_solver_set_order_and_merge_slack():
     _err(GOOD.replace("order = 12\n", "order = 12\nset_order = 3\n"), "set_order", "not 1 or 2")
 
 
+def test_solver_set_step():
+    text = GOOD.replace("order = 12\n", 'order = 12\nset_order = 2\nset_step = "composition"\n')
+    kw = loads_scene(text).simulate_kwargs(NAMES)
+    assert kw["set_step"] == "composition" and kw["set_order"] == 2
+    _err(GOOD.replace("order = 12\n", 'order = 12\nset_step = "taylor"\n'), "set_step",
+         "not 'mean_value' or 'composition'")
+
+
 def test_solver_energy_shell_and_params_per_state():
     kw = loads_scene(GOOD.replace("order = 12\n", "order = 12\nenergy_shell = true\nparams_per_state = 12\n")
                      ).simulate_kwargs(NAMES)
