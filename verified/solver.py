@@ -299,8 +299,10 @@ def solve(
         doubletons ``c + C r0 + Q r`` (:mod:`verified.sets`). 2: the same plus a
         quadratic term in the initial box (:mod:`verified.quadratic`), so the flow's
         curvature is carried instead of wrapped every step; costs the second
-        variational equations (n (n + 1) / 2 more directions). Not yet with adaptive
-        splitting or a consistency test.
+        variational equations (n (n + 1) / 2 more directions). With ``adaptive=True``
+        a set is split along the parameter or error component that gives it the most
+        width (:meth:`verified.quadratic.QuadraticSets.split`). Not yet with a
+        consistency test.
     set_step : "mean_value" (default) or "composition": how a second-order set
         (``set_order=2``) is advanced. "mean_value": by the Taylor map's derivatives at
         the centre (second variational equations) plus the Hessian's spread over the
@@ -394,9 +396,8 @@ def solve(
         wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, progress=progress)
     if set_order not in (1, 2) or isinstance(set_order, bool):
         raise ValueError(f"set_order must be 1 or 2, got {set_order!r}")
-    if set_order == 2 and (adaptive or consistency is not None):
-        raise ValueError("set_order=2 does not support adaptive splitting or a consistency test yet; "
-                         "use set_order=1 for those")
+    if set_order == 2 and consistency is not None:
+        raise ValueError("set_order=2 does not support a consistency test yet; use set_order=1 for it")
     if set_step not in ("mean_value", "composition"):
         raise ValueError(f"set_step must be 'mean_value' or 'composition', got {set_step!r}")
     if set_step == "composition" and set_order != 2:

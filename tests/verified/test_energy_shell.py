@@ -50,6 +50,7 @@ def test_max_energy_bounds_the_initial_energy():
     assert H.max() <= hmax < H.max() + 1.0  # measured 21.17 against 20.70
 
 
+@pytest.mark.slow  # 5 s; tests/mbs/test_simulate_energy_options.py holds the pendulum in the shell by default
 def test_pendulum_over_the_top_held_in_the_shell(samples):
     lo, hi = pd.initial_box()
     hook = EnergyShellHook(_shell(), _hmax(lo, hi))
