@@ -233,8 +233,11 @@ class TaylorModelFlowStepper(LohnerStepper):
         aff = self.taylor.series(models_to_forms(Xm, M, mq), K, self._params(Xm.shape[1]))
         lo = np.maximum(ranges.lo, aff.lo)
         hi = np.minimum(ranges.hi, aff.hi)
-        if (lo > hi).any():  # (two enclosures of the same values always meet)
-            return ranges
+        if (lo > hi).any():
+            # two enclosures of the same coefficients always meet: one of them is wrong,
+            # and which cannot be told here (never continue with either)
+            raise RuntimeError("internal error: the Taylor-model and affine enclosures of a step's "
+                               "coefficients are disjoint (an unsound enclosure); please report it")
         return Interval._from_bounds(lo, hi)
 
     def _ranges(self, out, M, mq) -> Interval:
