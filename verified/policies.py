@@ -285,8 +285,9 @@ class WrapControl:
     def update(self, step) -> None:
         """Adapt ``h_limit`` after the accepted :class:`~verified.stepper.StepResult` ``step``."""
         n = self.steer
-        ratio = float(np.max(step.nonlinear_width[:, :n].max(axis=1)
-                             / (step.sets.linear_width()[:, :n].max(axis=1) + 1e-300)))
+        with np.errstate(invalid="ignore"):  # (a NaN width, a set breaking down, leaves the limit as it is)
+            ratio = float(np.max(step.nonlinear_width[:, :n].max(axis=1)
+                                 / (step.sets.linear_width()[:, :n].max(axis=1) + 1e-300)))
         h = step.length
         if ratio > self.target:
             self.h_limit = h * max(0.2, np.sqrt(self.target / ratio))
