@@ -105,6 +105,7 @@ def test_function_controller_with_parameter_and_time():
     assert not misses(sol, trajs, per_step=3, states=4)
 
 
+@pytest.mark.slow  # 2.4 s (default-run budget)
 def test_time_state_does_not_steer_steps_or_widen():
     """The same law, once with t as a state (uses_time=True) and once without: the same
     steps and (up to rounding) the same enclosures. Exactly so without absorbing the
@@ -203,6 +204,7 @@ def test_bandwidth_gains_are_the_nominal_mass_matrix_at_the_reference():
         closed_loop(chain, PD(bandwidth=3.0, gains="full"), q_init=Q0)
 
 
+@pytest.mark.slow  # 4 s; param_subdivision runs by default in the shipped payload scene (test_uncertain_params)
 def test_param_subdivision_splits_the_parameter_box_and_stays_sound():
     chain = get("planar2")
     x0 = box(Q0)

@@ -80,6 +80,7 @@ def test_a_frame_enclosure_without_the_jacobian_term_is_caught(arm_run, monkeypa
     assert frame_misses(enc, trajs, lambda x: tip(x[:2]))
 
 
+@pytest.mark.slow  # 3.3 s; frames stay covered by the planar-arm and frame-graph tests
 def test_ur5_tool0_with_payload_contains_pinocchio_frames():
     """UR5 under PD with gravity compensation, payload 1 kg +- 10% on tool0: tool0's
     enclosure holds Pinocchio's framesForwardKinematics of sampled closed-loop states."""

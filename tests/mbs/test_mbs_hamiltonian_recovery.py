@@ -210,6 +210,7 @@ def test_system_needs_parameter_values():
 
 
 # --------------------------------------------------------------------------- mode (iii)
+@pytest.mark.slow  # 2.2 s; recovery stays covered by the eq. (22) and planar-chain tests
 def test_recovered_double_pendulum_simulates_with_energy_test():
     """A user with only eq. (22) gets mode (iii): the recovered H and dH/dt drive the
     energy consistency test, and the final hull still holds DOP853 trajectories."""

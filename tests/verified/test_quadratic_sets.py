@@ -331,7 +331,7 @@ def test_split_halves_cover_the_set():
     assert out.take([0]).c.tolist() == sets.take([1]).c.tolist()  # the unselected set is unchanged
 
 
-@pytest.mark.parametrize("set_step", ["mean_value", "composition"])
+@pytest.mark.parametrize("set_step", [pytest.param("mean_value", marks=pytest.mark.slow), "composition"])
 def test_adaptive_second_order_sets_split_and_contain_trajectories(set_step):
     """The pendulum from q in [0.8, 1.2], qd in [-0.2, 0.2] to T = 2, adaptive splitting
     on: sets are split, every sampled trajectory stays in the union at every output time
