@@ -32,7 +32,7 @@ test_splits = 4
 """
 
 
-@pytest.mark.parametrize("mode", ["i", "ii"])
+@pytest.mark.parametrize("mode", ["i", pytest.param("ii", marks=pytest.mark.slow)])
 def test_simulate_writes_result_and_figures(tmp_path, mode, capsys):
     scene = tmp_path / "p.toml"
     scene.write_text(SMALL.format(mode=mode))

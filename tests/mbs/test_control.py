@@ -59,6 +59,7 @@ def test_a_wrong_controller_graph_is_caught_by_the_oracle(monkeypatch):
 
 
 # --------------------------------------------------------------------------- PD, quintic, disturbance
+@pytest.mark.slow  # 2.6 s (default-run budget; the quintic's refusal past its end stays)
 def test_pd_tracking_quintic_with_disturbance_encloses_pinocchio():
     chain = get("planar2")
     q1 = np.array([0.9, 0.1])

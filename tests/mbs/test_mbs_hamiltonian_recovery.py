@@ -184,6 +184,7 @@ def test_bad_input():
 
 
 # --------------------------------------------------------------------------- graphs
+@pytest.mark.slow  # 1.5 s (default-run budget)
 def test_system_graphs_match_sympy():
     xs, f, H = dp.sympy_model()
     r = recover_hamiltonian(f, xs[:2], xs[2:])

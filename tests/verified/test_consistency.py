@@ -60,8 +60,10 @@ def _check(sol, f, lo, hi, t_end, n_random=40):
     assert not bad, f"{len(bad)} sampled states outside, first at t = {bad[0][0]}"
 
 
-# ("grid": 10 s, behind the slow marker to keep the default run under 3 minutes)
-@pytest.mark.parametrize("strategy", ["gradient", "widest", pytest.param("grid", marks=pytest.mark.slow)])
+# ("grid": 10 s, "gradient" (the default, run by every mode-ii simulate test): 2.6 s; behind the slow
+# marker to keep the default run under 3 minutes)
+@pytest.mark.parametrize("strategy", [pytest.param("gradient", marks=pytest.mark.slow), "widest",
+                                      pytest.param("grid", marks=pytest.mark.slow)])
 def test_pendulum_pruning_keeps_every_sampled_trajectory(strategy):
     """Sec. 5.1's pendulum: the parts kept after each test hold every sampled state."""
     rhs, H = _pendulum_graphs()

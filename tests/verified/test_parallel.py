@@ -84,6 +84,7 @@ def test_inprocess_chunks_contain_samples(ode, box, oracle, single):
     assert sol.stats["steps"] == sum(sol.stats["chunk_steps"])
 
 
+@pytest.mark.slow  # 2 s; the killed-worker test runs chunks on the same cluster by default
 def test_dask_chunks_contain_samples(ode, box, oracle, single, client):
     ticks = []
     sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, client=client, chunks=2,

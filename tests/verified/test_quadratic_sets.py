@@ -207,6 +207,7 @@ def test_absorbing_the_error_part_is_exact():
     assert (a.hull().lo <= s.hull().lo + 1e-12).all() and (a.hull().hi >= s.hull().hi - 1e-12).all()
 
 
+@pytest.mark.slow  # 1.7 s; absorption is exercised by every second-order robot test
 def test_absorption_happens_and_stays_sound():
     """Double pendulum quarter box, T = 0.8: the error part is absorbed at least once and
     DOP853 trajectories stay inside."""
