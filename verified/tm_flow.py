@@ -46,8 +46,8 @@ from numba import njit
 
 from . import linalg
 from .affine_taylor import box_forms
-from .interval import Interval, point
-from .lohner import LohnerStepper
+from .interval import Interval, _k_round_up, point
+from .lohner import LohnerStepper, _inflate
 from .quadratic import QuadraticSets
 from .stepper import StepResult
 from .taylor_model import _acc_add, _pairs, _scale_into, forms_to_models, model_length, models_to_interval
@@ -59,26 +59,9 @@ __all__ = ["TaylorModelFlowStepper", "set_models"]
 QUADRATIC_CAP = 16
 
 
-def _k_up(x):
-    """Round nonnegative float results upward (one ulp, and past underflow)."""
-    return x + (np.abs(x) * 2.0**-52 + 1e-300)
-
-
-def _inflate_box(x: Interval, factor=0.1, absolute=1e-14) -> Interval:
-    """``x`` widened by ``factor`` of its radius plus an absolute margin, and made to hold 0."""
-    x = x.hull(0.0)
-    r = x.rad() * factor + absolute * (1.0 + x.mag())
-    return Interval._from_bounds(x.lo - r, x.hi + r)
-
-
 def _spread_about(rng: Interval, centre: np.ndarray) -> np.ndarray:
     """Upper bound of ``|x - centre|`` over the intervals ``rng`` (same shape)."""
-    return np.maximum(_k_up(centre - rng.lo), _k_up(rng.hi - centre))
-
-
-def _unit_bounds(lo, hi):
-    """Interval from bounds (shape-preserving helper)."""
-    return Interval._from_bounds(np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
+    return np.maximum(_k_round_up(centre - rng.lo), _k_round_up(rng.hi - centre))
 
 
 def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP):
@@ -92,7 +75,6 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP):
     quadratic monomials (the first ``mq``). Quadratic terms of parameters past ``mq``
     are bounded into the remainder."""
     nb, n = sets.c.shape
-    m = sets.C.shape[2]
     rho = sets.r0.mag()  # r0 within [-rho, rho]: u = rho eps covers it
     reach = np.abs(sets.C) * rho[:, None, :] + np.einsum("bijk,bk->bij", np.abs(sets.S), rho) * rho[:, None, :]
     width = reach.sum(axis=1).max(axis=0)  # (m,)
@@ -129,7 +111,7 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP):
         inside = pj < mqu  # pairs among the quadratic parameters (pi <= pj)
         qi, qj = pi[inside], pj[inside]
         sym = Interval(Sl[:, :, qi, qj]) + Interval(np.where(qi == qj, 0.0, Sl[:, :, qj, qi]))
-        coef = sym * point(rl[:, None, qi] * 1.0) * point(rl[:, None, qj] * 1.0)
+        coef = sym * point(rl[:, None, qi]) * point(rl[:, None, qj])
         # (rho_j rho_k as a product of two points: each multiplication rounds outward)
         idx = M + 1 + np.flatnonzero(inside)
         X[:, :, idx] = coef.mid().transpose(1, 0, 2)
@@ -217,7 +199,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         Xm, live, rho, mq = set_models(work, self.quadratic_cap)
         M = live.size + self.n
         out = self.models._run(Xm, self._param_models(nb, M, mq), K, M, mq)  # (n, K + 1, B, L)
-        cX = self._tighter(self._ranges(out, M, mq), Xm, M, mq, K)
+        cX = self._tighter(self.models._interval(out, M, mq), Xm, M, mq, K)
         self._cur = dict(sets=sets, work=work, live=live, mq=mq, M=M, out=out, cX=cX)
         self._fresh = True
 
@@ -239,11 +221,6 @@ class TaylorModelFlowStepper(LohnerStepper):
             raise RuntimeError("internal error: the Taylor-model and affine enclosures of a step's "
                                "coefficients are disjoint (an unsound enclosure); please report it")
         return Interval._from_bounds(lo, hi)
-
-    def _ranges(self, out, M, mq) -> Interval:
-        lo, hi = models_to_interval(out, M, mq)  # (n, K + 1, B)
-        return Interval._from_bounds(np.ascontiguousarray(lo.transpose(2, 1, 0)),
-                                     np.ascontiguousarray(hi.transpose(2, 1, 0)))
 
     def coefficients(self, x: Interval) -> Interval:
         """The driver's first call of a step (after :meth:`begin`): the ranges of the
@@ -315,7 +292,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         Em = np.zeros((n, nb, L2))
         Em[:, :, : M + 1] = base[:, :, : M + 1]
         Em[:, :, M2 + 1:] = base[:, :, M + 1:]
-        rng = self._ranges(out[:, 1:K], M, mq)  # (B, K - 1, n)
+        rng = self.models._interval(out[:, 1:K], M, mq)  # (B, K - 1, n)
         cen = out[:, 1:K, :, 0].transpose(2, 1, 0)  # (B, K - 1, n)
         W = _spread_about(rng, cen)
         hp = np.array([float(h) ** i for i in range(1, K)])
@@ -324,7 +301,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         slack = (np.abs(tau).sum(axis=1) * 2.0**-44 + (0.5 * W * hp[None, :, None] * (1.0 + 2.0**-44)).sum(axis=1)
                  + 1e-300)  # (B, n): rounding of h^i c_i / 2, and the bounded parts
         HK = Interval(0.0, float(h)) ** K
-        Bx = _inflate_box(HK * cX[:, K])
+        Bx = _inflate((HK * cX[:, K]).hull(0.0))
         P = self._param_models(nb, M2, mq)
         for _ in range(tries):
             if not (np.isfinite(Bx.lo).all() and np.isfinite(Bx.hi).all()):
@@ -333,15 +310,15 @@ class TaylorModelFlowStepper(LohnerStepper):
             bm, br = Bx.mid(), Bx.rad()
             with np.errstate(over="ignore", invalid="ignore"):
                 trial[:, :, 0] += bm.T
-                trial[:, :, -1] = _k_up(_k_up(trial[:, :, -1] + (slack + br).T) + np.abs(trial[:, :, 0]) * 2.0**-52)
+                trial[:, :, -1] = _k_round_up(_k_round_up(trial[:, :, -1] + (slack + br).T) + np.abs(trial[:, :, 0]) * 2.0**-52)
             co = self.models._run(np.ascontiguousarray(trial), P, K, M2, mq)
-            cE = self._tighter(self._ranges(co, M2, mq), trial, M2, mq, K)
+            cE = self._tighter(self.models._interval(co, M2, mq), trial, M2, mq, K)
             new = HK * cE[:, K]
             if new.interior_subset(Bx).all():
                 lo, hi = models_to_interval(trial, M2, mq)
                 E = Interval._from_bounds(np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T))
                 return E, cE
-            Bx = _inflate_box(Bx.hull(new), factor=0.5)
+            Bx = _inflate(Bx.hull(new).hull(0.0), factor=0.5)
         return None
 
     def step(self, sets: QuadraticSets, h, X: Interval, E: Interval, cE: Interval) -> StepResult:
@@ -360,9 +337,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         # Lagrange remainder over E, and (h an interval) the distance from h to hm
         extra = cE[:, K] * (h_iv ** K)
         if isinstance(h, Interval):
-            lo, hi = models_to_interval(out, M, mq)  # (n, K, B)
-            rng = Interval._from_bounds(np.ascontiguousarray(lo.transpose(2, 1, 0)),
-                                        np.ascontiguousarray(hi.transpose(2, 1, 0)))  # (B, K, n)
+            rng = self.models._interval(out, M, mq)  # (B, K, n)
             for k in range(1, K):
                 extra = extra + rng[:, k] * (h_iv ** k - Interval(hm) ** k)
         # split the model: centre, linear in eps / delta, quadratic, remainder
@@ -379,7 +354,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         q_lo = np.where(diag, np.minimum(qd, 0.0), -np.abs(qd)).sum(axis=-1)
         q_hi = np.where(diag, np.maximum(qd, 0.0), np.abs(qd)).sum(axis=-1)
         bump = (np.abs(q_lo) + np.abs(q_hi)) * 2.0**-40 + 1e-300  # (the float sums' rounding)
-        nonlinear = _unit_bounds(q_lo - bump, q_hi + bump) + _unit_bounds(-rem, rem)  # (B, n), outward
+        nonlinear = Interval._from_bounds(q_lo - bump, q_hi + bump) + Interval._from_bounds(-rem, rem)  # (B, n), outward
         incoming_all = point(centre) + extra + nonlinear
         bad = ~(np.isfinite(incoming_all.lo).all(axis=1) & np.isfinite(incoming_all.hi).all(axis=1)
                 & np.isfinite(y).all(axis=(0, 2)))
@@ -397,15 +372,15 @@ class TaylorModelFlowStepper(LohnerStepper):
         S_new[:, :, cols_i, cols_j] = half
         S_new[:, :, cols_j, cols_i] = half
         # (halving a subnormal may round: cover it)
-        incoming = incoming + _unit_bounds(np.full((nb, n), -1e-300), np.full((nb, n), 1e-300)) * float(max(1, qi.size))
+        incoming = incoming + Interval._from_bounds(np.full((nb, n), -1e-300), np.full((nb, n), 1e-300)) * float(max(1, qi.size))
         r0_lo = np.zeros((nb, m))
         r0_hi = np.zeros((nb, m))
         r0_lo[:, live] = -1.0
         r0_hi[:, live] = 1.0
-        r0_new = _unit_bounds(r0_lo, r0_hi)
+        r0_new = Interval._from_bounds(r0_lo, r0_hi)
         # the error part: A delta + incoming, delta in [-1, 1] (0 where r had no width)
         has = work.r.rad() > 0
-        unit = _unit_bounds(np.where(has, -1.0, 0.0), np.where(has, 1.0, 0.0))
+        unit = Interval._from_bounds(np.where(has, -1.0, 0.0), np.where(has, 1.0, 0.0))
         Q_out, r_new = self.basis.update(work.Q, unit, point(A), incoming)
         if bad.any():
             # a model that broke down (an operation left its domain): the set is lost,
