@@ -396,7 +396,7 @@ def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> fl
     from .solver import solve
     t = time.perf_counter()
     ode = _prepared(problem)
-    kw = {k: v for k, v in kwargs.items() if k in ("order", "tol", "error_basis", "set_order", "set_step", "h_min",
+    kw = {k: v for k, v in kwargs.items() if k in ("order", "tol", "error_basis", "set_order", "set_step", "model_degree", "h_min",
                                                  "wrap_target")}
     t0, t1 = kwargs["t_span"]
     try:

@@ -227,6 +227,7 @@ def solve(
     arithmetic: str | None = None,
     set_order: int = 1,
     set_step: str = "mean_value",
+    model_degree: int | None = None,
     absorb: bool = False,
     params_per_state: int | None = None,
     consistency=None,
@@ -307,16 +308,23 @@ def solve(
         (``set_order=2``) is advanced. "mean_value": by the Taylor map's derivatives at
         the centre (second variational equations) plus the Hessian's spread over the
         set (:mod:`verified.quadratic`). "composition": the Taylor map is composed with
-        the set written as a degree-2 Taylor model over its own parameters, and the
-        step's Taylor coefficients, its a-priori enclosure and the step-size choice are
-        taken over that model instead of the set's hull box
-        (:mod:`verified.tm_flow`): no variational equations, third-order effects bounded
-        where they arise. Measured (``python benchmarks/bench_robots.py --only 8,9``):
-        UR5, q0 +- 1e-3, ``params_per_state=12``: T = 1 verified in 90 s (ratio <= 1.31
-        up to 0.6 s, 45 at 1 s; "mean_value": 0.4 s in 150 s); the pendulum over the top
-        from one box to T = 10 (the C++ QR-Lohner solver breaks down at 3.67 s); the
-        double pendulum from one box to 1.09 s; 3-link arm +- 0.01: 0.34 s in 5 s
-        ("mean_value": 0.38 s in 60 s).
+        the set written as a Taylor model over its own parameters, and the step's
+        Taylor coefficients, its a-priori enclosure and the step-size choice are taken
+        over that model instead of the set's hull box (:mod:`verified.tm_flow`): no
+        variational equations, higher-order effects bounded where they arise. Measured
+        (``python benchmarks/bench_robots.py --only 8,9``): UR5, q0 +- 1e-3,
+        ``params_per_state=12``: T = 1 verified in 55 s at ratio 1.24 ("mean_value":
+        0.4 s in 150 s); the pendulum over the top from one box to T = 10 (the C++
+        QR-Lohner solver breaks down at 3.67 s); the double pendulum from one box to
+        1.46 s; 3-link arm +- 0.01: 0.38 s in 4 s ("mean_value": 0.38 s in 60 s).
+    model_degree : 2 or 3 (default 3; only with ``set_step="composition"``): the degree
+        of the Taylor-model arithmetic the composition runs in
+        (:mod:`verified.taylor_model`). At 3, products keep their cubic terms in the
+        set's widest parameters (``verified.tm_flow.CUBIC_CAP`` of them) and bound only
+        the fourth order and up, where degree 2 bounds the third (the sets themselves stay
+        second order). Measured on the UR5's right-hand side over +- 0.05 in all states:
+        remainder 13x smaller; UR5 q0 +- 1e-3 to T = 1: ratio 1.24 in 55 s, against a
+        break-down at 0.66 s at degree 2 with the same settings.
     absorb : False (default) or True. With
         ``set_order=1``, turn the error part ``Q r`` into new parameters of the set once
         it is 10 % of the exactly carried part (:meth:`verified.sets.DoubletonSets.absorb_error`;
@@ -402,6 +410,12 @@ def solve(
         raise ValueError(f"set_step must be 'mean_value' or 'composition', got {set_step!r}")
     if set_step == "composition" and set_order != 2:
         raise ValueError("set_step='composition' advances second-order sets: it needs set_order=2")
+    if model_degree is not None:
+        if isinstance(model_degree, (bool, np.bool_)) or model_degree not in (2, 3):
+            raise ValueError(f"model_degree must be 2 or 3, got {model_degree!r}")
+        if set_step != "composition":
+            raise ValueError("model_degree is the degree of set_step='composition''s Taylor models: "
+                             "it needs set_order=2, set_step='composition'")
     if not isinstance(absorb, (bool, np.bool_)):
         raise ValueError(f"absorb must be True or False, got {absorb!r}")
     if params_per_state is not None and (isinstance(params_per_state, (bool, np.bool_))
@@ -428,14 +442,15 @@ def solve(
     if absorb and appended:
         raise ValueError("absorb=True needs set_order=1, adaptive=False, no consistency test and no "
                          "states appended by a hook")
-    stepper = _stepper(prob, order, setup.params, error_basis, set_order, bool(absorb), params_per_state, set_step)
+    stepper = _stepper(prob, order, setup.params, error_basis, set_order, bool(absorb), params_per_state, set_step,
+                       model_degree)
     control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
     wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
     split = SplitPolicy(split_ratio, max_boxes, tol) if adaptive else None
     merge = MergePolicy(merge_slack) if adaptive and merge_slack is not None else None
     def make_stepper(graph):  # a stepper of this run's kind for another graph (backward tests)
         return _stepper(VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis, set_order,
-                        set_step=set_step)
+                        set_step=set_step, model_degree=model_degree)
 
     run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper)
     # benchmarks/bench_robots.py reads out_t, out_boxes, tube, tube_t, t and steps from this
@@ -676,11 +691,11 @@ class _Run:
 
 
 def _stepper(prob: VerifiedODE, order, params, error_basis, set_order=1, absorb=False,
-             params_per_state=None, set_step="mean_value") -> LohnerStepper:
+             params_per_state=None, set_step="mean_value", model_degree=None) -> LohnerStepper:
     max_params = None if params_per_state is None else params_per_state * prob.n
     if set_order == 2 and set_step == "composition":
         return TaylorModelFlowStepper(prob.taylor, prob.set_models, order, params, error_basis,
-                                      max_params=max_params)
+                                      max_params=max_params, degree=3 if model_degree is None else model_degree)
     if set_order == 2:
         return QuadraticStepper(prob.taylor, prob.variational, prob.second_variational, order, params, error_basis,
                                 second_over_set=prob.second_variational_over_set,

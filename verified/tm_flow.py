@@ -15,19 +15,22 @@ it: the set is written as a degree-2 Taylor model over its own symbols,
 ``eps`` the set's parameters ``u = rho eps`` (``rho`` = the magnitude of ``r0``) and
 ``delta`` the error vector ``r = mid r + rad r delta``, every symbol in ``[-1, 1]``
 (the floats' rounding in a remainder). The Taylor coefficients ``x_[k]``, ``k < K``,
-of the solutions from that model are computed in degree-2 Taylor-model arithmetic
+of the solutions from that model are computed in Taylor-model arithmetic of degree 3
 (:mod:`verified.taylor_model`: the graph's Taylor recursion, quadratic terms exact,
-third and fourth order and rounding in a rigorous remainder per operation), and
+cubic ones exact in the ``CUBIC_CAP`` widest parameters, the higher orders and rounding
+in a rigorous remainder per operation; degree 2 on request), and
 
     phi(h, x)  in  sum_{k<K} x_[k](x) h^k  +  h^K x_[K](E)
 
 with the Lagrange remainder over the a-priori enclosure ``E`` (as every step here).
-The result is again a degree-2 model: its linear and quadratic parts in ``eps``
-become ``C'`` and ``S'`` (the new parameter box is ``[-1, 1]`` per live symbol), its
+The result's linear and quadratic parts in ``eps`` become ``C'`` and ``S'`` (the new parameter box is ``[-1, 1]`` per live symbol), its
 linear part in ``delta`` (the step's Jacobian acting on the error, a float matrix)
 carries the error part into the new basis (Lohner's QR or a plain box, by
-``error_basis``), and the rest (remainder, quadratic terms in ``delta``, the Lagrange
-term) is the error the step injects. No variational equations are integrated and no
+``error_basis``), and the rest (remainder, cubic terms, quadratic terms in ``delta``,
+the Lagrange term) is the error the step injects. Degree 3 pays because a robot's
+graph cancels most of its cubic terms: bounded operation by operation at degree 2,
+they made the remainder 100-250x the true non-quadratic part of the UR5's qdd over a
+box of +- 0.01-0.05 (``python benchmarks/bench_robots.py --only 8``). No variational equations are integrated and no
 Jacobian or Hessian is enclosed over the set: third-order effects are bounded where
 they arise, operation by operation, on the set's own symbols.
 
@@ -54,6 +57,10 @@ from .taylor_model import _acc_add, _pairs, _scale_into, forms_to_models, model_
 
 __all__ = ["TaylorModelFlowStepper", "set_models"]
 
+#: default cap on the symbols with cubic monomials in degree-3 arithmetic (the set's
+#: widest parameters first); a product costs O(cap^3). See TaylorModelFlowStepper.
+CUBIC_CAP = 6
+
 #: default cap on the symbols with quadratic monomials (the set's widest parameters
 #: first, then the widest error directions); a product costs O(cap^2)
 QUADRATIC_CAP = 16
@@ -64,29 +71,44 @@ def _spread_about(rng: Interval, centre: np.ndarray) -> np.ndarray:
     return np.maximum(_k_round_up(centre - rng.lo), _k_round_up(rng.hi - centre))
 
 
-def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP):
-    """Degree-2 Taylor models enclosing the sets ``c + C u + q(u) + Q r`` (module
-    docstring), over ``M = mu + n`` symbols: the ``mu`` live parameters (widest first)
-    and the ``n`` components of ``r``.
+def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_cap: int = 0):
+    """Taylor models enclosing the sets ``c + C u + q(u) + Q r`` (module docstring),
+    over ``M = mu + n`` symbols: the ``mu`` live parameters (widest first) and the ``n``
+    components of ``r``.
 
-    Returns ``(X, live, rho, mq)``: ``X`` (n, B, L) the models (``L =
-    model_length(M, mq)``), ``live`` (mu,) the parameter columns in symbol order,
-    ``rho`` (B, m) the magnitudes of ``r0`` (``u = rho eps``), ``mq`` the symbols with
-    quadratic monomials (the first ``mq``). Quadratic terms of parameters past ``mq``
-    are bounded into the remainder."""
+    Returns ``(X, live, errors, rho, mq, m3)``: ``X`` (n, B, L) the models (``L =
+    model_length(M, mq, m3)``; the cubic part, room for the arithmetic's, is zero),
+    ``live`` (mu,) the parameter columns in symbol order, ``errors`` (n,) the components
+    of ``r`` in symbol order (widest first: they follow the parameters, and the first of
+    them may still get quadratic monomials), ``rho`` (B, m) the magnitudes of ``r0``
+    (``u = rho eps``), ``mq`` and ``m3`` the symbols with quadratic and cubic monomials
+    (the first ones). Quadratic terms of parameters past ``mq`` are bounded into the
+    remainder."""
     nb, n = sets.c.shape
     rho = sets.r0.mag()  # r0 within [-rho, rho]: u = rho eps covers it
     reach = np.abs(sets.C) * rho[:, None, :] + np.einsum("bijk,bk->bij", np.abs(sets.S), rho) * rho[:, None, :]
     width = reach.sum(axis=1).max(axis=0)  # (m,)
-    live = np.flatnonzero(width > 0)
+    # parameters below 1e-12 of the widest (a zero-width start leaves some at 1e-323)
+    # would take symbols, and the quadratic monomials of the first ones, for nothing:
+    # they are bounded into the remainder instead (below)
+    is_live = width > (width.max() if width.size else 0.0) * 1e-12
+    live = np.flatnonzero(is_live)
     live = live[np.argsort(-width[live], kind="stable")]
+    dead = np.flatnonzero(~is_live & (width > 0))
     mu = live.size
     M = mu + n
     mq = min(M, max(int(quadratic_cap), 0))
+    m3 = min(mq, max(int(cubic_cap), 0))
     mqu = min(mu, mq)  # parameters with quadratic monomials
-    L = model_length(M, mq)
+    L = model_length(M, mq, m3)
     X = np.zeros((n, nb, L))
     err = np.zeros((nb, n))
+    if dead.size:
+        # every term with a dead parameter: C_ij u_j, and S_ijk u_j u_k with j or k dead
+        # (S symmetric: twice the rows of the dead ones)
+        lin = np.abs(sets.C[:, :, dead]) * rho[:, None, dead]
+        quad = np.einsum("bijk,bk->bij", np.abs(sets.S[:, :, dead, :]), rho) * rho[:, None, dead]
+        err += (lin + 2.0 * quad).sum(axis=-1) * (1.0 + 2.0**-40) + 1e-300
 
     # centre: c + Q mid(r)
     mr = sets.r.mid()
@@ -101,7 +123,8 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP):
     # linear in delta: Q rad(r)
     rr = sets.r.rad()
     b = Interval(sets.Q) * point(rr[:, None, :])  # (B, n, n)
-    X[:, :, mu + 1: M + 1] = b.mid().transpose(1, 0, 2)
+    errors = np.argsort(-np.abs(b.mid()).sum(axis=1).max(axis=0), kind="stable")
+    X[:, :, mu + 1: M + 1] = b.mid()[:, :, errors].transpose(1, 0, 2)
     err += b.rad().sum(axis=-1)
     # quadratic in eps: S_jj rho_j^2 on the diagonal, (S_jk + S_kj) rho_j rho_k off it
     if mu:
@@ -128,7 +151,7 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP):
     if bad.any():
         X[:, bad, :] = 0.0
         X[:, bad, -1] = np.inf
-    return X, live, rho, mq
+    return X, live, errors, rho, mq, m3
 
 
 def models_to_forms(X: np.ndarray, M: int, mq: int) -> np.ndarray:
@@ -168,24 +191,45 @@ class TaylorModelFlowStepper(LohnerStepper):
 
     ``taylor``: the evaluator of Taylor coefficients over boxes (step size and a-priori
     enclosure, as every stepper); ``models``: a
-    :class:`verified.taylor_model.TaylorModelODE` of the same graph. The error part is
-    absorbed into parameters as :class:`~verified.quadratic.QuadraticStepper` does
-    (``absorb_ratio``, up to ``max_params``, then merged)."""
+    :class:`verified.taylor_model.TaylorModelODE` of the same graph; ``degree`` (2 or 3)
+    that of the arithmetic, with ``cubic_cap`` symbols carrying cubic monomials
+    (measured on the UR5 +- 1e-3 to T = 1: ratio 2.68 / 2.69 / 2.68 with 6 / 8 / 10, at
+    1.0 / 1.4 / 1.8x the time). The error part is absorbed into parameters as
+    :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``, up to
+    ``max_params``, default 12 per state, then merged).
+
+    ``absorb_ratio`` None (default): 1 % of the carried width for systems of 6 states or
+    more, 10 % (as the mean-value step) below. Why early on robots: the error part is a
+    box in a basis, wrapped every step, and over a thousand steps of a robot the
+    wrapping, not the injected error, is what grows it (UR5 +- 1e-3: the error part
+    4.5x wider from 0.60 s to 0.66 s while 5e-6 was injected); parameters are carried
+    exactly. Measured on the UR5 to T = 1: ratio 2.59 at 10 %, 1.24 at 1 % (max 1.42) in
+    1.2x the time; 0.1 %, or 1 % with a cap of 4 per state, reach the cap and merge,
+    and break down at 0.93 s / 0.99 s. The 3-link arm +- 1e-3: ratio 1.33 at 1.2 s with
+    1 %, 3.45 at 1.3 s with 10 %. Small systems lose by it: the double pendulum from one
+    box reaches 1.46 / 1.14 / 1.03 s at 10 / 3 / 1 % (every absorbed parameter past the
+    quadratic cap is one more symbol whose products are bounded)."""
 
     def __init__(self, taylor, models, order: int, params=None, error_basis="qr", max_params: int | None = None,
-                 quadratic_cap: int = QUADRATIC_CAP, absorb_ratio: float = 0.1):
+                 quadratic_cap: int = QUADRATIC_CAP, degree: int = 3, cubic_cap: int = CUBIC_CAP,
+                 absorb_ratio: float | None = None):
+        if absorb_ratio is None:
+            absorb_ratio = 0.01 if taylor.n >= 6 else 0.1
         super().__init__(taylor, None, order, params, error_basis, absorb=bool(np.isfinite(absorb_ratio)),
-                         max_params=4 * taylor.n if max_params is None else max_params)
+                         max_params=12 * taylor.n if max_params is None else max_params)
         self.absorb_ratio = float(absorb_ratio)
         self.models = models
         self.quadratic_cap = int(quadratic_cap)
+        if degree not in (2, 3):
+            raise ValueError(f"degree must be 2 or 3, got {degree!r}")
+        self.cubic_cap = int(cubic_cap) if degree == 3 else 0
 
-    def _param_models(self, nb, M, mq):
+    def _param_models(self, nb, M, mq, m3):
         p = self._params(nb)
         np_ = self.models.n_params
         if not np_:
-            return np.zeros((0, nb, model_length(M, mq)))
-        return forms_to_models(box_forms(p.lo, p.hi, np.full(np_, -1), M), mq)
+            return np.zeros((0, nb, model_length(M, mq, m3)))
+        return forms_to_models(box_forms(p.lo, p.hi, np.full(np_, -1), M), mq, m3)
 
     # ------------------------------------------------------------------ per step
     def begin(self, sets: QuadraticSets) -> None:
@@ -196,11 +240,11 @@ class TaylorModelFlowStepper(LohnerStepper):
         K = self.order
         nb = sets.n_sets
         work = sets.recentred() if self.recentre else sets
-        Xm, live, rho, mq = set_models(work, self.quadratic_cap)
+        Xm, live, errors, rho, mq, m3 = set_models(work, self.quadratic_cap, self.cubic_cap)
         M = live.size + self.n
-        out = self.models._run(Xm, self._param_models(nb, M, mq), K, M, mq)  # (n, K + 1, B, L)
+        out = self.models._run(Xm, self._param_models(nb, M, mq, m3), K, M, mq, m3)  # (n, K + 1, B, L)
         cX = self._tighter(self.models._interval(out, M, mq), Xm, M, mq, K)
-        self._cur = dict(sets=sets, work=work, live=live, mq=mq, M=M, out=out, cX=cX)
+        self._cur = dict(sets=sets, work=work, live=live, errors=errors, mq=mq, m3=m3, M=M, out=out, cX=cX)
         self._fresh = True
 
     def _tighter(self, ranges: Interval, Xm: np.ndarray, M: int, mq: int, K: int) -> Interval:
@@ -261,6 +305,13 @@ class TaylorModelFlowStepper(LohnerStepper):
     #: see suggest_step
     REMAINDER_GROWTH = 1.2
 
+    #: the a-priori test's coefficients over the candidate tube in models as well as in
+    #: affine arithmetic (False: affine only). Only the last coefficient (the Lagrange
+    #: term, ~1e-12 per step on the UR5) is used, and affine arithmetic with fresh
+    #: symbols per order bounds it as well: on the UR5 +- 1e-3 to T = 1 the same steps
+    #: and widths, in half the time.
+    APRIORI_MODELS = False
+
     def apriori(self, X: Interval, cX: Interval, h: float, tries: int = 4):
         """A-priori enclosure over ``[0, h]`` of the solutions from the sets, as a model
         (the high-order enclosure test of Nedialkov, Jackson & Pryce over a set that is
@@ -276,15 +327,17 @@ class TaylorModelFlowStepper(LohnerStepper):
         interior of ``B``, then no solution from the set leaves ``E~`` on ``[0, h]`` (at a
         first exit time ``t*``, the Taylor expansion with its Lagrange remainder,
         componentwise over ``[0, t*]`` where the solution is in ``E~``, puts ``x(t*)``
-        in the interior of ``E~``) and ``x_[K]`` over ``E~`` bounds the remainder."""
+        in the interior of ``E~``) and ``x_[K]`` over ``E~`` bounds the remainder.
+        ``x_[K]`` over ``E~`` is taken in affine arithmetic over the model's affine forms
+        (every nonlinear monomial bounded into the error; ``APRIORI_MODELS``)."""
         cur = getattr(self, "_cur", None)
         if cur is None or cur["sets"].n_sets != X.shape[0]:
             return super().apriori(X, cX, h, tries)
         K = self.order
-        out, M, mq = cur["out"], cur["M"], cur["mq"]
+        out, M, mq, m3 = cur["out"], cur["M"], cur["mq"], cur["m3"]
         n, _, nb, L = out.shape
         M2 = M + K - 1
-        L2 = model_length(M2, mq)
+        L2 = model_length(M2, mq, m3)
         # sum_i h^i P_i (1/2 for i >= 1) and the tau coefficients h^i c_i / 2
         half = np.ascontiguousarray(out[:, :K].copy())
         half[:, 1:] *= 0.5  # (exact, barring underflow: covered below)
@@ -302,7 +355,7 @@ class TaylorModelFlowStepper(LohnerStepper):
                  + 1e-300)  # (B, n): rounding of h^i c_i / 2, and the bounded parts
         HK = Interval(0.0, float(h)) ** K
         Bx = _inflate((HK * cX[:, K]).hull(0.0))
-        P = self._param_models(nb, M2, mq)
+        P = self._param_models(nb, M2, mq, m3)
         for _ in range(tries):
             if not (np.isfinite(Bx.lo).all() and np.isfinite(Bx.hi).all()):
                 return None
@@ -311,8 +364,11 @@ class TaylorModelFlowStepper(LohnerStepper):
             with np.errstate(over="ignore", invalid="ignore"):
                 trial[:, :, 0] += bm.T
                 trial[:, :, -1] = _k_round_up(_k_round_up(trial[:, :, -1] + (slack + br).T) + np.abs(trial[:, :, 0]) * 2.0**-52)
-            co = self.models._run(np.ascontiguousarray(trial), P, K, M2, mq)
-            cE = self._tighter(self.models._interval(co, M2, mq), trial, M2, mq, K)
+            if self.APRIORI_MODELS or not hasattr(self.taylor, "series"):
+                co = self.models._run(np.ascontiguousarray(trial), P, K, M2, mq, m3)
+                cE = self._tighter(self.models._interval(co, M2, mq), trial, M2, mq, K)
+            else:
+                cE = self.taylor.series(models_to_forms(trial, M2, mq), K, self._params(nb))
             new = HK * cE[:, K]
             if new.interior_subset(Bx).all():
                 lo, hi = models_to_interval(trial, M2, mq)
@@ -343,9 +399,13 @@ class TaylorModelFlowStepper(LohnerStepper):
         # split the model: centre, linear in eps / delta, quadratic, remainder
         centre = y[:, :, 0].T  # (B, n)
         lin_u = y[:, :, 1: mu + 1].transpose(1, 0, 2)  # (B, n, mu)
-        A = np.ascontiguousarray(y[:, :, mu + 1: M + 1].transpose(1, 0, 2))  # (B, n, n)
-        quad = y[:, :, M + 1: -1].transpose(1, 0, 2)  # (B, n, pairs)
-        rem = y[:, :, -1].T  # (B, n)
+        A = np.empty((nb, n, n))  # (B, n, n): columns back in the order of r's components
+        A[:, :, cur["errors"]] = y[:, :, mu + 1: M + 1].transpose(1, 0, 2)
+        nq = mq * (mq + 1) // 2
+        quad = y[:, :, M + 1: M + 1 + nq].transpose(1, 0, 2)  # (B, n, pairs)
+        # cubic monomials: the sets are second order, so they join the error (in [-1, 1])
+        cubic = np.abs(y[:, :, M + 1 + nq: -1]).sum(axis=-1).T  # (B, n)
+        rem = _k_round_up(y[:, :, -1].T + cubic * (1.0 + 2.0**-40))  # (B, n)
         pi, pj = _pairs(mq)
         on_u = pj < min(mu, mq)  # both symbols parameters (pi <= pj)
         qd = quad[:, :, ~on_u]

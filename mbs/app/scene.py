@@ -131,7 +131,8 @@ _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_m
            "max_boxes": int, "max_steps": int, "max_width": float, "adaptive": bool,
            "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
            "set_order": int, "merge_slack": float, "param_subdivision": None, "absorb": bool,
-           "params_per_state": int, "energy_shell": bool, "invariant_after": float, "set_step": str}
+           "params_per_state": int, "energy_shell": bool, "invariant_after": float, "set_step": str,
+           "model_degree": int}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str, "contract": str, "prune": bool}
 _CONTRACTS = ("step", "test", "off")
@@ -559,6 +560,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         raise SceneError(f"{where} set_order: {solver['set_order']!r} is not 1 or 2")
     if "set_step" in solver and solver["set_step"] not in ("mean_value", "composition"):
         raise SceneError(f"{where} set_step: {solver['set_step']!r} is not 'mean_value' or 'composition'")
+    if "model_degree" in solver and solver["model_degree"] not in (2, 3):
+        raise SceneError(f"{where} model_degree: {solver['model_degree']!r} is not 2 or 3")
 
     # [consistency]
     where = f"{source}: [consistency]"

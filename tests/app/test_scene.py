@@ -196,6 +196,9 @@ def test_solver_set_step():
     assert kw["set_step"] == "composition" and kw["set_order"] == 2
     _err(GOOD.replace("order = 12\n", 'order = 12\nset_step = "taylor"\n'), "set_step",
          "not 'mean_value' or 'composition'")
+    kw = loads_scene(text.replace("set_order = 2\n", "set_order = 2\nmodel_degree = 2\n")).simulate_kwargs(NAMES)
+    assert kw["model_degree"] == 2
+    _err(text.replace("set_order = 2\n", "set_order = 2\nmodel_degree = 4\n"), "model_degree", "not 2 or 3")
 
 
 def test_solver_energy_shell_and_params_per_state():

@@ -28,21 +28,22 @@ def _riccati(x, p=()):
     return [x[0] * x[0]]
 
 
-def _riccati_run(lo=0.5, hi=1.5, T=0.5, set_step="composition"):
+def _riccati_run(lo=0.5, hi=1.5, T=0.5, set_step="composition", **kw):
     return solve(trace(_riccati, 1), Interval([lo], [hi]), (0.0, T), t_eval=np.linspace(0, T, 6),
-                 set_order=2, set_step=set_step, order=8)
+                 set_order=2, set_step=set_step, order=8, **kw)
 
 
 def _riccati_exact(x0, t):
     return x0 / (1.0 - x0 * t)
 
 
-def test_riccati_encloses_closed_form_and_beats_the_mean_value_step():
+@pytest.mark.parametrize("degree", [2, 3])
+def test_riccati_encloses_closed_form_and_beats_the_mean_value_step(degree):
     """x' = x^2 from [0.5, 1.5] to T = 0.5 (x(T) from 0.667 to 6, far from quadratic in
     x0): every output box holds the closed form at 41 initial points, and is narrower
-    than the mean-value step's (measured: 1.0002 / 1.002 / 1.010 / 1.036 / 1.12 times
-    the true width against 1.002 / 1.007 / 1.020 / 1.056 / 1.16)."""
-    sol = _riccati_run()
+    than the mean-value step's (measured at degree 2: 1.0002 / 1.002 / 1.010 / 1.036 /
+    1.12 times the true width against 1.002 / 1.007 / 1.020 / 1.056 / 1.16)."""
+    sol = _riccati_run(model_degree=degree)
     ref = _riccati_run(set_step="mean_value")
     assert sol.status == "completed", sol.reason
     x0 = np.linspace(0.5, 1.5, 41)
@@ -115,19 +116,26 @@ def test_pendulum_composition_contains_trajectories():
 
 def test_set_models_enclose_the_set():
     """The degree-2 models of a set (parameters and error part as symbols) hold the set's
-    points: exact rationals at random parameter and error values."""
+    points: exact rationals at random parameter and error values. The last parameter is
+    1e-13 as wide as the others: bounded into the remainder, linear and quadratic terms
+    (without that bound the check fails)."""
     rng = np.random.default_rng(3)
     nb, n, m = 2, 3, 4
     c = rng.normal(size=(nb, n))
     C = rng.normal(size=(nb, n, m))
     S = rng.normal(size=(nb, n, m, m)) * 0.3
     S = 0.5 * (S + S.transpose(0, 1, 3, 2))
+    C[:, :, :-1] *= 1e4
+    C[:, :, -1] *= 1e-9
+    S[:, :, -1, :] *= 1e-9
+    S[:, :, :, -1] *= 1e-9
     Q = np.linalg.qr(rng.normal(size=(nb, n, n)))[0]
     r0 = Interval(-rng.uniform(0.1, 1, (nb, m)), rng.uniform(0.1, 1, (nb, m)))
     r = Interval(-rng.uniform(0, 0.1, (nb, n)), rng.uniform(0, 0.1, (nb, n)))
     sets = QuadraticSets(c=c, C=C, r0=r0, S=S, Q=Q, r=r).recentred()
-    X, live, rho, mq = tm_flow.set_models(sets, quadratic_cap=3)  # parameters past 3 bounded
+    X, live, errors, rho, mq, _ = tm_flow.set_models(sets, quadratic_cap=3)  # parameters past 3 bounded
     M = live.size + n
+    assert m - 1 not in live and live.size == m - 1
     pi, pj = _pairs(mq)
     F = Fraction
     for _ in range(30):
@@ -138,7 +146,7 @@ def test_set_models_enclose_the_set():
         eps = [F(float(u[j])) / F(float(rho[b, j])) for j in live]
         rm, rr = sets.r.mid()[b], sets.r.rad()[b]
         delta = [(F(float(e[i])) - F(float(rm[i]))) / F(float(rr[i])) if rr[i] > 0 else F(0) for i in range(n)]
-        sym = eps + delta
+        sym = eps + [delta[k] for k in errors]
         for i in range(n):
             x = (F(float(sets.c[b, i])) + sum(F(float(sets.C[b, i, j])) * F(float(u[j])) for j in range(m))
                  + sum(F(float(sets.S[b, i, j, k])) * F(float(u[j])) * F(float(u[k]))
@@ -174,3 +182,7 @@ def test_set_step_arguments_are_checked():
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, set_step="taylor")
     with pytest.raises(ValueError, match="needs set_order=2"):
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_step="composition")
+    with pytest.raises(ValueError, match="model_degree must be 2 or 3"):
+        solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, set_step="composition", model_degree=4)
+    with pytest.raises(ValueError, match="model_degree is the degree"):
+        solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, model_degree=3)
