@@ -193,8 +193,8 @@ class TaylorModelFlowStepper(LohnerStepper):
     enclosure, as every stepper); ``models``: a
     :class:`verified.taylor_model.TaylorModelODE` of the same graph; ``degree`` (2 or 3)
     that of the arithmetic, with ``cubic_cap`` symbols carrying cubic monomials
-    (measured on the UR5 +- 1e-3 to T = 1: ratio 2.68 / 2.69 / 2.68 with 6 / 8 / 10, at
-    1.0 / 1.4 / 1.8x the time). The error part is absorbed into parameters as
+    (measured on the UR5 +- 1e-3 to T = 1, absorbing at 10 %: ratio 2.68 / 2.69 / 2.68
+    with 6 / 8 / 10, at 1.0 / 1.4 / 1.8x the time). The error part is absorbed into parameters as
     :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``, up to
     ``max_params``, default 12 per state, then merged).
 
