@@ -186,3 +186,36 @@ def test_set_step_arguments_are_checked():
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, set_step="composition", model_degree=4)
     with pytest.raises(ValueError, match="model_degree is the degree"):
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, model_degree=3)
+
+
+@pytest.mark.slow
+def test_ur5_degree_three_contains_pinocchio_trajectories():
+    """UR5 (example-robot-data, no damping), q0 +- 1e-3, qd = 0, T = 0.15: the composition
+    in degree-3 models on the numeric model's right-hand side (mode i), absorbing at 1 %
+    (6 states or more): DOP853 trajectories with Pinocchio's aba as right-hand side in
+    every output box and the tube."""
+    import pinocchio as pin
+
+    from mbs.pinocchio_check import _QMap
+    from mbs.simulate import system_for
+    from models.robots import ur5
+
+    chain = ur5()
+    model = chain.to_pinocchio()
+    data = model.createData()
+    qm = _QMap(chain, model)
+    zero = np.zeros(chain.n)
+
+    def f(x):
+        q, qd = x[:6], x[6:]
+        return np.concatenate([qd, qm.back(pin.aba(model, data, qm.q(q), qm.v(qd), qm.v(zero)).copy())])
+
+    x0 = np.r_[0.0, -1.0, 1.0, -0.5, 0.5, 0.0, np.zeros(6)]
+    r = np.r_[np.full(6, 1e-3), np.zeros(6)]
+    lo, hi = x0 - r, x0 + r
+    sol = solve(VerifiedODE(system_for(chain, "i").rhs, "taylor_model"), Interval(lo, hi), (0.0, 0.15),
+                t_eval=[0.05, 0.1, 0.15], set_order=2, set_step="composition", model_degree=3,
+                error_basis="auto", order=8, params_per_state=12)
+    assert sol.status == "completed", sol.reason
+    sols = trajectories(f, np.unique(sample_initial_points(lo, hi, 12), axis=0), 0.15)
+    assert misses(sol, sols, per_step=2) == []
