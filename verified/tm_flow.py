@@ -23,16 +23,17 @@ in a rigorous remainder per operation; degree 2 on request), and
     phi(h, x)  in  sum_{k<K} x_[k](x) h^k  +  h^K x_[K](E)
 
 with the Lagrange remainder over the a-priori enclosure ``E`` (as every step here).
-The result's linear and quadratic parts in ``eps`` become ``C'`` and ``S'`` (the new parameter box is ``[-1, 1]`` per live symbol), its
-linear part in ``delta`` (the step's Jacobian acting on the error, a float matrix)
-carries the error part into the new basis (Lohner's QR or a plain box, by
-``error_basis``), and the rest (remainder, cubic terms, quadratic terms in ``delta``,
-the Lagrange term) is the error the step injects. Degree 3 pays because a robot's
-graph cancels most of its cubic terms: bounded operation by operation at degree 2,
-they made the remainder 100-250x the true non-quadratic part of the UR5's qdd over a
-box of +- 0.01-0.05 (``python benchmarks/bench_robots.py --only 8``). No variational equations are integrated and no
-Jacobian or Hessian is enclosed over the set: third-order effects are bounded where
-they arise, operation by operation, on the set's own symbols.
+The result's linear and quadratic parts in ``eps`` become ``C'`` and ``S'`` (the new
+parameter box is ``[-1, 1]`` per live symbol), its linear part in ``delta`` (the
+step's Jacobian acting on the error, a float matrix) carries the error part into the
+new basis (Lohner's QR or a plain box, by ``error_basis``), and the rest (remainder,
+cubic terms, quadratic terms in ``delta``, the Lagrange term) is the error the step
+injects. Degree 3 pays because a robot's graph cancels most of its cubic terms:
+bounded operation by operation at degree 2, they made the remainder 100-250x the true
+non-quadratic part of the UR5's qdd over a box of +- 0.01-0.05 (``python
+benchmarks/bench_robots.py --only 8``). No variational equations are integrated and
+no Jacobian or Hessian is enclosed over the set: higher-order effects are bounded
+where they arise, operation by operation, on the set's own symbols.
 
 Rigor: the input models enclose the set (every float product's rounding is added
 to the remainder), the model kernel is checked against arb
@@ -194,9 +195,9 @@ class TaylorModelFlowStepper(LohnerStepper):
     :class:`verified.taylor_model.TaylorModelODE` of the same graph; ``degree`` (2 or 3)
     that of the arithmetic, with ``cubic_cap`` symbols carrying cubic monomials
     (measured on the UR5 +- 1e-3 to T = 1, absorbing at 10 %: ratio 2.68 / 2.69 / 2.68
-    with 6 / 8 / 10, at 1.0 / 1.4 / 1.8x the time). The error part is absorbed into parameters as
-    :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``, up to
-    ``max_params``, default 12 per state, then merged).
+    with 6 / 8 / 10, at 1.0 / 1.4 / 1.8x the time). The error part is absorbed into
+    parameters as :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``,
+    up to ``max_params``, default 12 per state, then merged).
 
     ``absorb_ratio`` None (default): 1 % of the carried width for systems of 6 states or
     more, 10 % (as the mean-value step) below. Why early on robots: the error part is a
@@ -355,7 +356,10 @@ class TaylorModelFlowStepper(LohnerStepper):
                  + 1e-300)  # (B, n): rounding of h^i c_i / 2, and the bounded parts
         HK = Interval(0.0, float(h)) ** K
         Bx = _inflate((HK * cX[:, K]).hull(0.0))
-        P = self._param_models(nb, M2, mq, m3)
+        # x_[K] over the candidate in models only on request (APRIORI_MODELS), or where
+        # the box evaluator takes no forms
+        in_models = self.APRIORI_MODELS or not hasattr(self.taylor, "series")
+        P = self._param_models(nb, M2, mq, m3) if in_models else None
         for _ in range(tries):
             if not (np.isfinite(Bx.lo).all() and np.isfinite(Bx.hi).all()):
                 return None
@@ -364,7 +368,7 @@ class TaylorModelFlowStepper(LohnerStepper):
             with np.errstate(over="ignore", invalid="ignore"):
                 trial[:, :, 0] += bm.T
                 trial[:, :, -1] = _k_round_up(_k_round_up(trial[:, :, -1] + (slack + br).T) + np.abs(trial[:, :, 0]) * 2.0**-52)
-            if self.APRIORI_MODELS or not hasattr(self.taylor, "series"):
+            if in_models:
                 co = self.models._run(np.ascontiguousarray(trial), P, K, M2, mq, m3)
                 cE = self._tighter(self.models._interval(co, M2, mq), trial, M2, mq, K)
             else:
