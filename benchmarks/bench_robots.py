@@ -34,8 +34,8 @@ Cases (issue 17's targets table):
 8. ``composition``: second-order sets (``set_order=2``, Taylor-model arithmetic,
    ``error_basis="auto"``, order 8, tol 1e-10, 12 parameters per state) advanced by
    the mean-value step (``set_step="mean_value"``) and by composition in Taylor models
-   (``set_step="composition"``, :mod:`verified.tm_flow`) in Taylor models of degree 2
-   and 3 (``model_degree``) side by side, through ``solve``
+   (``set_step="composition"``, :mod:`verified.tm_flow`) in Taylor models of degree 2,
+   3 and 4 (``model_degree``) side by side, through ``solve``
    on the numeric rhs graph: the 3-link arm (eps 0.01, 1e-3), the UR5 and the Panda
    (eps 1e-3), chains n = 4..7 and the double pendulum from one box; the wall cap is
    ``--cap`` except where a row states its own. Also the worst ratio at every output
@@ -110,7 +110,8 @@ TUBE_CHECKS = 200  # steps whose tube boxes are checked (evenly spread)
 #: case 8's columns: the solver options of each
 STEPS_8 = {"mean_value": dict(set_step="mean_value"),
            "degree 2": dict(set_step="composition", model_degree=2),
-           "degree 3": dict(set_step="composition", model_degree=3)}
+           "degree 3": dict(set_step="composition", model_degree=3),
+           "degree 4": dict(set_step="composition", model_degree=4)}
 
 CASES = {1: "arm3", 2: "ur5", 3: "panda", 4: "chains", 5: "dp", 6: "pendulum", 7: "qdd", 8: "composition",
          9: "pendulum_composition"}
@@ -894,11 +895,11 @@ class Bench:
         self.results["composition"] = labelled
         head = ["case", "T"] + [f"{s}: {c}" for s in STEPS_8
                                 for c in ("reached", "ratio @ t", "wall s", "steps")] + ["sound"]
-        return ("### 8. Second-order sets: mean-value step against composition in Taylor models of degree 2 and 3\n\n"
+        return ("### 8. Second-order sets: mean-value step against composition in Taylor models of degree 2, 3 and 4\n\n"
                 "`solve(..., set_order=2, arithmetic=\"taylor_model\", error_basis=\"auto\", order=8, tol=1e-10, "
                 "params_per_state=12, ...)` on the numeric rhs graph (the double pendulum: eq. 22 traced, order 6), "
-                "with `set_step=\"mean_value\"`, and `set_step=\"composition\"` with `model_degree=2` and 3 "
-                f"(the default). Wall cap {self.cap:g} s unless the row says otherwise.\n\n"
+                "with `set_step=\"mean_value\"`, and `set_step=\"composition\"` with `model_degree=2`, 3 (the default) and 4. "
+                f"Wall cap {self.cap:g} s unless the row says otherwise.\n\n"
                 + md_table(head, rows)
                 + "\n\nWorst ratio (component) at every output time, composition of degree 3:\n\n"
                 + md_table(["case", "t: ratio"], history))

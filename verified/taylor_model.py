@@ -1,4 +1,4 @@
-"""Taylor coefficients of ODE solutions as Taylor models of degree 2 or 3 in a set's symbols.
+"""Taylor coefficients of ODE solutions as Taylor models of degree 2 to 4 in a set's symbols.
 
 Affine arithmetic (:mod:`verified.affine_taylor`) carries the first-order dependence
 of every intermediate on the set's noise symbols exactly and bounds every product's
@@ -24,7 +24,10 @@ measured 1.02x on ``qdd`` and 1.03-1.05x on ``d qdd / dq`` at ``+- 0.01`` (1.2x 
 cubic terms too: bounded per operation at degree 2, the remainder of the UR5's qdd
 over +- 0.01-0.05 in all states was 100-250x its true non-quadratic part; degree 3
 makes it 13-80x smaller (``test_degree_three_is_tighter_on_the_arm`` shows it on the
-3-link arm).
+3-link arm). Degree 4 (quartic monomials in the first ``m4 <= m3`` symbols) exists for
+the same reason one order up: sums such as a rotated vector's components cancel their
+fourth-order terms, which degree 3 bounds term by term (3-link arm, sets at 0.1 / 0.2 /
+0.3 s into a run: the remainder of qdd 30x / 11x / 3.4x smaller with 4 quartic symbols).
 
 Rules (all bounds rounded upward by :func:`verified.affine_taylor._up`, every float
 coefficient's rounding error added to ``e``):
@@ -32,16 +35,18 @@ coefficient's rounding error added to ``e``):
 * ``x + y``, ``x - y``, ``x / k``, ``d x``: coefficient by coefficient.
 * ``x * y``: the centres times every monomial of the other, and every product of
   two non-constant monomials whose result the model keeps (:func:`product_table`:
-  linear x linear into quadratic, linear x quadratic into cubic), exactly up to
+  linear x linear into quadratic, linear x quadratic into cubic, linear x cubic
+  and quadratic x quadratic into quartic), exactly up to
   rounding; ``e`` gains the sum of ``|x_a| |y_b|`` over every other pair (``S_x S_y``
   minus the kept pairs' sum, ``S`` the sums of |non-constant coefficients|), and
   ``(|c_x| + S_x) e_y + (|c_y| + S_y) e_x + e_x e_y``.
 * ``f(x)`` for sqrt, exp, log, sin, cos, tan, atan and ``1/x``: the expansion about
   the centre ``c`` with ``d = x - c`` (a model with centre 0) of the model's degree,
   ``f(c) + f'(c) d + f''(xi)/2 d^2`` (degree 2) or ``f(c) + f'(c) d + f''(c)/2 d^2 +
-  f'''(xi)/6 d^3`` (degree 3): every derivative at ``c`` by the midpoint of its
-  enclosure, the last over the range ``X`` of ``x``; ``e`` gains their radii times
-  ``1, W, W^2 (, W^3)`` (``W >= |d|``). Where that error alone exceeds the plain image
+  f'''(xi)/6 d^3`` (degree 3) or, one term more, ``... + f'''(c)/6 d^3 + f''''(xi)/24
+  d^4`` (degree 4): every derivative at ``c`` by the midpoint of its enclosure, the
+  last over the range ``X`` of ``x``; ``e`` gains their radii times ``1, W, W^2 (, W^3,
+  W^4)`` (``W >= |d|``). Where that error alone exceeds the plain image
   ``f(X)``, the image replaces the model (as in the affine kernel).
 * Higher orders in time: the recurrences of :mod:`verified.taylor`, built from these.
 
@@ -77,11 +82,17 @@ def cubic_count(m3: int) -> int:
     return m3 * (m3 + 1) * (m3 + 2) // 6
 
 
-def model_length(m: int, mq: int, m3: int = 0) -> int:
-    """Length of a model over ``m`` symbols, ``mq`` of them with quadratic monomials and
-    the first ``m3 <= mq`` with cubic ones: centre, ``m`` linear, ``mq (mq + 1) / 2``
-    quadratic, ``m3 (m3 + 1) (m3 + 2) / 6`` cubic coefficients, remainder."""
-    return m + mq * (mq + 1) // 2 + cubic_count(m3) + 2
+def quartic_count(m4: int) -> int:
+    """Number of quartic monomials ``eps_i eps_j eps_k eps_l`` (i <= j <= k <= l < m4)."""
+    return m4 * (m4 + 1) * (m4 + 2) * (m4 + 3) // 24
+
+
+def model_length(m: int, mq: int, m3: int = 0, m4: int = 0) -> int:
+    """Length of a model over ``m`` symbols, ``mq`` of them with quadratic monomials, the
+    first ``m3 <= mq`` with cubic ones and the first ``m4 <= m3`` with quartic ones:
+    centre, ``m`` linear, ``mq (mq + 1) / 2`` quadratic, ``m3 (m3 + 1) (m3 + 2) / 6``
+    cubic, :func:`quartic_count` quartic coefficients, remainder."""
+    return m + mq * (mq + 1) // 2 + cubic_count(m3) + quartic_count(m4) + 2
 
 
 def _pairs(mq: int) -> tuple[np.ndarray, np.ndarray]:
@@ -97,23 +108,33 @@ def _triples(m3: int) -> np.ndarray:
                     dtype=np.int64).reshape(-1, 3)
 
 
+def _quads(m4: int) -> np.ndarray:
+    """Symbol indices (i, j, k, l), i <= j <= k <= l < m4, of the quartic coefficients, in
+    storage order, shape (quartic_count(m4), 4)."""
+    return np.array([(i, j, k, l) for i in range(m4) for j in range(i, m4) for k in range(j, m4)
+                     for l in range(k, m4)], dtype=np.int64).reshape(-1, 4)
+
+
 #: a product's kept pairs are summed in floats; _acc_mul bounds that sum's rounding for up to
 #: 2^14 terms
 _MAX_PAIRS = 2**14
 
 
 @functools.lru_cache(maxsize=64)
-def product_table(m: int, mq: int, m3: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def product_table(m: int, mq: int, m3: int = 0, m4: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The products of non-constant monomials a model keeps: ``(PA, PB, PC)`` with
     ``x[PA[t]] * y[PB[t]]`` a multiple of monomial ``PC[t]`` (storage indices of a model
     of :func:`model_length`); ordered pairs, so ``x_i y_j`` and ``x_j y_i`` are two
     entries. Every other product of non-constant monomials is bounded by :func:`_acc_mul`."""
-    if not 0 <= m3 <= mq <= m:
-        raise ValueError(f"need 0 <= cubic symbols <= quadratic symbols <= symbols, got {m3}, {mq}, {m}")
+    if not 0 <= m4 <= m3 <= mq <= m:
+        raise ValueError(f"need 0 <= quartic symbols <= cubic symbols <= quadratic symbols <= symbols, "
+                         f"got {m4}, {m3}, {mq}, {m}")
     pi, pj = _pairs(mq)
     quad = {(int(i), int(j)): m + 1 + p for p, (i, j) in enumerate(zip(pi, pj))}
     base3 = m + 1 + pi.size
     cubic = {tuple(int(v) for v in t): base3 + p for p, t in enumerate(_triples(m3))}
+    base4 = base3 + cubic_count(m3)
+    quartic = {tuple(int(v) for v in t): base4 + p for p, t in enumerate(_quads(m4))}
     A, B, C = [], [], []
     for i in range(mq):
         for j in range(mq):
@@ -128,6 +149,24 @@ def product_table(m: int, mq: int, m3: int = 0) -> tuple[np.ndarray, np.ndarray,
             A += [1 + i, q]
             B += [q, 1 + i]
             C += [c, c]
+    # degree 4 among the first m4 symbols: linear x cubic (both orders), quadratic x quadratic
+    for t, c3 in cubic.items():
+        if t[2] >= m4:
+            continue
+        for i in range(m4):
+            c = quartic[tuple(sorted((i,) + t))]
+            A += [1 + i, c3]
+            B += [c3, 1 + i]
+            C += [c, c]
+    for (i, j), qa in quad.items():
+        if j >= m4:
+            continue
+        for (k, l), qb in quad.items():
+            if l >= m4:
+                continue
+            A.append(qa)
+            B.append(qb)
+            C.append(quartic[tuple(sorted((i, j, k, l)))])
     if len(A) > _MAX_PAIRS:
         raise ValueError(f"{len(A)} kept products per model product exceed {_MAX_PAIRS}: fewer quadratic "
                          f"or cubic symbols")
@@ -334,6 +373,48 @@ def _deriv3(kind, lo, hi):
 
 
 @njit(cache=True)
+def _deriv4(kind, lo, hi):
+    """Interval enclosure of the fourth derivative over [lo, hi] (kinds as :func:`_deriv2`)."""
+    if kind == 0:  # sqrt: -15 / (16 x^3 sqrt(x))
+        sl, sh = _k.sqrt(lo, hi)
+        cl, ch = _k.ipow(lo, hi, 3)
+        pl, ph = _k.mul(cl, ch, sl, sh)
+        dl, dh = _k.mul(16.0, 16.0, pl, ph)
+        rl, rh = _k.div(15.0, 15.0, dl, dh)
+        return -rh, -rl
+    if kind == 1:  # exp
+        return _k.exp(lo, hi)
+    if kind == 2:  # log: -6 / x^4
+        fl, fh = _k.ipow(lo, hi, 4)
+        rl, rh = _k.div(6.0, 6.0, fl, fh)
+        return -rh, -rl
+    if kind == 3:  # sin: sin
+        return _k.sin(lo, hi)
+    if kind == 4:  # cos: cos
+        return _k.cos(lo, hi)
+    if kind == 5:  # tan: 8 t (1 + t^2) (2 + 3 t^2)
+        tl, th = _k.tan(lo, hi)
+        ql, qh = _k.sqr(tl, th)
+        al, ah = _k.add(1.0, 1.0, ql, qh)
+        sl, sh = _k.mul(3.0, 3.0, ql, qh)
+        bl, bh = _k.add(2.0, 2.0, sl, sh)
+        pl, ph = _k.mul(al, ah, bl, bh)
+        ul, uh = _k.mul(8.0, 8.0, tl, th)
+        return _k.mul(ul, uh, pl, ph)
+    if kind == 6:  # atan: 24 x (1 - x^2) / (1 + x^2)^4
+        ql, qh = _k.sqr(lo, hi)
+        al, ah = _k.add(1.0, 1.0, ql, qh)
+        cl, ch = _k.ipow(al, ah, 4)
+        ol, oh = _k.sub(1.0, 1.0, ql, qh)
+        ul, uh = _k.mul(24.0, 24.0, lo, hi)
+        nl, nh = _k.mul(ul, uh, ol, oh)
+        return _k.div(nl, nh, cl, ch)
+    # 7: reciprocal: 24 / x^5
+    fl, fh = _k.ipow(lo, hi, 5)
+    return _k.div(24.0, 24.0, fl, fh)
+
+
+@njit(cache=True)
 def _mid_rad(lo, hi):
     """(midpoint, radius rounded up) of [lo, hi]: the midpoint stands for the interval."""
     mid = 0.5 * lo + 0.5 * hi
@@ -341,12 +422,12 @@ def _mid_rad(lo, hi):
 
 
 @njit(cache=True)
-def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, known_lo=-INF):
-    """Z = f(x) by the expansion of degree ``deg`` (2 or 3) about the centre ``c``
-    (module docstring), with ``d = x - c``: ``f(c) + f'(c) d + f2(xi)/2 d^2`` (deg 2) or
-    ``f(c) + f'(c) d + f2(c)/2 d^2 + f3(xi)/6 d^3`` (deg 3), ``f2, f3`` the second and
-    third derivatives, ``xi`` in the range of x. ``D``, ``D2``: scratch of the model's
-    length. ``known_lo``: a lower bound of x known from elsewhere (1 for ``1 + u^2``); the
+def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, D3, known_lo=-INF):
+    """Z = f(x) by the expansion of degree ``deg`` (2, 3 or 4) about the centre ``c``
+    (module docstring), with ``d = x - c``: ``f(c) + f'(c) d + f2(xi)/2 d^2`` (deg 2),
+    ``f(c) + f'(c) d + f2(c)/2 d^2 + f3(xi)/6 d^3`` (deg 3) or ``... + f3(c)/6 d^3 +
+    f4(xi)/24 d^4`` (deg 4), ``f2, f3, f4`` the second to fourth derivatives, ``xi`` in
+    the range of x. ``D``, ``D2``, ``D3``: scratch of the model's length. ``known_lo``: a lower bound of x known from elsewhere (1 for ``1 + u^2``); the
     range used for the last derivative is cut to it."""
     E = Z.size - 1
     c = x[0]
@@ -361,13 +442,19 @@ def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, known_lo=-INF):
         return
     fl, fh = _value(kind, c, c)
     dl, dh = _deriv(kind, c, c)
-    if deg >= 3:
+    gl, gh = 0.0, 0.0
+    if deg >= 4:
+        hl, hh = _deriv2(kind, c, c)  # f2 and f3 at the centre, f4 over the range
+        gl, gh = _deriv3(kind, c, c)
+        sl, sh = _deriv4(kind, xlo, xhi)
+    elif deg >= 3:
         hl, hh = _deriv2(kind, c, c)  # f2 at the centre, f3 over the range
         sl, sh = _deriv3(kind, xlo, xhi)
     else:
         hl, hh = 0.0, 0.0
         sl, sh = _deriv2(kind, xlo, xhi)
-    if not (fl <= fh and dl <= dh and sl <= sh and hl <= hh):
+    if not (fl <= fh and dl <= dh and sl <= sh and hl <= hh and gl <= gh and math.isfinite(gl)
+            and math.isfinite(gh)):
         _poison(Z)  # outside the domain, or a pole within reach
         return
     if not (math.isfinite(fl) and math.isfinite(fh) and math.isfinite(dl) and math.isfinite(dh)
@@ -376,9 +463,9 @@ def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, known_lo=-INF):
         return
     f0, frad = _mid_rad(fl, fh)
     d1, r1 = _mid_rad(dl, dh)
-    # f2/2 and f3/6: halving is exact away from underflow (_TINY in _up covers that); the
-    # division by 6 rounds, which a relative slack on the radius covers
-    top = 2.0 if deg < 3 else 6.0
+    # f2/2, f3/6 and f4/24: halving is exact away from underflow (_TINY in _up covers
+    # that); the divisions by 6 and 24 round, which a relative slack on the radius covers
+    top = 2.0 if deg < 3 else (6.0 if deg == 3 else 24.0)
     s, rl = _mid_rad(sl / top, sh / top)
     rl = _up(rl + (abs(sl) + abs(sh)) * _U)
     for i in range(D.size):  # D = x - c: the same model with centre 0 (exact)
@@ -387,7 +474,20 @@ def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, known_lo=-INF):
     _scale_into(Z, D, d1)  # d1 d, with the remainder |d1| e_x and the rounding
     Z[0] = f0
     W2 = _pm(W, W)
-    if deg >= 3:
+    if deg >= 4:
+        h2, r2 = _mid_rad(0.5 * hl, 0.5 * hh)
+        t3, r3 = _mid_rad(gl / 6.0, gh / 6.0)
+        r3 = _up(r3 + (abs(gl) + abs(gh)) * _U)
+        _acc_mul(Z, D, D, PA, PB, PC, h2)  # + f2(c)/2 d^2
+        _clear(D2)
+        _acc_mul(D2, D, D, PA, PB, PC, 1.0)  # d^2
+        _acc_mul(Z, D2, D, PA, PB, PC, t3)  # + f3(c)/6 d^3
+        _clear(D3)
+        _acc_mul(D3, D2, D, PA, PB, PC, 1.0)  # d^3
+        _acc_mul(Z, D3, D, PA, PB, PC, s)  # + f4/24 d^4 (truncated, bounded)
+        W3 = _pm(W2, W)
+        Z[E] = _up(Z[E] + frad + _pm(r1, W) + _pm(r2, W2) + _pm(r3, W3) + _pm(rl, _pm(W3, W)) + _TINY)
+    elif deg >= 3:
         h2, r2 = _mid_rad(0.5 * hl, 0.5 * hh)
         _acc_mul(Z, D, D, PA, PB, PC, h2)  # + f2(c)/2 d^2
         _clear(D2)
@@ -446,6 +546,7 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
     S = np.zeros(L)
     D = np.zeros(L)
     D2 = np.zeros(L)
+    D3 = np.zeros(L)
     for k in range(order):
         fk = float(k)
         for s in range(nslots):
@@ -491,7 +592,7 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                     _sqrconv(Z, F, u, k, 0, b, PA, PB, PC)
                 elif o == T_DIV:
                     if k == 0:
-                        _unary_into(REC[s, b], F[v, 0, b], PA, PB, PC, deg, 7, D, D2)
+                        _unary_into(REC[s, b], F[v, 0, b], PA, PB, PC, deg, 7, D, D2, D3)
                     _clear(T)
                     _acc_add(T, F[u, k, b], 1.0)
                     if not cst[v]:
@@ -501,9 +602,9 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                     _acc_mul(Z, T, REC[s, b], PA, PB, PC, 1.0)
                 elif o == T_SQRT:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 0, D, D2)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 0, D, D2, D3)
                         _scale_into(T, Z, 2.0)
-                        _unary_into(REC[s, b], T, PA, PB, PC, deg, 7, D, D2)
+                        _unary_into(REC[s, b], T, PA, PB, PC, deg, 7, D, D2, D3)
                     else:
                         _clear(T)
                         _acc_add(T, F[u, k, b], 1.0)
@@ -514,7 +615,7 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                         _acc_mul(Z, T, REC[s, b], PA, PB, PC, 1.0)
                 elif o == T_EXP:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 1, D, D2)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 1, D, D2, D3)
                     else:
                         _clear(T)
                         for j in range(1, k + 1):
@@ -522,16 +623,16 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                         _div_int_into(Z, T, fk)
                 elif o == T_LOG:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 2, D, D2)
-                        _unary_into(REC[s, b], F[u, 0, b], PA, PB, PC, deg, 7, D, D2)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 2, D, D2, D3)
+                        _unary_into(REC[s, b], F[u, 0, b], PA, PB, PC, deg, 7, D, D2, D3)
                     else:
                         _quotient_step(Z, F, s, u, u, k, b, PA, PB, PC, REC[s, b], T, S)
                 elif o == T_SIN or o == T_COS:
                     ss = s if o == T_SIN else aux[s]
                     cs = aux[s] if o == T_SIN else s
                     if k == 0:
-                        _unary_into(F[ss, 0, b], F[u, 0, b], PA, PB, PC, deg, 3, D, D2)
-                        _unary_into(F[cs, 0, b], F[u, 0, b], PA, PB, PC, deg, 4, D, D2)
+                        _unary_into(F[ss, 0, b], F[u, 0, b], PA, PB, PC, deg, 3, D, D2, D3)
+                        _unary_into(F[cs, 0, b], F[u, 0, b], PA, PB, PC, deg, 4, D, D2, D3)
                     else:
                         _clear(T)
                         for j in range(1, k + 1):
@@ -544,7 +645,7 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                 elif o == T_TAN:
                     vs = aux[s]  # v = 1 + tan^2 = tan'
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 5, D, D2)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 5, D, D2, D3)
                         V = F[vs, 0, b]
                         _clear(V)
                         V[0] = 1.0
@@ -560,12 +661,12 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                 elif o == T_ATAN:
                     vs = aux[s]  # v = 1 + u^2, atan(u)' = u' / v
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 6, D, D2)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 6, D, D2, D3)
                         V = F[vs, 0, b]
                         _clear(V)
                         V[0] = 1.0
                         _acc_mul(V, F[u, 0, b], F[u, 0, b], PA, PB, PC, 1.0)
-                        _unary_into(REC[s, b], V, PA, PB, PC, deg, 7, D, D2, 1.0)  # v0 >= 1
+                        _unary_into(REC[s, b], V, PA, PB, PC, deg, 7, D, D2, D3, 1.0)  # v0 >= 1
                     else:
                         V = F[vs, k, b]
                         _clear(V)
@@ -582,11 +683,11 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
 # --------------------------------------------------------------------------
 # Affine forms / boxes <-> models <-> intervals
 # --------------------------------------------------------------------------
-def forms_to_models(F: np.ndarray, mq: int, m3: int = 0) -> np.ndarray:
+def forms_to_models(F: np.ndarray, mq: int, m3: int = 0, m4: int = 0) -> np.ndarray:
     """Affine forms ``(..., m + 2)`` (centre, ``m`` symbols, error radius) as models with
-    zero quadratic and cubic parts, ``(..., L)``."""
+    zero quadratic, cubic and quartic parts, ``(..., L)``."""
     m = F.shape[-1] - 2
-    out = np.zeros(F.shape[:-1] + (model_length(m, mq, m3),))
+    out = np.zeros(F.shape[:-1] + (model_length(m, mq, m3, m4),))
     out[..., : m + 1] = F[..., : m + 1]
     out[..., -1] = F[..., -1]
     return out
@@ -596,8 +697,8 @@ def models_to_interval(F: np.ndarray, m: int, mq: int) -> tuple[np.ndarray, np.n
     """Interval ranges of models ``(..., L)`` (rounded outward); NaN gives ``[-inf, inf]``.
 
     ``eps_i^2`` lies in ``[0, 1]``, so a diagonal coefficient ``q_ii`` moves only one
-    bound; every other monomial (cubic ones included, after the quadratic ones) lies in
-    ``[-1, 1]``."""
+    bound; every other monomial (cubic and quartic ones included, after the quadratic
+    ones) lies in ``[-1, 1]``."""
     pi, pj = _pairs(mq)
     diag = np.zeros(F.shape[-1] - m - 2, dtype=bool)
     diag[: pi.size] = (pi == pj)
@@ -636,7 +737,8 @@ class TaylorModelODE:
     #: costs O(m) per operation; the quadratic monomials go to the widest ones)
     all_symbols = True
 
-    def __init__(self, graph, quadratic_symbols: int = QUADRATIC_SYMBOLS, cubic_symbols: int = 0):
+    def __init__(self, graph, quadratic_symbols: int = QUADRATIC_SYMBOLS, cubic_symbols: int = 0,
+                 quartic_symbols: int = 0):
         if graph.n_outputs != graph.n_inputs:
             raise ValueError(
                 f"an ODE right-hand side needs as many outputs as inputs, got {graph.n_inputs} "
@@ -649,29 +751,35 @@ class TaylorModelODE:
         if c3 < 0:
             raise ValueError(f"cubic_symbols must be >= 0, got {cubic_symbols!r}")
         self.cubic_symbols = c3
+        c4 = int(quartic_symbols)
+        if c4 < 0:
+            raise ValueError(f"quartic_symbols must be >= 0, got {quartic_symbols!r}")
+        self.quartic_symbols = c4
         self.graph = graph
         self.n = graph.n_inputs
         self.n_params = graph.n_params
         self.quadratic_symbols = q
         self._tape = _Tape(graph)
 
-    def symbol_caps(self, m: int) -> tuple[int, int]:
-        """``(mq, m3)``: the symbols with quadratic and with cubic monomials in a model over ``m``."""
+    def symbol_caps(self, m: int) -> tuple[int, int, int]:
+        """``(mq, m3, m4)``: the symbols with quadratic, cubic and quartic monomials in a
+        model over ``m``."""
         mq = min(m, self.quadratic_symbols)
-        return mq, min(mq, self.cubic_symbols)
+        m3 = min(mq, self.cubic_symbols)
+        return mq, m3, min(m3, self.quartic_symbols)
 
-    def _run(self, X, P, order, m, mq, m3=0):
+    def _run(self, X, P, order, m, mq, m3=0, m4=0):
         """The kernel on input models ``X`` (n, B, L) and parameter models ``P`` (p, B, L),
-        ``L = model_length(m, mq, m3)``: (n, order + 1, B, L)."""
+        ``L = model_length(m, mq, m3, m4)``: (n, order + 1, B, L)."""
         t = self._tape
-        PA, PB, PC = product_table(m, mq, m3)
-        L = model_length(m, mq, m3)
+        PA, PB, PC = product_table(m, mq, m3, m4)
+        L = model_length(m, mq, m3, m4)
         if X.shape[-1] != L or P.shape[-1] != L:
-            raise ValueError(f"models of length {L} expected for {m} symbols ({mq} quadratic, {m3} cubic), "
-                             f"got {X.shape[-1]} and {P.shape[-1]}")
+            raise ValueError(f"models of length {L} expected for {m} symbols ({mq} quadratic, {m3} cubic, "
+                             f"{m4} quartic), got {X.shape[-1]} and {P.shape[-1]}")
         return _model_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs,
                              np.ascontiguousarray(X), np.ascontiguousarray(P), int(order), PA, PB, PC,
-                             3 if m3 > 0 else 2)
+                             4 if m4 > 0 else (3 if m3 > 0 else 2))
 
     def _interval(self, out, m, mq):
         lo, hi = models_to_interval(out, m, mq)  # (n, K + 1, B)
@@ -686,17 +794,17 @@ class TaylorModelODE:
         if n != self.n:
             raise ValueError(f"forms must have shape ({self.n}, B, m + 2), got {X.shape}")
         m = m2 - 2
-        mq, m3 = self.symbol_caps(m)
+        mq, m3, m4 = self.symbol_caps(m)
         # the widest symbols (over the batch) first: they get the quadratic monomials
         widths = np.abs(X[:, :, 1: m + 1]).sum(axis=0).max(axis=0)
         perm = np.argsort(-widths, kind="stable")
         X = np.concatenate([X[:, :, :1], X[:, :, 1: m + 1][:, :, perm], X[:, :, m + 1:]], axis=2)
-        Xm = forms_to_models(X, mq, m3)
-        P = np.zeros((self.n_params, nb, model_length(m, mq, m3)))
+        Xm = forms_to_models(X, mq, m3, m4)
+        P = np.zeros((self.n_params, nb, model_length(m, mq, m3, m4)))
         if self.n_params:
             p = _as_interval(params).broadcast_to((nb, self.n_params))
-            P = forms_to_models(box_forms(p.lo, p.hi, np.full(self.n_params, -1), m), mq, m3)
-        return self._interval(self._run(Xm, P, int(order), m, mq, m3), m, mq)
+            P = forms_to_models(box_forms(p.lo, p.hi, np.full(self.n_params, -1), m), mq, m3, m4)
+        return self._interval(self._run(Xm, P, int(order), m, mq, m3, m4), m, mq)
 
     def coefficients(self, x, order, params=None) -> Interval:
         """Interval enclosures of ``x_[0..order]`` over boxes ``x`` (B, n) (one symbol
@@ -705,6 +813,6 @@ class TaylorModelODE:
         if order < 1:
             raise ValueError(f"order must be >= 1, got {order}")
         X, P, m = _wide_symbol_forms(self.graph, x, params, extra=0)
-        mq, m3 = self.symbol_caps(m)
-        return self._interval(self._run(forms_to_models(X, mq, m3), forms_to_models(P, mq, m3), order, m, mq, m3),
-                              m, mq)
+        mq, m3, m4 = self.symbol_caps(m)
+        return self._interval(self._run(forms_to_models(X, mq, m3, m4), forms_to_models(P, mq, m3, m4), order,
+                                        m, mq, m3, m4), m, mq)

@@ -18,7 +18,8 @@ it: the set is written as a degree-2 Taylor model over its own symbols,
 of the solutions from that model are computed in Taylor-model arithmetic of degree 3
 (:mod:`verified.taylor_model`: the graph's Taylor recursion, quadratic terms exact,
 cubic ones exact in the ``CUBIC_CAP`` widest parameters, the higher orders and rounding
-in a rigorous remainder per operation; degree 2 on request), and
+in a rigorous remainder per operation; degree 2 on request, or degree 4 with quartic
+terms exact in the ``QUARTIC_CAP`` widest), and
 
     phi(h, x)  in  sum_{k<K} x_[k](x) h^k  +  h^K x_[K](E)
 
@@ -62,6 +63,10 @@ __all__ = ["TaylorModelFlowStepper", "set_models"]
 #: widest parameters first); a product costs O(cap^3). See TaylorModelFlowStepper.
 CUBIC_CAP = 6
 
+#: default cap on the symbols with quartic monomials in degree-4 arithmetic (the widest
+#: first, within the cubic ones); a product costs O(cap^4). See TaylorModelFlowStepper.
+QUARTIC_CAP = 4
+
 #: default cap on the symbols with quadratic monomials (the set's widest parameters
 #: first, then the widest error directions); a product costs O(cap^2)
 QUADRATIC_CAP = 16
@@ -72,18 +77,19 @@ def _spread_about(rng: Interval, centre: np.ndarray) -> np.ndarray:
     return np.maximum(_k_round_up(centre - rng.lo), _k_round_up(rng.hi - centre))
 
 
-def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_cap: int = 0):
+def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_cap: int = 0, quartic_cap: int = 0):
     """Taylor models enclosing the sets ``c + C u + q(u) + Q r`` (module docstring),
     over ``M = mu + n`` symbols: the ``mu`` live parameters (widest first) and the ``n``
     components of ``r``.
 
-    Returns ``(X, live, errors, rho, mq, m3)``: ``X`` (n, B, L) the models (``L =
-    model_length(M, mq, m3)``; the cubic part, room for the arithmetic's, is zero),
+    Returns ``(X, live, errors, rho, mq, m3, m4)``: ``X`` (n, B, L) the models (``L =
+    model_length(M, mq, m3, m4)``; the cubic and quartic parts, room for the
+    arithmetic's, are zero),
     ``live`` (mu,) the parameter columns in symbol order, ``errors`` (n,) the components
     of ``r`` in symbol order (widest first: they follow the parameters, and the first of
     them may still get quadratic monomials), ``rho`` (B, m) the magnitudes of ``r0``
-    (``u = rho eps``), ``mq`` and ``m3`` the symbols with quadratic and cubic monomials
-    (the first ones). Quadratic terms of parameters past ``mq`` are bounded into the
+    (``u = rho eps``), ``mq``, ``m3`` and ``m4`` the symbols with quadratic, cubic and
+    quartic monomials (the first ones). Quadratic terms of parameters past ``mq`` are bounded into the
     remainder."""
     nb, n = sets.c.shape
     rho = sets.r0.mag()  # r0 within [-rho, rho]: u = rho eps covers it
@@ -100,8 +106,9 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
     M = mu + n
     mq = min(M, max(int(quadratic_cap), 0))
     m3 = min(mq, max(int(cubic_cap), 0))
+    m4 = min(m3, max(int(quartic_cap), 0))
     mqu = min(mu, mq)  # parameters with quadratic monomials
-    L = model_length(M, mq, m3)
+    L = model_length(M, mq, m3, m4)
     X = np.zeros((n, nb, L))
     err = np.zeros((nb, n))
     if dead.size:
@@ -152,7 +159,7 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
     if bad.any():
         X[:, bad, :] = 0.0
         X[:, bad, -1] = np.inf
-    return X, live, errors, rho, mq, m3
+    return X, live, errors, rho, mq, m3, m4
 
 
 def models_to_forms(X: np.ndarray, M: int, mq: int) -> np.ndarray:
@@ -192,10 +199,12 @@ class TaylorModelFlowStepper(LohnerStepper):
 
     ``taylor``: the evaluator of Taylor coefficients over boxes (step size and a-priori
     enclosure, as every stepper); ``models``: a
-    :class:`verified.taylor_model.TaylorModelODE` of the same graph; ``degree`` (2 or 3)
-    that of the arithmetic, with ``cubic_cap`` symbols carrying cubic monomials
+    :class:`verified.taylor_model.TaylorModelODE` of the same graph; ``degree`` (2, 3 or
+    4) that of the arithmetic, with ``cubic_cap`` symbols carrying cubic monomials
     (measured on the UR5 +- 1e-3 to T = 1, absorbing at 10 %: ratio 2.68 / 2.69 / 2.68
-    with 6 / 8 / 10, at 1.0 / 1.4 / 1.8x the time). The error part is absorbed into
+    with 6 / 8 / 10, at 1.0 / 1.4 / 1.8x the time) and, at degree 4, ``quartic_cap``
+    of them quartic ones (3-link arm +- 0.01 with 2 parameters per state: 0.662 s with
+    4, 0.668 s with 9 cubic and 6 quartic at 1.5x the time). The error part is absorbed into
     parameters as :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``,
     up to ``max_params``, default 12 per state, then merged).
 
@@ -213,7 +222,7 @@ class TaylorModelFlowStepper(LohnerStepper):
 
     def __init__(self, taylor, models, order: int, params=None, error_basis="qr", max_params: int | None = None,
                  quadratic_cap: int = QUADRATIC_CAP, degree: int = 3, cubic_cap: int = CUBIC_CAP,
-                 absorb_ratio: float | None = None):
+                 absorb_ratio: float | None = None, quartic_cap: int = QUARTIC_CAP):
         if absorb_ratio is None:
             absorb_ratio = 0.01 if taylor.n >= 6 else 0.1
         super().__init__(taylor, None, order, params, error_basis, absorb=bool(np.isfinite(absorb_ratio)),
@@ -221,16 +230,17 @@ class TaylorModelFlowStepper(LohnerStepper):
         self.absorb_ratio = float(absorb_ratio)
         self.models = models
         self.quadratic_cap = int(quadratic_cap)
-        if degree not in (2, 3):
-            raise ValueError(f"degree must be 2 or 3, got {degree!r}")
-        self.cubic_cap = int(cubic_cap) if degree == 3 else 0
+        if degree not in (2, 3, 4):
+            raise ValueError(f"degree must be 2, 3 or 4, got {degree!r}")
+        self.cubic_cap = int(cubic_cap) if degree >= 3 else 0
+        self.quartic_cap = int(quartic_cap) if degree == 4 else 0
 
-    def _param_models(self, nb, M, mq, m3):
+    def _param_models(self, nb, M, mq, m3, m4):
         p = self._params(nb)
         np_ = self.models.n_params
         if not np_:
-            return np.zeros((0, nb, model_length(M, mq, m3)))
-        return forms_to_models(box_forms(p.lo, p.hi, np.full(np_, -1), M), mq, m3)
+            return np.zeros((0, nb, model_length(M, mq, m3, m4)))
+        return forms_to_models(box_forms(p.lo, p.hi, np.full(np_, -1), M), mq, m3, m4)
 
     # ------------------------------------------------------------------ per step
     def begin(self, sets: QuadraticSets) -> None:
@@ -241,11 +251,11 @@ class TaylorModelFlowStepper(LohnerStepper):
         K = self.order
         nb = sets.n_sets
         work = sets.recentred() if self.recentre else sets
-        Xm, live, errors, rho, mq, m3 = set_models(work, self.quadratic_cap, self.cubic_cap)
+        Xm, live, errors, rho, mq, m3, m4 = set_models(work, self.quadratic_cap, self.cubic_cap, self.quartic_cap)
         M = live.size + self.n
-        out = self.models._run(Xm, self._param_models(nb, M, mq, m3), K, M, mq, m3)  # (n, K + 1, B, L)
+        out = self.models._run(Xm, self._param_models(nb, M, mq, m3, m4), K, M, mq, m3, m4)  # (n, K + 1, B, L)
         cX = self._tighter(self.models._interval(out, M, mq), Xm, M, mq, K)
-        self._cur = dict(sets=sets, work=work, live=live, errors=errors, mq=mq, m3=m3, M=M, out=out, cX=cX)
+        self._cur = dict(sets=sets, work=work, live=live, errors=errors, mq=mq, m3=m3, m4=m4, M=M, out=out, cX=cX)
         self._fresh = True
 
     def _tighter(self, ranges: Interval, Xm: np.ndarray, M: int, mq: int, K: int) -> Interval:
@@ -286,16 +296,31 @@ class TaylorModelFlowStepper(LohnerStepper):
         on): break-down at 0.71 s without the cut (steps 4x longer), 0.80 / 0.88 / 0.98 s
         with 4 / 2 / 1.2 (7.8 / 12 / 30 s); UR5 +- 1e-3 to T = 1: ratio at 1 s 45 with
         1.2 in 95 s, break-down at 0.80 s with 2; 1.05 reached 0.70 s in 200 s with ratios
-        within 15 % of 1.2's."""
+        within 15 % of 1.2's.
+
+        Where the leading remainders are only the floats' rounding (the right-hand side
+        is a polynomial the models carry exactly: x' = x^2 at degree 4), the rate is
+        taken from the first order ``j`` whose remainder is more than that (``e_k >
+        2^-30`` times the coefficient's magnitude), as ``sum_{k >= j} e_k h^(k - j)``
+        against ``e_j``: a rounding-level floor would cut the step to nothing (x' = x^2
+        at degree 4: steps of 4e-6 instead of 0.007-0.03)."""
         h = super().suggest_step(cX, tol, components)
         cur = getattr(self, "_cur", None)
         if cur is None or not np.isfinite(h) or h <= 0:
             return h
-        e = cur["out"][:components, 1:, :, -1]  # (N', K, B): remainders of x_[1..K]
-        floor = float(np.max(e[:, 0]))
-        if not (floor > 0 and np.isfinite(e).all()):
+        co = cur["out"][:components, 1:]  # (N', K, B, L): models of x_[1..K]
+        e = co[..., -1]  # their remainders
+        if not np.isfinite(e).all():
             return h
-        powers = np.arange(e.shape[1])  # e_k h^(k - 1)
+        mag = np.abs(co[..., :-1]).sum(axis=-1)
+        significant = np.flatnonzero((e > 2.0**-30 * mag).any(axis=(0, 2)))
+        if significant.size == 0:
+            return h
+        e = e[:, significant[0]:]
+        floor = float(np.max(e[:, 0]))
+        if not floor > 0:
+            return h
+        powers = np.arange(e.shape[1])  # e_k h^(k - j)
         for _ in range(40):
             rate = np.max(np.sum(e * (h ** powers)[None, :, None], axis=1))
             if rate <= self.REMAINDER_GROWTH * floor:
@@ -335,10 +360,10 @@ class TaylorModelFlowStepper(LohnerStepper):
         if cur is None or cur["sets"].n_sets != X.shape[0]:
             return super().apriori(X, cX, h, tries)
         K = self.order
-        out, M, mq, m3 = cur["out"], cur["M"], cur["mq"], cur["m3"]
+        out, M, mq, m3, m4 = cur["out"], cur["M"], cur["mq"], cur["m3"], cur["m4"]
         n, _, nb, L = out.shape
         M2 = M + K - 1
-        L2 = model_length(M2, mq, m3)
+        L2 = model_length(M2, mq, m3, m4)
         # sum_i h^i P_i (1/2 for i >= 1) and the tau coefficients h^i c_i / 2
         half = np.ascontiguousarray(out[:, :K].copy())
         half[:, 1:] *= 0.5  # (exact, barring underflow: covered below)
@@ -359,7 +384,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         # x_[K] over the candidate in models only on request (APRIORI_MODELS), or where
         # the box evaluator takes no forms
         in_models = self.APRIORI_MODELS or not hasattr(self.taylor, "series")
-        P = self._param_models(nb, M2, mq, m3) if in_models else None
+        P = self._param_models(nb, M2, mq, m3, m4) if in_models else None
         for _ in range(tries):
             if not (np.isfinite(Bx.lo).all() and np.isfinite(Bx.hi).all()):
                 return None
@@ -369,7 +394,7 @@ class TaylorModelFlowStepper(LohnerStepper):
                 trial[:, :, 0] += bm.T
                 trial[:, :, -1] = _k_round_up(_k_round_up(trial[:, :, -1] + (slack + br).T) + np.abs(trial[:, :, 0]) * 2.0**-52)
             if in_models:
-                co = self.models._run(np.ascontiguousarray(trial), P, K, M2, mq, m3)
+                co = self.models._run(np.ascontiguousarray(trial), P, K, M2, mq, m3, m4)
                 cE = self._tighter(self.models._interval(co, M2, mq), trial, M2, mq, K)
             else:
                 cE = self.taylor.series(models_to_forms(trial, M2, mq), K, self._params(nb))
@@ -407,7 +432,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         A[:, :, cur["errors"]] = y[:, :, mu + 1: M + 1].transpose(1, 0, 2)
         nq = mq * (mq + 1) // 2
         quad = y[:, :, M + 1: M + 1 + nq].transpose(1, 0, 2)  # (B, n, pairs)
-        # cubic monomials: the sets are second order, so they join the error (in [-1, 1])
+        # cubic and quartic monomials: the sets are second order, so they join the error (in [-1, 1])
         cubic = np.abs(y[:, :, M + 1 + nq: -1]).sum(axis=-1).T  # (B, n)
         rem = _k_round_up(y[:, :, -1].T + cubic * (1.0 + 2.0**-40))  # (B, n)
         pi, pj = _pairs(mq)

@@ -560,8 +560,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         raise SceneError(f"{where} set_order: {solver['set_order']!r} is not 1 or 2")
     if "set_step" in solver and solver["set_step"] not in ("mean_value", "composition"):
         raise SceneError(f"{where} set_step: {solver['set_step']!r} is not 'mean_value' or 'composition'")
-    if "model_degree" in solver and solver["model_degree"] not in (2, 3):
-        raise SceneError(f"{where} model_degree: {solver['model_degree']!r} is not 2 or 3")
+    if "model_degree" in solver and solver["model_degree"] not in (2, 3, 4):
+        raise SceneError(f"{where} model_degree: {solver['model_degree']!r} is not 2, 3 or 4")
 
     # [consistency]
     where = f"{source}: [consistency]"

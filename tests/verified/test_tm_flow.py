@@ -37,7 +37,7 @@ def _riccati_exact(x0, t):
     return x0 / (1.0 - x0 * t)
 
 
-@pytest.mark.parametrize("degree", [2, 3])
+@pytest.mark.parametrize("degree", [2, 3, 4])
 def test_riccati_encloses_closed_form_and_beats_the_mean_value_step(degree):
     """x' = x^2 from [0.5, 1.5] to T = 0.5 (x(T) from 0.667 to 6, far from quadratic in
     x0): every output box holds the closed form at 41 initial points, and is narrower
@@ -133,7 +133,7 @@ def test_set_models_enclose_the_set():
     r0 = Interval(-rng.uniform(0.1, 1, (nb, m)), rng.uniform(0.1, 1, (nb, m)))
     r = Interval(-rng.uniform(0, 0.1, (nb, n)), rng.uniform(0, 0.1, (nb, n)))
     sets = QuadraticSets(c=c, C=C, r0=r0, S=S, Q=Q, r=r).recentred()
-    X, live, errors, rho, mq, _ = tm_flow.set_models(sets, quadratic_cap=3)  # parameters past 3 bounded
+    X, live, errors, rho, mq, _, _ = tm_flow.set_models(sets, quadratic_cap=3)  # parameters past 3 bounded
     M = live.size + n
     assert m - 1 not in live and live.size == m - 1
     pi, pj = _pairs(mq)
@@ -182,8 +182,8 @@ def test_set_step_arguments_are_checked():
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, set_step="taylor")
     with pytest.raises(ValueError, match="needs set_order=2"):
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_step="composition")
-    with pytest.raises(ValueError, match="model_degree must be 2 or 3"):
-        solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, set_step="composition", model_degree=4)
+    with pytest.raises(ValueError, match="model_degree must be 2, 3 or 4"):
+        solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, set_step="composition", model_degree=5)
     with pytest.raises(ValueError, match="model_degree is the degree"):
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, model_degree=3)
 
