@@ -158,15 +158,16 @@ def test_set_models_enclose_the_set():
             assert abs(x - val) <= F(float(mod[-1])), (b, i)
 
 
-def test_arm_composition_contains_pinocchio_trajectories(arm_pin):
+@pytest.mark.parametrize("degree", [3, 4])
+def test_arm_composition_contains_pinocchio_trajectories(arm_pin, degree):
     """3-link arm, q +- 1e-3, T = 0.2: DOP853 trajectories with Pinocchio's aba as
-    right-hand side in every output box and the tube."""
+    right-hand side in every output box and the tube, in models of degree 3 and 4."""
     chain, g, qdd = arm_pin
     x0 = np.concatenate([ARM_Q0, np.zeros(3)])
     r = np.array([1e-3] * 3 + [0.0] * 3)
     lo, hi = x0 - r, x0 + r
     sol = solve(VerifiedODE(g, "affine"), Interval(lo, hi), (0.0, 0.2), t_eval=[0.1, 0.2], set_order=2,
-                set_step="composition", order=8)
+                set_step="composition", order=8, model_degree=degree)
     assert sol.success, sol.reason
 
     def f(x):
