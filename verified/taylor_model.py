@@ -427,8 +427,9 @@ def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, D3, known_lo=-INF):
     (module docstring), with ``d = x - c``: ``f(c) + f'(c) d + f2(xi)/2 d^2`` (deg 2),
     ``f(c) + f'(c) d + f2(c)/2 d^2 + f3(xi)/6 d^3`` (deg 3) or ``... + f3(c)/6 d^3 +
     f4(xi)/24 d^4`` (deg 4), ``f2, f3, f4`` the second to fourth derivatives, ``xi`` in
-    the range of x. ``D``, ``D2``, ``D3``: scratch of the model's length. ``known_lo``: a lower bound of x known from elsewhere (1 for ``1 + u^2``); the
-    range used for the last derivative is cut to it."""
+    the range of x. ``D``, ``D2``, ``D3``: scratch of the model's length. ``known_lo``: a
+    lower bound of x known from elsewhere (1 for ``1 + u^2``); the range used for the
+    last derivative is cut to it."""
     E = Z.size - 1
     c = x[0]
     W = _width_bound(x)
@@ -442,10 +443,10 @@ def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, D3, known_lo=-INF):
         return
     fl, fh = _value(kind, c, c)
     dl, dh = _deriv(kind, c, c)
-    gl, gh = 0.0, 0.0
+    kl, kh = 0.0, 0.0
     if deg >= 4:
         hl, hh = _deriv2(kind, c, c)  # f2 and f3 at the centre, f4 over the range
-        gl, gh = _deriv3(kind, c, c)
+        kl, kh = _deriv3(kind, c, c)
         sl, sh = _deriv4(kind, xlo, xhi)
     elif deg >= 3:
         hl, hh = _deriv2(kind, c, c)  # f2 at the centre, f3 over the range
@@ -453,8 +454,8 @@ def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, D3, known_lo=-INF):
     else:
         hl, hh = 0.0, 0.0
         sl, sh = _deriv2(kind, xlo, xhi)
-    if not (fl <= fh and dl <= dh and sl <= sh and hl <= hh and gl <= gh and math.isfinite(gl)
-            and math.isfinite(gh)):
+    if not (fl <= fh and dl <= dh and sl <= sh and hl <= hh and kl <= kh and math.isfinite(kl)
+            and math.isfinite(kh)):
         _poison(Z)  # outside the domain, or a pole within reach
         return
     if not (math.isfinite(fl) and math.isfinite(fh) and math.isfinite(dl) and math.isfinite(dh)
@@ -474,26 +475,23 @@ def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, D3, known_lo=-INF):
     _scale_into(Z, D, d1)  # d1 d, with the remainder |d1| e_x and the rounding
     Z[0] = f0
     W2 = _pm(W, W)
-    if deg >= 4:
-        h2, r2 = _mid_rad(0.5 * hl, 0.5 * hh)
-        t3, r3 = _mid_rad(gl / 6.0, gh / 6.0)
-        r3 = _up(r3 + (abs(gl) + abs(gh)) * _U)
-        _acc_mul(Z, D, D, PA, PB, PC, h2)  # + f2(c)/2 d^2
-        _clear(D2)
-        _acc_mul(D2, D, D, PA, PB, PC, 1.0)  # d^2
-        _acc_mul(Z, D2, D, PA, PB, PC, t3)  # + f3(c)/6 d^3
-        _clear(D3)
-        _acc_mul(D3, D2, D, PA, PB, PC, 1.0)  # d^3
-        _acc_mul(Z, D3, D, PA, PB, PC, s)  # + f4/24 d^4 (truncated, bounded)
-        W3 = _pm(W2, W)
-        Z[E] = _up(Z[E] + frad + _pm(r1, W) + _pm(r2, W2) + _pm(r3, W3) + _pm(rl, _pm(W3, W)) + _TINY)
-    elif deg >= 3:
+    if deg >= 3:
         h2, r2 = _mid_rad(0.5 * hl, 0.5 * hh)
         _acc_mul(Z, D, D, PA, PB, PC, h2)  # + f2(c)/2 d^2
         _clear(D2)
         _acc_mul(D2, D, D, PA, PB, PC, 1.0)  # d^2
-        _acc_mul(Z, D2, D, PA, PB, PC, s)  # + f3/6 d^3 (truncated, bounded)
-        Z[E] = _up(Z[E] + frad + _pm(r1, W) + _pm(r2, W2) + _pm(rl, _pm(W2, W)) + _TINY)
+        if deg >= 4:
+            t3, r3 = _mid_rad(kl / 6.0, kh / 6.0)
+            r3 = _up(r3 + (abs(kl) + abs(kh)) * _U)
+            _acc_mul(Z, D2, D, PA, PB, PC, t3)  # + f3(c)/6 d^3
+            _clear(D3)
+            _acc_mul(D3, D2, D, PA, PB, PC, 1.0)  # d^3
+            _acc_mul(Z, D3, D, PA, PB, PC, s)  # + f4/24 d^4 (truncated, bounded)
+            W3 = _pm(W2, W)
+            Z[E] = _up(Z[E] + frad + _pm(r1, W) + _pm(r2, W2) + _pm(r3, W3) + _pm(rl, _pm(W3, W)) + _TINY)
+        else:
+            _acc_mul(Z, D2, D, PA, PB, PC, s)  # + f3/6 d^3 (truncated, bounded)
+            Z[E] = _up(Z[E] + frad + _pm(r1, W) + _pm(r2, W2) + _pm(rl, _pm(W2, W)) + _TINY)
     else:
         _acc_mul(Z, D, D, PA, PB, PC, s)  # + s d^2 (truncated, bounded)
         Z[E] = _up(Z[E] + frad + _pm(r1, W) + _pm(rl, W2) + _TINY)

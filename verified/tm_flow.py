@@ -89,8 +89,8 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
     of ``r`` in symbol order (widest first: they follow the parameters, and the first of
     them may still get quadratic monomials), ``rho`` (B, m) the magnitudes of ``r0``
     (``u = rho eps``), ``mq``, ``m3`` and ``m4`` the symbols with quadratic, cubic and
-    quartic monomials (the first ones). Quadratic terms of parameters past ``mq`` are bounded into the
-    remainder."""
+    quartic monomials (the first ones). Quadratic terms of parameters past ``mq`` are
+    bounded into the remainder."""
     nb, n = sets.c.shape
     rho = sets.r0.mag()  # r0 within [-rho, rho]: u = rho eps covers it
     reach = np.abs(sets.C) * rho[:, None, :] + np.einsum("bijk,bk->bij", np.abs(sets.S), rho) * rho[:, None, :]
@@ -204,8 +204,8 @@ class TaylorModelFlowStepper(LohnerStepper):
     (measured on the UR5 +- 1e-3 to T = 1, absorbing at 10 %: ratio 2.68 / 2.69 / 2.68
     with 6 / 8 / 10, at 1.0 / 1.4 / 1.8x the time) and, at degree 4, ``quartic_cap``
     of them quartic ones (3-link arm +- 0.01 with 2 parameters per state: 0.662 s with
-    4, 0.668 s with 9 cubic and 6 quartic at 1.5x the time). The error part is absorbed into
-    parameters as :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``,
+    4, 0.668 s with 9 cubic and 6 quartic at 1.5x the time). The error part is absorbed
+    into parameters as :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``,
     up to ``max_params``, default 12 per state, then merged).
 
     ``absorb_ratio`` None (default): 1 % of the carried width for systems of 6 states or
