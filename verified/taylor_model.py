@@ -29,6 +29,19 @@ the same reason one order up: sums such as a rotated vector's components cancel 
 fourth-order terms, which degree 3 bounds term by term (3-link arm, sets at 0.1 / 0.2 /
 0.3 s into a run: the remainder of qdd 30x / 11x / 3.4x smaller with 4 quartic symbols).
 
+*Star* monomials ``eps_i eps_j`` with ``i < ms <= mq`` and ``j >= mq`` (the first ``ms``
+symbols times every symbol past the quadratic block) keep, exactly, the cross terms of
+the wide symbols with the many narrow ones a long run accumulates (the error a set
+absorbs into parameters). Bounded per operation instead, those cross terms were linear
+in the narrow symbols' size and, amplified through a deep graph, fed the error they
+came from: on the 3-link arm +- 1e-3 the remainder per step grew from 1e-9 (6
+parameters) to 2e-5 (72) at an unchanged set width, and the run broke down at 1.27 s;
+with every pair of symbols kept it completes T = 2 at 1e-8 per step. The star keeps the
+pairs that matter at ``ms (m - mq)`` monomials instead of ``m^2 / 2`` (or fewer: ``ns``
+symbols past the quadratic ones instead of all). A star monomial
+is off-diagonal (``eps_i eps_j`` in ``[-1, 1]``) and of degree 2: products that would
+raise it are bounded.
+
 Rules (all bounds rounded upward by :func:`verified.affine_taylor._up`, every float
 coefficient's rounding error added to ``e``):
 
@@ -68,7 +81,7 @@ from .taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT
                      T_PARAM, T_SIN, T_SQR, T_SQRT, T_SUB, T_TAN, _Tape)
 
 __all__ = ["TaylorModelODE", "model_length", "forms_to_models", "models_to_interval", "product_table",
-           "QUADRATIC_SYMBOLS"]
+           "QUADRATIC_SYMBOLS", "star_count", "star_base", "star_span"]
 
 INF = math.inf
 
@@ -87,12 +100,39 @@ def quartic_count(m4: int) -> int:
     return m4 * (m4 + 1) * (m4 + 2) * (m4 + 3) // 24
 
 
-def model_length(m: int, mq: int, m3: int = 0, m4: int = 0) -> int:
+def star_span(m: int, mq: int, ns: int | None) -> int:
+    """The symbols past the quadratic ones that star monomials reach (``ns``; None: all)."""
+    return max(m - mq, 0) if ns is None else int(ns)
+
+
+def star_count(m: int, mq: int, ms: int, ns: int | None = None) -> int:
+    """Number of star monomials ``eps_i eps_j`` (i < ms, mq <= j < mq + ns)."""
+    return ms * star_span(m, mq, ns)
+
+
+def model_length(m: int, mq: int, m3: int = 0, m4: int = 0, ms: int = 0, ns: int | None = None) -> int:
     """Length of a model over ``m`` symbols, ``mq`` of them with quadratic monomials, the
-    first ``m3 <= mq`` with cubic ones and the first ``m4 <= m3`` with quartic ones:
-    centre, ``m`` linear, ``mq (mq + 1) / 2`` quadratic, ``m3 (m3 + 1) (m3 + 2) / 6``
-    cubic, :func:`quartic_count` quartic coefficients, remainder."""
-    return m + mq * (mq + 1) // 2 + cubic_count(m3) + quartic_count(m4) + 2
+    first ``m3 <= mq`` with cubic ones, the first ``m4 <= m3`` with quartic ones and the
+    first ``ms <= mq`` with star monomials (with the ``ns`` symbols after the quadratic
+    ones; None: all of them): centre, ``m`` linear, ``mq (mq + 1) / 2`` quadratic, ``m3
+    (m3 + 1) (m3 + 2) / 6`` cubic, :func:`quartic_count` quartic, :func:`star_count`
+    star coefficients, remainder."""
+    return m + mq * (mq + 1) // 2 + cubic_count(m3) + quartic_count(m4) + star_count(m, mq, ms, ns) + 2
+
+
+def star_base(m: int, mq: int, m3: int = 0, m4: int = 0) -> int:
+    """Storage index of the first star monomial (after the quartic ones)."""
+    return m + 1 + mq * (mq + 1) // 2 + cubic_count(m3) + quartic_count(m4)
+
+
+def _star_pairs(m: int, mq: int, ms: int, ns: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Symbol indices (i, j), i < ms, mq <= j < mq + ns, of the star coefficients in
+    storage order (``j``-major)."""
+    span = star_span(m, mq, ns)
+    if ms <= 0 or span <= 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    jj, ii = np.meshgrid(np.arange(mq, mq + span), np.arange(ms), indexing="ij")
+    return ii.ravel().astype(np.int64), jj.ravel().astype(np.int64)
 
 
 def _pairs(mq: int) -> tuple[np.ndarray, np.ndarray]:
@@ -121,7 +161,8 @@ _MAX_PAIRS = 2**14
 
 
 @functools.lru_cache(maxsize=64)
-def product_table(m: int, mq: int, m3: int = 0, m4: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def product_table(m: int, mq: int, m3: int = 0, m4: int = 0, ms: int = 0,
+                  ns: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The products of non-constant monomials a model keeps: ``(PA, PB, PC)`` with
     ``x[PA[t]] * y[PB[t]]`` a multiple of monomial ``PC[t]`` (storage indices of a model
     of :func:`model_length`); ordered pairs, so ``x_i y_j`` and ``x_j y_i`` are two
@@ -129,6 +170,10 @@ def product_table(m: int, mq: int, m3: int = 0, m4: int = 0) -> tuple[np.ndarray
     if not 0 <= m4 <= m3 <= mq <= m:
         raise ValueError(f"need 0 <= quartic symbols <= cubic symbols <= quadratic symbols <= symbols, "
                          f"got {m4}, {m3}, {mq}, {m}")
+    if not 0 <= ms <= mq:
+        raise ValueError(f"need 0 <= star symbols <= quadratic symbols, got {ms}, {mq}")
+    if not 0 <= star_span(m, mq, ns) <= m - mq:
+        raise ValueError(f"star monomials reach {ns} symbols, past the {mq} quadratic ones of {m}")
     pi, pj = _pairs(mq)
     quad = {(int(i), int(j)): m + 1 + p for p, (i, j) in enumerate(zip(pi, pj))}
     base3 = m + 1 + pi.size
@@ -167,6 +212,13 @@ def product_table(m: int, mq: int, m3: int = 0, m4: int = 0) -> tuple[np.ndarray
             A.append(qa)
             B.append(qb)
             C.append(quartic[tuple(sorted((i, j, k, l)))])
+    # star: linear x linear with one symbol among the first ms and the other past mq
+    si, sj = _star_pairs(m, mq, ms, ns)
+    if si.size:
+        idx = star_base(m, mq, m3, m4) + np.arange(si.size)
+        A += list(1 + si) + list(1 + sj)
+        B += list(1 + sj) + list(1 + si)
+        C += list(idx) + list(idx)
     if len(A) > _MAX_PAIRS:
         raise ValueError(f"{len(A)} kept products per model product exceed {_MAX_PAIRS}: fewer quadratic "
                          f"or cubic symbols")
@@ -528,11 +580,14 @@ def _quotient_step(Z, F, s, u, v, k, b, PA, PB, PC, rec, T, S):
 
 
 @njit(cache=True)
-def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA, PB, PC, deg):
+def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA, PB, PC, deg, fresh0):
     """Taylor models of x_[0..order]; X (n, B, L) and P (p, B, L) are the input models.
 
     Returns (n, order + 1, B, L). The loop is the one of
-    :func:`verified.affine_taylor._affine_kernel_reference`, with model operations."""
+    :func:`verified.affine_taylor._affine_kernel_reference`, with model operations.
+    ``fresh0 >= 0``: the remainder of ``x_[k]_i`` (k >= 1) moves into the linear
+    coefficient of symbol ``fresh0 + (k - 1) n + i`` (zero in the inputs; see
+    :meth:`TaylorModelODE._run`)."""
     nslots = op.size
     n, nb, L = X.shape
     E = L - 1
@@ -674,18 +729,24 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
         for i in range(n):
             o = outputs[i]
             for b in range(nb):
-                _div_int_into(out[i, k + 1, b], F[o, k, b], fk + 1.0)
+                Y = out[i, k + 1, b]
+                _div_int_into(Y, F[o, k, b], fk + 1.0)
+                if fresh0 >= 0:
+                    # e [-1, 1] = e delta: exact, and later orders carry delta linearly
+                    Y[1 + fresh0 + k * n + i] = Y[E]
+                    Y[E] = 0.0
     return out
 
 
 # --------------------------------------------------------------------------
 # Affine forms / boxes <-> models <-> intervals
 # --------------------------------------------------------------------------
-def forms_to_models(F: np.ndarray, mq: int, m3: int = 0, m4: int = 0) -> np.ndarray:
+def forms_to_models(F: np.ndarray, mq: int, m3: int = 0, m4: int = 0, ms: int = 0,
+                    ns: int | None = None) -> np.ndarray:
     """Affine forms ``(..., m + 2)`` (centre, ``m`` symbols, error radius) as models with
-    zero quadratic, cubic and quartic parts, ``(..., L)``."""
+    zero quadratic, cubic, quartic and star parts, ``(..., L)``."""
     m = F.shape[-1] - 2
-    out = np.zeros(F.shape[:-1] + (model_length(m, mq, m3, m4),))
+    out = np.zeros(F.shape[:-1] + (model_length(m, mq, m3, m4, ms, ns),))
     out[..., : m + 1] = F[..., : m + 1]
     out[..., -1] = F[..., -1]
     return out
@@ -695,8 +756,8 @@ def models_to_interval(F: np.ndarray, m: int, mq: int) -> tuple[np.ndarray, np.n
     """Interval ranges of models ``(..., L)`` (rounded outward); NaN gives ``[-inf, inf]``.
 
     ``eps_i^2`` lies in ``[0, 1]``, so a diagonal coefficient ``q_ii`` moves only one
-    bound; every other monomial (cubic and quartic ones included, after the quadratic
-    ones) lies in ``[-1, 1]``."""
+    bound; every other monomial (cubic, quartic and star ones included, after the
+    quadratic ones) lies in ``[-1, 1]``."""
     pi, pj = _pairs(mq)
     diag = np.zeros(F.shape[-1] - m - 2, dtype=bool)
     diag[: pi.size] = (pi == pj)
@@ -731,6 +792,9 @@ class TaylorModelODE:
     (0: degree 3 or less); cost per product grows as its fourth power. Measured on the
     3-link arm's right-hand side over +- 0.05 in all 6 states, all cubic: remainder of
     qdd 0.012-0.033 at degree 3, 7.3-7.9x smaller with 4 quartic symbols, 15-16x with 6.
+    ``star_symbols``: at most this many of the quadratic ones also get star monomials
+    with every symbol past the quadratic ones (module docstring); cost per product
+    grows as its product with the number of symbols.
     One box at a time (no batching over boxes inside the kernel): meant for few sets of
     deep graphs (robots), where the affine kernel's batching gains little.
     """
@@ -740,7 +804,7 @@ class TaylorModelODE:
     all_symbols = True
 
     def __init__(self, graph, quadratic_symbols: int = QUADRATIC_SYMBOLS, cubic_symbols: int = 0,
-                 quartic_symbols: int = 0):
+                 quartic_symbols: int = 0, star_symbols: int = 0):
         if graph.n_outputs != graph.n_inputs:
             raise ValueError(
                 f"an ODE right-hand side needs as many outputs as inputs, got {graph.n_inputs} "
@@ -757,31 +821,46 @@ class TaylorModelODE:
         if c4 < 0:
             raise ValueError(f"quartic_symbols must be >= 0, got {quartic_symbols!r}")
         self.quartic_symbols = c4
+        cs = int(star_symbols)
+        if cs < 0:
+            raise ValueError(f"star_symbols must be >= 0, got {star_symbols!r}")
+        self.star_symbols = cs
         self.graph = graph
         self.n = graph.n_inputs
         self.n_params = graph.n_params
         self.quadratic_symbols = q
         self._tape = _Tape(graph)
 
-    def symbol_caps(self, m: int) -> tuple[int, int, int]:
-        """``(mq, m3, m4)``: the symbols with quadratic, cubic and quartic monomials in a
-        model over ``m``."""
+    def symbol_caps(self, m: int) -> tuple[int, int, int, int]:
+        """``(mq, m3, m4, ms)``: the symbols with quadratic, cubic, quartic and star
+        monomials in a model over ``m``."""
         mq = min(m, self.quadratic_symbols)
         m3 = min(mq, self.cubic_symbols)
-        return mq, m3, min(m3, self.quartic_symbols)
+        return mq, m3, min(m3, self.quartic_symbols), min(mq, self.star_symbols)
 
-    def _run(self, X, P, order, m, mq, m3=0, m4=0):
+    def _run(self, X, P, order, m, mq, m3=0, m4=0, ms=0, ns=None, fresh=False):
         """The kernel on input models ``X`` (n, B, L) and parameter models ``P`` (p, B, L),
-        ``L = model_length(m, mq, m3, m4)``: (n, order + 1, B, L)."""
+        ``L = model_length(m, mq, m3, m4, ms, ns)``: (n, order + 1, B, L).
+
+        ``fresh``: the last ``n order`` of the ``m`` symbols are fresh, one per state and
+        order (zero in ``X`` and ``P``): the remainder of each ``x_[k]_i`` becomes the
+        coefficient of its own symbol once computed, so the later orders carry it
+        linearly (its cancellations kept) instead of bounding it through every
+        operation. Sound as affine arithmetic's fresh symbols are: the true coefficient
+        is the polynomial at some value of that symbol in ``[-1, 1]``."""
         t = self._tape
-        PA, PB, PC = product_table(m, mq, m3, m4)
-        L = model_length(m, mq, m3, m4)
+        PA, PB, PC = product_table(m, mq, m3, m4, ms, ns)
+        L = model_length(m, mq, m3, m4, ms, ns)
         if X.shape[-1] != L or P.shape[-1] != L:
             raise ValueError(f"models of length {L} expected for {m} symbols ({mq} quadratic, {m3} cubic, "
-                             f"{m4} quartic), got {X.shape[-1]} and {P.shape[-1]}")
+                             f"{m4} quartic, {ms} star), got {X.shape[-1]} and {P.shape[-1]}")
+        fresh0 = m - self.n * int(order) if fresh else -1
+        if fresh and fresh0 < mq + star_span(m, mq, ns if ms else 0):
+            raise ValueError(f"{self.n * int(order)} fresh symbols among {m} overlap the {mq} quadratic ones "
+                             f"or the star's")
         return _model_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs,
                              np.ascontiguousarray(X), np.ascontiguousarray(P), int(order), PA, PB, PC,
-                             4 if m4 > 0 else (3 if m3 > 0 else 2))
+                             4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0)
 
     def _interval(self, out, m, mq):
         lo, hi = models_to_interval(out, m, mq)  # (n, K + 1, B)
@@ -796,17 +875,17 @@ class TaylorModelODE:
         if n != self.n:
             raise ValueError(f"forms must have shape ({self.n}, B, m + 2), got {X.shape}")
         m = m2 - 2
-        mq, m3, m4 = self.symbol_caps(m)
+        mq, m3, m4, ms = self.symbol_caps(m)
         # the widest symbols (over the batch) first: they get the quadratic monomials
         widths = np.abs(X[:, :, 1: m + 1]).sum(axis=0).max(axis=0)
         perm = np.argsort(-widths, kind="stable")
         X = np.concatenate([X[:, :, :1], X[:, :, 1: m + 1][:, :, perm], X[:, :, m + 1:]], axis=2)
-        Xm = forms_to_models(X, mq, m3, m4)
-        P = np.zeros((self.n_params, nb, model_length(m, mq, m3, m4)))
+        Xm = forms_to_models(X, mq, m3, m4, ms)
+        P = np.zeros((self.n_params, nb, model_length(m, mq, m3, m4, ms)))
         if self.n_params:
             p = _as_interval(params).broadcast_to((nb, self.n_params))
-            P = forms_to_models(box_forms(p.lo, p.hi, np.full(self.n_params, -1), m), mq, m3, m4)
-        return self._interval(self._run(Xm, P, int(order), m, mq, m3, m4), m, mq)
+            P = forms_to_models(box_forms(p.lo, p.hi, np.full(self.n_params, -1), m), mq, m3, m4, ms)
+        return self._interval(self._run(Xm, P, int(order), m, mq, m3, m4, ms), m, mq)
 
     def coefficients(self, x, order, params=None) -> Interval:
         """Interval enclosures of ``x_[0..order]`` over boxes ``x`` (B, n) (one symbol
@@ -815,6 +894,6 @@ class TaylorModelODE:
         if order < 1:
             raise ValueError(f"order must be >= 1, got {order}")
         X, P, m = _wide_symbol_forms(self.graph, x, params, extra=0)
-        mq, m3, m4 = self.symbol_caps(m)
-        return self._interval(self._run(forms_to_models(X, mq, m3, m4), forms_to_models(P, mq, m3, m4), order,
-                                        m, mq, m3, m4), m, mq)
+        mq, m3, m4, ms = self.symbol_caps(m)
+        return self._interval(self._run(forms_to_models(X, mq, m3, m4, ms), forms_to_models(P, mq, m3, m4, ms),
+                                        order, m, mq, m3, m4, ms), m, mq)

@@ -36,6 +36,26 @@ benchmarks/bench_robots.py --only 8``). No variational equations are integrated 
 no Jacobian or Hessian is enclosed over the set: higher-order effects are bounded
 where they arise, operation by operation, on the set's own symbols.
 
+Two things keep those bounds from feeding on themselves over a long run:
+
+* *Fresh symbols per coefficient* (``fresh_symbols``, on by default): once ``x_[k]_i``
+  is computed, its remainder becomes the coefficient of a symbol of its own
+  (:meth:`verified.taylor_model.TaylorModelODE._run`), so the later orders of the
+  recursion carry it linearly, with its cancellations, instead of multiplying a
+  radius through every operation of the graph. The remainders of the high orders had
+  grown about 2000x per order on a 4-link chain, and the step-size cut
+  (:meth:`TaylorModelFlowStepper.suggest_step`) held the steps at 1e-4 s where
+  DOP853 takes 1e-2 s. The step bounds those symbols' terms with the rest of the
+  error. Measured (``benchmarks/bench_robots.py`` case 8): the 3-link arm +- 1e-3 to T
+  = 2 in 565 steps instead of 4814 (12 s against 51 s, ratio 1.32 against 1.43), the
+  UR5 to T = 1 in 269 steps instead of about 1070.
+* *Star monomials* (``star_cap``, :mod:`verified.taylor_model`): the widest symbols'
+  products with every other symbol of the set are kept, not bounded. A set that
+  absorbs its error gathers dozens of narrow parameters past the quadratic cap; their
+  cross terms with the wide ones, bounded per operation, fed the error they came from
+  (3-link arm +- 1e-3: the remainder per step 1e-9 with 6 parameters, 2e-5 with 72 at
+  the same width, break-down at 1.27 s; with star monomials T = 2).
+
 Rigor: the input models enclose the set (every float product's rounding is added
 to the remainder), the model kernel is checked against arb
 (``tests/verified/test_taylor_model.py``), the Horner sum in models rounds into the
@@ -46,6 +66,8 @@ absolute term covers subnormals).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -55,9 +77,10 @@ from .interval import Interval, _k_round_up, point
 from .lohner import LohnerStepper, _inflate
 from .quadratic import QuadraticSets
 from .stepper import StepResult
-from .taylor_model import _acc_add, _pairs, _scale_into, forms_to_models, model_length, models_to_interval
+from .taylor_model import (_acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length,
+                           models_to_interval, star_base)
 
-__all__ = ["TaylorModelFlowStepper", "set_models"]
+__all__ = ["TaylorModelFlowStepper", "set_models", "ModelCaps"]
 
 #: default cap on the symbols with cubic monomials in degree-3 arithmetic (the set's
 #: widest parameters first); a product costs O(cap^3). See TaylorModelFlowStepper.
@@ -71,26 +94,47 @@ QUARTIC_CAP = 4
 #: first, then the widest error directions); a product costs O(cap^2)
 QUADRATIC_CAP = 16
 
+#: default number of the widest symbols whose products with every symbol past the
+#: quadratic cap are kept as star monomials (verified.taylor_model); a product costs
+#: O(cap * symbols) more. See TaylorModelFlowStepper.
+STAR_CAP = 6
+
+
+class ModelCaps(NamedTuple):
+    """The monomials of the models over a set's symbols (:func:`verified.taylor_model.model_length`
+    takes them in this order: ``model_length(M, *caps)``): the first ``mq`` symbols
+    with quadratic monomials, the first ``m3`` cubic, the first ``m4`` quartic, and the
+    first ``ms`` with star monomials reaching the ``ns`` symbols after the quadratic
+    ones (the rest of the set's symbols; fresh symbols appended later get none)."""
+
+    mq: int
+    m3: int
+    m4: int
+    ms: int
+    ns: int
+
 
 def _spread_about(rng: Interval, centre: np.ndarray) -> np.ndarray:
     """Upper bound of ``|x - centre|`` over the intervals ``rng`` (same shape)."""
     return np.maximum(_k_round_up(centre - rng.lo), _k_round_up(rng.hi - centre))
 
 
-def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_cap: int = 0, quartic_cap: int = 0):
+def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_cap: int = 0, quartic_cap: int = 0,
+               star_cap: int = 0):
     """Taylor models enclosing the sets ``c + C u + q(u) + Q r`` (module docstring),
     over ``M = mu + n`` symbols: the ``mu`` live parameters (widest first) and the ``n``
     components of ``r``.
 
-    Returns ``(X, live, errors, rho, mq, m3, m4)``: ``X`` (n, B, L) the models (``L =
-    model_length(M, mq, m3, m4)``; the cubic and quartic parts, room for the
-    arithmetic's, are zero),
+    Returns ``(X, live, errors, rho, caps)``: ``X`` (n, B, L) the models (``L =
+    model_length(M, *caps)``; the cubic and quartic parts, room for the arithmetic's,
+    are zero),
     ``live`` (mu,) the parameter columns in symbol order, ``errors`` (n,) the components
     of ``r`` in symbol order (widest first: they follow the parameters, and the first of
     them may still get quadratic monomials), ``rho`` (B, m) the magnitudes of ``r0``
-    (``u = rho eps``), ``mq``, ``m3`` and ``m4`` the symbols with quadratic, cubic and
-    quartic monomials (the first ones). Quadratic terms of parameters past ``mq`` are
-    bounded into the remainder."""
+    (``u = rho eps``), ``caps`` a :class:`ModelCaps`: the symbols with quadratic,
+    cubic, quartic and star monomials (the first ones). Quadratic terms of two
+    parameters past ``mq``, or of one past ``mq`` with one past ``ms``, are bounded into
+    the remainder."""
     nb, n = sets.c.shape
     rho = sets.r0.mag()  # r0 within [-rho, rho]: u = rho eps covers it
     reach = np.abs(sets.C) * rho[:, None, :] + np.einsum("bijk,bk->bij", np.abs(sets.S), rho) * rho[:, None, :]
@@ -107,8 +151,10 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
     mq = min(M, max(int(quadratic_cap), 0))
     m3 = min(mq, max(int(cubic_cap), 0))
     m4 = min(m3, max(int(quartic_cap), 0))
+    ms = min(mq, max(int(star_cap), 0))
+    caps = ModelCaps(mq, m3, m4, ms, M - mq)
     mqu = min(mu, mq)  # parameters with quadratic monomials
-    L = model_length(M, mq, m3, m4)
+    L = model_length(M, *caps)
     X = np.zeros((n, nb, L))
     err = np.zeros((nb, n))
     if dead.size:
@@ -147,10 +193,24 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
         idx = M + 1 + np.flatnonzero(inside)
         X[:, :, idx] = coef.mid().transpose(1, 0, 2)
         err += coef.rad().sum(axis=-1)
+        # star: (S_jk + S_kj) rho_j rho_k for j < ms, k a parameter past mq
+        si, sj = _star_pairs(M, mq, ms, caps.ns)
+        on = (si < mqu) & (sj < mu)  # (mu <= mq leaves none: the star's symbols past mq are errors)
+        if on.any():
+            ti, tj = si[on], sj[on]
+            sym = Interval(Sl[:, :, ti, tj]) + Interval(Sl[:, :, tj, ti])
+            coef = sym * point(rl[:, None, ti]) * point(rl[:, None, tj])
+            idx = star_base(M, mq, m3, m4) + np.flatnonzero(on)
+            X[:, :, idx] = coef.mid().transpose(1, 0, 2)
+            err += coef.rad().sum(axis=-1)
         if mqu < mu:
-            # quadratic terms with a parameter past mq: |S_jk| rho_j rho_k into the remainder
+            # quadratic terms with a parameter past mq (and not a star pair): |S_jk| rho_j
+            # rho_k into the remainder
             outside = np.ones((mu, mu), dtype=bool)
             outside[:mqu, :mqu] = False
+            if on.any():
+                outside[ti, tj] = False
+                outside[tj, ti] = False
             absS = np.abs(Sl) * outside
             bound = Interval(absS) * point(rl[:, None, :, None]) * point(rl[:, None, None, :])
             err += bound.hi.sum(axis=(-1, -2)) * (1.0 + 2.0**-40)
@@ -159,7 +219,17 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
     if bad.any():
         X[:, bad, :] = 0.0
         X[:, bad, -1] = np.inf
-    return X, live, errors, rho, mq, m3, m4
+    return X, live, errors, rho, caps
+
+
+def more_symbols(X: np.ndarray, M: int, extra: int) -> np.ndarray:
+    """The models ``X`` (..., L) over ``M`` symbols as models over ``M + extra`` with the
+    same caps (the new symbols last, every coefficient of theirs 0: their linear ones
+    are inserted, every block after them keeps its place relative to the end)."""
+    out = np.zeros(X.shape[:-1] + (X.shape[-1] + extra,))
+    out[..., : M + 1] = X[..., : M + 1]
+    out[..., M + extra + 1:] = X[..., M + 1:]
+    return out
 
 
 def models_to_forms(X: np.ndarray, M: int, mq: int) -> np.ndarray:
@@ -208,6 +278,12 @@ class TaylorModelFlowStepper(LohnerStepper):
     into parameters as :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``,
     up to ``max_params``, default 12 per state, then merged).
 
+    ``star_cap``: the widest symbols that get star monomials (default ``STAR_CAP`` = 6;
+    0: none). Measured with fresh symbols: the 3-link arm +- 1e-3 reaches T = 2 with 6
+    (ratio 1.32) and breaks down at 1.34 s with 0; the UR5 to T = 1 ratio 1.16 against
+    1.22 at the same cost; chains n = 5 / 7 0.70 / 0.23 s against 0.57 / 0.21 s in
+    60 s. ``fresh_symbols`` (None: ``FRESH_SYMBOLS``, True): see the module docstring.
+
     ``absorb_ratio`` None (default): 1 % of the carried width for systems of 6 states or
     more, 10 % (as the mean-value step) below. Why early on robots: the error part is a
     box in a basis, wrapped every step, and over a thousand steps of a robot the
@@ -222,7 +298,8 @@ class TaylorModelFlowStepper(LohnerStepper):
 
     def __init__(self, taylor, models, order: int, params=None, error_basis="qr", max_params: int | None = None,
                  quadratic_cap: int = QUADRATIC_CAP, degree: int = 3, cubic_cap: int = CUBIC_CAP,
-                 absorb_ratio: float | None = None, quartic_cap: int = QUARTIC_CAP):
+                 absorb_ratio: float | None = None, quartic_cap: int = QUARTIC_CAP, star_cap: int = STAR_CAP,
+                 fresh_symbols: bool | None = None):
         if absorb_ratio is None:
             absorb_ratio = 0.01 if taylor.n >= 6 else 0.1
         super().__init__(taylor, None, order, params, error_basis, absorb=bool(np.isfinite(absorb_ratio)),
@@ -234,13 +311,17 @@ class TaylorModelFlowStepper(LohnerStepper):
             raise ValueError(f"degree must be 2, 3 or 4, got {degree!r}")
         self.cubic_cap = int(cubic_cap) if degree >= 3 else 0
         self.quartic_cap = int(quartic_cap) if degree == 4 else 0
+        if int(star_cap) < 0:
+            raise ValueError(f"star_cap must be >= 0, got {star_cap!r}")
+        self.star_cap = int(star_cap)
+        self.fresh_symbols = self.FRESH_SYMBOLS if fresh_symbols is None else bool(fresh_symbols)
 
-    def _param_models(self, nb, M, mq, m3, m4):
+    def _param_models(self, nb, M, caps):
         p = self._params(nb)
         np_ = self.models.n_params
         if not np_:
-            return np.zeros((0, nb, model_length(M, mq, m3, m4)))
-        return forms_to_models(box_forms(p.lo, p.hi, np.full(np_, -1), M), mq, m3, m4)
+            return np.zeros((0, nb, model_length(M, *caps)))
+        return forms_to_models(box_forms(p.lo, p.hi, np.full(np_, -1), M), *caps)
 
     # ------------------------------------------------------------------ per step
     def begin(self, sets: QuadraticSets) -> None:
@@ -251,11 +332,21 @@ class TaylorModelFlowStepper(LohnerStepper):
         K = self.order
         nb = sets.n_sets
         work = sets.recentred() if self.recentre else sets
-        Xm, live, errors, rho, mq, m3, m4 = set_models(work, self.quadratic_cap, self.cubic_cap, self.quartic_cap)
-        M = live.size + self.n
-        out = self.models._run(Xm, self._param_models(nb, M, mq, m3, m4), K, M, mq, m3, m4)  # (n, K + 1, B, L)
+        Xm, live, errors, rho, caps = set_models(work, self.quadratic_cap, self.cubic_cap, self.quartic_cap,
+                                                 self.star_cap)
+        M_set = live.size + self.n
+        M = M_set + (self.n * K if self.fresh_symbols else 0)
+        if M > M_set:
+            Xm = more_symbols(Xm, M_set, M - M_set)
+        out = self.models._run(Xm, self._param_models(nb, M, caps), K, M, *caps,
+                               fresh=self.fresh_symbols)  # (n, K + 1, B, L)
+        mq = caps.mq
         cX = self._tighter(self.models._interval(out, M, mq), Xm, M, mq, K)
-        self._cur = dict(sets=sets, work=work, live=live, errors=errors, mq=mq, m3=m3, m4=m4, M=M, out=out, cX=cX)
+        # what a step bounds of each coefficient: its remainder and its fresh symbols'
+        # coefficients (the step-size cut weighs them; see suggest_step)
+        bounded = out[..., -1] + np.abs(out[..., M_set + 1: M + 1]).sum(axis=-1)  # (n, K + 1, B)
+        self._cur = dict(sets=sets, work=work, live=live, errors=errors, caps=caps, M=M, M_set=M_set, out=out,
+                         cX=cX, bounded=bounded)
         self._fresh = True
 
     def _tighter(self, ranges: Interval, Xm: np.ndarray, M: int, mq: int, K: int) -> Interval:
@@ -289,10 +380,10 @@ class TaylorModelFlowStepper(LohnerStepper):
     def suggest_step(self, cX: Interval, tol: float, components: int | None = None) -> float:
         """The step of :meth:`LohnerStepper.suggest_step`, cut so that the remainder the
         composition adds per unit time stays within ``REMAINDER_GROWTH`` times its rate
-        as ``h -> 0``: with ``e_k`` the remainders of the coefficient models, the step
-        adds ``sum_k e_k h^k``, and ``e_k`` grows with ``k`` (a degree-2 model bounds more
-        at every order of the recursion), so long steps add more per second than short
-        ones. Measured on the 3-link arm +- 1e-3 (affine cross-check of the coefficients
+        as ``h -> 0``: with ``e_k`` the remainders of the coefficient models (with fresh
+        symbols: those symbols' coefficients), the step adds about ``sum_k e_k h^k``,
+        and ``e_k`` grows with ``k`` (a degree-2 model bounds more at every order of
+        the recursion), so long steps add more per second than short ones. Measured on the 3-link arm +- 1e-3 (affine cross-check of the coefficients
         on): break-down at 0.71 s without the cut (steps 4x longer), 0.80 / 0.88 / 0.98 s
         with 4 / 2 / 1.2 (7.8 / 12 / 30 s); UR5 +- 1e-3 to T = 1: ratio at 1 s 45 with
         1.2 in 95 s, break-down at 0.80 s with 2; 1.05 reached 0.70 s in 200 s with ratios
@@ -309,10 +400,10 @@ class TaylorModelFlowStepper(LohnerStepper):
         if cur is None or not np.isfinite(h) or h <= 0:
             return h
         co = cur["out"][:components, 1:]  # (N', K, B, L): models of x_[1..K]
-        e = co[..., -1]  # their remainders
+        e = cur["bounded"][:components, 1:]  # their remainders (with the fresh symbols')
         if not np.isfinite(e).all():
             return h
-        mag = np.abs(co[..., :-1]).sum(axis=-1)
+        mag = np.abs(co[..., :-1]).sum(axis=-1) - (e - co[..., -1])
         significant = np.flatnonzero((e > 2.0**-30 * mag).any(axis=(0, 2)))
         if significant.size == 0:
             return h
@@ -330,6 +421,9 @@ class TaylorModelFlowStepper(LohnerStepper):
 
     #: see suggest_step
     REMAINDER_GROWTH = 1.2
+
+    #: default of ``fresh_symbols``: see TaylorModelODE._run
+    FRESH_SYMBOLS = True
 
     #: the a-priori test's coefficients over the candidate tube in models as well as in
     #: affine arithmetic (False: affine only). Only the last coefficient (the Lagrange
@@ -360,17 +454,15 @@ class TaylorModelFlowStepper(LohnerStepper):
         if cur is None or cur["sets"].n_sets != X.shape[0]:
             return super().apriori(X, cX, h, tries)
         K = self.order
-        out, M, mq, m3, m4 = cur["out"], cur["M"], cur["mq"], cur["m3"], cur["m4"]
+        out, M, caps = cur["out"], cur["M"], cur["caps"]
+        mq = caps.mq
         n, _, nb, L = out.shape
         M2 = M + K - 1
-        L2 = model_length(M2, mq, m3, m4)
         # sum_i h^i P_i (1/2 for i >= 1) and the tau coefficients h^i c_i / 2
         half = np.ascontiguousarray(out[:, :K].copy())
         half[:, 1:] *= 0.5  # (exact, barring underflow: covered below)
         base = _horner_models(half, float(h))  # (n, B, L)
-        Em = np.zeros((n, nb, L2))
-        Em[:, :, : M + 1] = base[:, :, : M + 1]
-        Em[:, :, M2 + 1:] = base[:, :, M + 1:]
+        Em = more_symbols(base, M, K - 1)
         rng = self.models._interval(out[:, 1:K], M, mq)  # (B, K - 1, n)
         cen = out[:, 1:K, :, 0].transpose(2, 1, 0)  # (B, K - 1, n)
         W = _spread_about(rng, cen)
@@ -384,7 +476,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         # x_[K] over the candidate in models only on request (APRIORI_MODELS), or where
         # the box evaluator takes no forms
         in_models = self.APRIORI_MODELS or not hasattr(self.taylor, "series")
-        P = self._param_models(nb, M2, mq, m3, m4) if in_models else None
+        P = self._param_models(nb, M2, caps) if in_models else None
         for _ in range(tries):
             if not (np.isfinite(Bx.lo).all() and np.isfinite(Bx.hi).all()):
                 return None
@@ -394,7 +486,7 @@ class TaylorModelFlowStepper(LohnerStepper):
                 trial[:, :, 0] += bm.T
                 trial[:, :, -1] = _k_round_up(_k_round_up(trial[:, :, -1] + (slack + br).T) + np.abs(trial[:, :, 0]) * 2.0**-52)
             if in_models:
-                co = self.models._run(np.ascontiguousarray(trial), P, K, M2, mq, m3, m4)
+                co = self.models._run(np.ascontiguousarray(trial), P, K, M2, *caps)
                 cE = self._tighter(self.models._interval(co, M2, mq), trial, M2, mq, K)
             else:
                 cE = self.taylor.series(models_to_forms(trial, M2, mq), K, self._params(nb))
@@ -413,7 +505,8 @@ class TaylorModelFlowStepper(LohnerStepper):
             self.begin(sets)
             cur = self._cur
         self._cur = None  # (used once: the next step begins with its own sets)
-        work, live, mq, M = cur["work"], cur["live"], cur["mq"], cur["M"]
+        work, live, caps, M = cur["work"], cur["live"], cur["caps"], cur["M"]
+        mq = caps.mq
         mu = live.size
         out = cur["out"][:, :K]
         h_iv = h if isinstance(h, Interval) else Interval(h)
@@ -429,11 +522,20 @@ class TaylorModelFlowStepper(LohnerStepper):
         centre = y[:, :, 0].T  # (B, n)
         lin_u = y[:, :, 1: mu + 1].transpose(1, 0, 2)  # (B, n, mu)
         A = np.empty((nb, n, n))  # (B, n, n): columns back in the order of r's components
-        A[:, :, cur["errors"]] = y[:, :, mu + 1: M + 1].transpose(1, 0, 2)
+        Me = cur["M_set"]  # the set's symbols (parameters and errors); fresh ones follow
+        A[:, :, cur["errors"]] = y[:, :, mu + 1: Me + 1].transpose(1, 0, 2)
         nq = mq * (mq + 1) // 2
         quad = y[:, :, M + 1: M + 1 + nq].transpose(1, 0, 2)  # (B, n, pairs)
-        # cubic and quartic monomials: the sets are second order, so they join the error (in [-1, 1])
-        cubic = np.abs(y[:, :, M + 1 + nq: -1]).sum(axis=-1).T  # (B, n)
+        # cubic and quartic monomials: the sets are second order, so they join the error (in [-1, 1]),
+        # as do the fresh symbols (the coefficients' remainders)
+        sb = star_base(M, mq, caps.m3, caps.m4)
+        cubic = np.abs(y[:, :, M + 1 + nq: sb]).sum(axis=-1).T + np.abs(y[:, :, Me + 1: M + 1]).sum(axis=-1).T
+        # star monomials (off-diagonal): of two parameters into S, with an error symbol
+        # into the error (in [-1, 1])
+        si, sj = _star_pairs(M, mq, caps.ms, caps.ns)
+        s_on = sj < mu  # (si < ms <= mq <= sj: si is a parameter too)
+        star = y[:, :, sb: -1].transpose(1, 0, 2)  # (B, n, star pairs)
+        cubic = cubic + np.abs(star[:, :, ~s_on]).sum(axis=-1)
         rem = _k_round_up(y[:, :, -1].T + cubic * (1.0 + 2.0**-40))  # (B, n)
         pi, pj = _pairs(mq)
         on_u = pj < min(mu, mq)  # both symbols parameters (pi <= pj)
@@ -460,6 +562,11 @@ class TaylorModelFlowStepper(LohnerStepper):
         half = np.where(qi == qj, qu, 0.5 * qu)
         S_new[:, :, cols_i, cols_j] = half
         S_new[:, :, cols_j, cols_i] = half
+        if s_on.any():
+            half_s = 0.5 * star[:, :, s_on]
+            S_new[:, :, live[si[s_on]], live[sj[s_on]]] = half_s
+            S_new[:, :, live[sj[s_on]], live[si[s_on]]] = half_s
+            qi = np.concatenate([qi, si[s_on]])  # (for the subnormal cover below)
         # (halving a subnormal may round: cover it)
         incoming = incoming + Interval._from_bounds(np.full((nb, n), -1e-300), np.full((nb, n), 1e-300)) * float(max(1, qi.size))
         r0_lo = np.zeros((nb, m))

@@ -19,7 +19,7 @@ from verified.graph import trace
 from verified.interval import Interval
 from verified.quadratic import QuadraticSets
 from verified.solver import VerifiedODE, solve
-from verified.taylor_model import _pairs
+from verified.taylor_model import TaylorModelODE, _pairs, _star_pairs, star_base
 
 from models import pendulum as pd
 
@@ -58,17 +58,30 @@ def test_riccati_encloses_closed_form_and_beats_the_mean_value_step(degree):
     assert ratios[-1] < 1.13
 
 
-def test_oracle_bites_when_the_model_remainder_is_dropped(monkeypatch):
+@pytest.mark.parametrize("fresh", [False, True])
+def test_oracle_bites_when_the_model_remainder_is_dropped(monkeypatch, fresh):
     """Drop the remainder of the composed models (the third- and higher-order terms and
-    the rounding): the enclosure of x' = x^2 must miss the closed form."""
+    the rounding): the enclosure of x' = x^2 must miss the closed form. With fresh
+    symbols the coefficients' remainders live in those symbols' coefficients: drop
+    them as well."""
+    monkeypatch.setattr(tm_flow.TaylorModelFlowStepper, "FRESH_SYMBOLS", fresh)
     real = tm_flow._horner_models
+    real_run = TaylorModelODE._run
 
     def no_remainder(out, h):
         y = real(out, h)
         y[..., -1] = 0.0
         return y
 
+    def no_fresh(self, X, P, order, m, *caps, fresh=False):
+        out = real_run(self, X, P, order, m, *caps, fresh=fresh)
+        if fresh:
+            f0 = m - self.n * order
+            out[..., 1 + f0: 1 + m] = 0.0
+        return out
+
     monkeypatch.setattr(tm_flow, "_horner_models", no_remainder)
+    monkeypatch.setattr(TaylorModelODE, "_run", no_fresh)
     sol = _riccati_run()
     x0 = np.linspace(0.5, 1.5, 41)
     missed = False
@@ -114,11 +127,13 @@ def test_pendulum_composition_contains_trajectories():
     assert misses(sol, sols) == []
 
 
-def test_set_models_enclose_the_set():
+@pytest.mark.parametrize("quadratic_cap,star_cap", [(3, 0), (2, 0), (2, 1), (1, 1)])
+def test_set_models_enclose_the_set(quadratic_cap, star_cap):
     """The degree-2 models of a set (parameters and error part as symbols) hold the set's
     points: exact rationals at random parameter and error values. The last parameter is
     1e-13 as wide as the others: bounded into the remainder, linear and quadratic terms
-    (without that bound the check fails)."""
+    (without that bound the check fails). With fewer quadratic symbols than parameters,
+    the pairs past the cap are bounded, or kept as star monomials (``star_cap``)."""
     rng = np.random.default_rng(3)
     nb, n, m = 2, 3, 4
     c = rng.normal(size=(nb, n))
@@ -133,10 +148,16 @@ def test_set_models_enclose_the_set():
     r0 = Interval(-rng.uniform(0.1, 1, (nb, m)), rng.uniform(0.1, 1, (nb, m)))
     r = Interval(-rng.uniform(0, 0.1, (nb, n)), rng.uniform(0, 0.1, (nb, n)))
     sets = QuadraticSets(c=c, C=C, r0=r0, S=S, Q=Q, r=r).recentred()
-    X, live, errors, rho, mq, _, _ = tm_flow.set_models(sets, quadratic_cap=3)  # parameters past 3 bounded
+    X, live, errors, rho, caps = tm_flow.set_models(sets, quadratic_cap=quadratic_cap, star_cap=star_cap)
+    mq = caps.mq
     M = live.size + n
     assert m - 1 not in live and live.size == m - 1
+    assert (mq, caps.ms, caps.ns) == (quadratic_cap, star_cap, M - mq)
     pi, pj = _pairs(mq)
+    si, sj = _star_pairs(M, mq, caps.ms, caps.ns)
+    sb = star_base(M, mq, caps.m3, caps.m4)
+    if star_cap:
+        assert np.abs(X[:, :, sb: -1]).max() > 0  # the star holds some of S
     F = Fraction
     for _ in range(30):
         b = int(rng.integers(nb))
@@ -155,6 +176,7 @@ def test_set_models_enclose_the_set():
             mod = X[i, b]
             val = F(float(mod[0])) + sum(F(float(mod[1 + s])) * sym[s] for s in range(M))
             val += sum(F(float(mod[M + 1 + k])) * sym[a] * sym[bb] for k, (a, bb) in enumerate(zip(pi, pj)))
+            val += sum(F(float(mod[sb + k])) * sym[a] * sym[bb] for k, (a, bb) in enumerate(zip(si, sj)))
             assert abs(x - val) <= F(float(mod[-1])), (b, i)
 
 
