@@ -232,6 +232,18 @@ def more_symbols(X: np.ndarray, M: int, extra: int) -> np.ndarray:
     return out
 
 
+def fold_symbols(X: np.ndarray, M: int, M_all: int) -> np.ndarray:
+    """The models ``X`` (..., L) over ``M_all`` symbols as models over the first ``M``:
+    the linear terms of the others bounded into the remainder (they have no other
+    monomials: fresh symbols, past every cap)."""
+    if M_all == M:
+        return X
+    out = np.concatenate([X[..., : M + 1], X[..., M_all + 1:]], axis=-1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out[..., -1] = _k_round_up(X[..., -1] + np.abs(X[..., M + 1: M_all + 1]).sum(axis=-1) * (1.0 + 2.0**-40))
+    return out
+
+
 def models_to_forms(X: np.ndarray, M: int, mq: int) -> np.ndarray:
     """Affine forms (..., M + 2) enclosing the models (..., L): the centre and linear
     coefficients kept, every quadratic monomial (in [-1, 1]) bounded into the error."""
@@ -341,7 +353,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         out = self.models._run(Xm, self._param_models(nb, M, caps), K, M, *caps,
                                fresh=self.fresh_symbols)  # (n, K + 1, B, L)
         mq = caps.mq
-        cX = self._tighter(self.models._interval(out, M, mq), Xm, M, mq, K)
+        cX = self._tighter(self.models._interval(out, M, mq), fold_symbols(Xm, M_set, M), M_set, mq, K)
         # what a step bounds of each coefficient: its remainder and its fresh symbols'
         # coefficients (the step-size cut weighs them; see suggest_step)
         bounded = out[..., -1] + np.abs(out[..., M_set + 1: M + 1]).sum(axis=-1)  # (n, K + 1, B)
@@ -454,7 +466,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         if cur is None or cur["sets"].n_sets != X.shape[0]:
             return super().apriori(X, cX, h, tries)
         K = self.order
-        out, M, caps = cur["out"], cur["M"], cur["caps"]
+        out, M_all, M, caps = cur["out"], cur["M"], cur["M_set"], cur["caps"]
         mq = caps.mq
         n, _, nb, L = out.shape
         M2 = M + K - 1
@@ -462,8 +474,10 @@ class TaylorModelFlowStepper(LohnerStepper):
         half = np.ascontiguousarray(out[:, :K].copy())
         half[:, 1:] *= 0.5  # (exact, barring underflow: covered below)
         base = _horner_models(half, float(h))  # (n, B, L)
-        Em = more_symbols(base, M, K - 1)
-        rng = self.models._interval(out[:, 1:K], M, mq)  # (B, K - 1, n)
+        # the fresh symbols are bounded into the remainder: the candidate tube gains
+        # nothing from their correlations, and the affine evaluation pays for every symbol
+        Em = more_symbols(fold_symbols(base, M, M_all), M, K - 1)
+        rng = self.models._interval(out[:, 1:K], M_all, mq)  # (B, K - 1, n)
         cen = out[:, 1:K, :, 0].transpose(2, 1, 0)  # (B, K - 1, n)
         W = _spread_about(rng, cen)
         hp = np.array([float(h) ** i for i in range(1, K)])
