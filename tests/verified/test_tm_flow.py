@@ -242,3 +242,37 @@ def test_ur5_degree_three_contains_pinocchio_trajectories():
     assert sol.status == "completed", sol.reason
     sols = trajectories(f, np.unique(sample_initial_points(lo, hi, 12), axis=0), 0.15)
     assert misses(sol, sols, per_step=2) == []
+
+
+def _fold_misses(fold):
+    """Points of random models over 3 + 4 symbols (the last 4 fresh: linear only) outside
+    the folded models' ranges over the first 3, evaluated exactly at random symbol values
+    (the fresh ones at +-1 as well)."""
+    rng = np.random.default_rng(5)
+    M, M_all, mq = 3, 7, 2
+    L = tm_flow.model_length(M_all, mq)
+    X = rng.normal(size=(2, 4, L))
+    X[..., -1] = np.abs(X[..., -1]) * 1e-3
+    folded = fold(X, M, M_all)
+    lo, hi = tm_flow.models_to_interval(folded, M, mq)
+    pi, pj = _pairs(mq)
+    F = Fraction
+    bad = 0
+    for _ in range(40):
+        e = list(rng.uniform(-1, 1, M)) + list(rng.choice([-1.0, 1.0], M_all - M))
+        for a in range(2):
+            for b in range(4):
+                x = X[a, b]
+                v = F(float(x[0])) + sum(F(float(x[1 + s])) * F(float(e[s])) for s in range(M_all))
+                v += sum(F(float(x[M_all + 1 + k])) * F(float(e[i])) * F(float(e[j])) for k, (i, j) in enumerate(zip(pi, pj)))
+                r = F(float(x[-1]))  # the remainder at either end
+                bad += int(not (F(float(lo[a, b])) <= v - r and v + r <= F(float(hi[a, b]))))
+    return bad
+
+
+def test_folding_fresh_symbols_keeps_the_range_and_the_oracle_bites():
+    """fold_symbols (the fresh symbols bounded into the remainder for the a-priori test):
+    the folded models' ranges hold the models' values at any value of the fresh symbols;
+    a fold that drops them without the bound must miss some."""
+    assert _fold_misses(tm_flow.fold_symbols) == 0
+    assert _fold_misses(lambda X, M, M_all: np.concatenate([X[..., : M + 1], X[..., M_all + 1:]], axis=-1)) > 0
