@@ -75,6 +75,7 @@ from . import linalg
 from .affine_taylor import box_forms
 from .interval import Interval, _k_round_up, point
 from .lohner import LohnerStepper, _inflate
+from .policies import REMAINDER_SLACK
 from .quadratic import QuadraticSets
 from .stepper import StepResult
 from .taylor_model import (_acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length,
@@ -411,6 +412,13 @@ class TaylorModelFlowStepper(LohnerStepper):
         cur = getattr(self, "_cur", None)
         if cur is None or not np.isfinite(h) or h <= 0:
             return h
+        widen = getattr(self, "_widen", None)
+        if widen is not None and widen.shape[0] == cX.shape[2]:
+            # the driver's remainder control takes x_[K] over the a-priori enclosure, not
+            # over the set: ask for a step it accepts on the first try, from the last
+            # step's ratio of the two (Panda: every step validated twice without it)
+            mags = np.maximum(cX[:, self.order, :components].mag() * widen[None, :components], 1e-300)
+            h = min(h, float(0.9 * np.min((REMAINDER_SLACK * tol / mags) ** (1.0 / self.order))))
         co = cur["out"][:components, 1:]  # (N', K, B, L): models of x_[1..K]
         e = cur["bounded"][:components, 1:]  # their remainders (with the fresh symbols')
         if not np.isfinite(e).all():
@@ -506,6 +514,9 @@ class TaylorModelFlowStepper(LohnerStepper):
                 cE = self.taylor.series(models_to_forms(trial, M2, mq), K, self._params(nb))
             new = HK * cE[:, K]
             if new.interior_subset(Bx).all():
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    w = (cE[:, K].mag() / np.maximum(cX[:, K].mag(), 1e-300)).max(axis=0)
+                self._widen = np.where(np.isfinite(w), np.maximum(w, 1.0), 1.0)
                 lo, hi = models_to_interval(trial, M2, mq)
                 E = Interval._from_bounds(np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T))
                 return E, cE
