@@ -276,3 +276,27 @@ def test_folding_fresh_symbols_keeps_the_range_and_the_oracle_bites():
     a fold that drops them without the bound must miss some."""
     assert _fold_misses(tm_flow.fold_symbols) == 0
     assert _fold_misses(lambda X, M, M_all: np.concatenate([X[..., : M + 1], X[..., M_all + 1:]], axis=-1)) > 0
+
+
+@pytest.mark.slow
+def test_arm_composition_past_the_old_break_down_with_fresh_symbols_and_star(arm_pin):
+    """The 3-link arm, q0 +- 1e-3, to T = 1.5 (bench_robots.py case 8's setting): it broke
+    down at 1.27 s before fresh symbols and star monomials (1.34 s with fresh symbols
+    alone), and without fresh symbols it took ~10x the steps (4814 against 507 to T = 2).
+    Required: completes in fewer than 1000 steps, every DOP853 trajectory with Pinocchio's
+    aba inside every output box and the tube."""
+    chain, g, qdd = arm_pin
+    x0 = np.concatenate([ARM_Q0, np.zeros(3)])
+    r = np.array([1e-3] * 3 + [0.0] * 3)
+    lo, hi = x0 - r, x0 + r
+    T = 1.5
+    sol = solve(VerifiedODE(g, "taylor_model"), Interval(lo, hi), (0.0, T), t_eval=np.linspace(0, T, 7),
+                set_order=2, set_step="composition", order=8, tol=1e-10, error_basis="auto", params_per_state=12)
+    assert sol.success, sol.reason
+    assert sol.stats["steps"] < 1000, sol.stats["steps"]
+
+    def f(x):
+        return np.concatenate([x[3:], qdd(x[:3], x[3:])])
+
+    sols = trajectories(f, np.unique(sample_initial_points(lo, hi, 12), axis=0), T)
+    assert misses(sol, sols, per_step=2) == []
