@@ -46,9 +46,9 @@ Two things keep those bounds from feeding on themselves over a long run:
   grown about 2000x per order on a 4-link chain, and the step-size cut
   (:meth:`TaylorModelFlowStepper.suggest_step`) held the steps at 1e-4 s where
   DOP853 takes 1e-2 s. The step bounds those symbols' terms with the rest of the
-  error. Measured (``benchmarks/bench_robots.py`` case 8): the 3-link arm +- 1e-3 to T
-  = 2 in 565 steps instead of 4814 (12 s against 51 s, ratio 1.32 against 1.43), the
-  UR5 to T = 1 in 269 steps instead of about 1070.
+  error. Measured (``benchmarks/bench_robots.py`` case 8, star monomials on in both):
+  the 3-link arm +- 1e-3 to T = 2 in 507 steps and 7.5 s instead of 4814 steps and
+  51 s (ratio 1.32 against 1.43); the UR5 to T = 1 in 270 steps instead of about 1070.
 * *Star monomials* (``star_cap``, :mod:`verified.taylor_model`): the widest symbols'
   products with every other symbol of the set are kept, not bounded. A set that
   absorbs its error gathers dozens of narrow parameters past the quadratic cap; their
@@ -133,9 +133,9 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
     of ``r`` in symbol order (widest first: they follow the parameters, and the first of
     them may still get quadratic monomials), ``rho`` (B, m) the magnitudes of ``r0``
     (``u = rho eps``), ``caps`` a :class:`ModelCaps`: the symbols with quadratic,
-    cubic, quartic and star monomials (the first ones). Quadratic terms of two
-    parameters past ``mq``, or of one past ``mq`` with one past ``ms``, are bounded into
-    the remainder."""
+    cubic, quartic and star monomials (the first ones). The quadratic terms of a pair
+    of parameters that is neither within the first ``mq`` nor a star pair (one of the
+    first ``ms`` with one past ``mq``) are bounded into the remainder."""
     nb, n = sets.c.shape
     rho = sets.r0.mag()  # r0 within [-rho, rho]: u = rho eps covers it
     reach = np.abs(sets.C) * rho[:, None, :] + np.einsum("bijk,bk->bij", np.abs(sets.S), rho) * rho[:, None, :]
@@ -396,8 +396,9 @@ class TaylorModelFlowStepper(LohnerStepper):
         as ``h -> 0``: with ``e_k`` the remainders of the coefficient models (with fresh
         symbols: those symbols' coefficients), the step adds about ``sum_k e_k h^k``,
         and ``e_k`` grows with ``k`` (a degree-2 model bounds more at every order of
-        the recursion), so long steps add more per second than short ones. Measured on the 3-link arm +- 1e-3 (affine cross-check of the coefficients
-        on): break-down at 0.71 s without the cut (steps 4x longer), 0.80 / 0.88 / 0.98 s
+        the recursion), so long steps add more per second than short ones. Measured on
+        the 3-link arm +- 1e-3 before fresh symbols (affine cross-check of the
+        coefficients on): break-down at 0.71 s without the cut (steps 4x longer), 0.80 / 0.88 / 0.98 s
         with 4 / 2 / 1.2 (7.8 / 12 / 30 s); UR5 +- 1e-3 to T = 1: ratio at 1 s 45 with
         1.2 in 95 s, break-down at 0.80 s with 2; 1.05 reached 0.70 s in 200 s with ratios
         within 15 % of 1.2's.
@@ -423,7 +424,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         e = cur["bounded"][:components, 1:]  # their remainders (with the fresh symbols')
         if not np.isfinite(e).all():
             return h
-        mag = np.abs(co[..., :-1]).sum(axis=-1) - (e - co[..., -1])
+        mag = np.abs(co[..., :-1]).sum(axis=-1) - (e - co[..., -1])  # (without the fresh symbols')
         significant = np.flatnonzero((e > 2.0**-30 * mag).any(axis=(0, 2)))
         if significant.size == 0:
             return h
