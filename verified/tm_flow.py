@@ -345,16 +345,15 @@ class TaylorModelFlowStepper(LohnerStepper):
         K = self.order
         nb = sets.n_sets
         work = sets.recentred() if self.recentre else sets
-        Xm, live, errors, rho, caps = set_models(work, self.quadratic_cap, self.cubic_cap, self.quartic_cap,
+        Xs, live, errors, rho, caps = set_models(work, self.quadratic_cap, self.cubic_cap, self.quartic_cap,
                                                  self.star_cap)
         M_set = live.size + self.n
         M = M_set + (self.n * K if self.fresh_symbols else 0)
-        if M > M_set:
-            Xm = more_symbols(Xm, M_set, M - M_set)
+        Xm = more_symbols(Xs, M_set, M - M_set) if M > M_set else Xs
         out = self.models._run(Xm, self._param_models(nb, M, caps), K, M, *caps,
                                fresh=self.fresh_symbols)  # (n, K + 1, B, L)
         mq = caps.mq
-        cX = self._tighter(self.models._interval(out, M, mq), fold_symbols(Xm, M_set, M), M_set, mq, K)
+        cX = self._tighter(self.models._interval(out, M, mq), Xs, M_set, mq, K)
         # what a step bounds of each coefficient: its remainder and its fresh symbols'
         # coefficients (the step-size cut weighs them; see suggest_step)
         bounded = out[..., -1] + np.abs(out[..., M_set + 1: M + 1]).sum(axis=-1)  # (n, K + 1, B)
