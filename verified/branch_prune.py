@@ -7,7 +7,10 @@ quantities misses its allowed range. The quantities are ``G = H(x) - h`` (must b
 the paper's ``H_H(S) ∩ H_V(S) = ∅``) and every constraint ``g`` (must lie in
 ``[lower, upper]``), each enclosed both naively on the hull and in mean-value form
 ``G(S) ⊆ G(c) + (DG C) r0 + (DG Q) r``, intersected (:func:`checks`). Either
-excluding the range proves the part empty of true states.
+excluding the range proves the part empty of true states. Second-order sets
+(:class:`verified.quadratic.QuadraticSets`) are cut and checked the same way
+through the same interface (``direction_columns`` ``[C + S r0 | Q]``,
+``direction_widths``, ``subdivide_along``, ``take``, ``concatenate``).
 
 :func:`branch_and_prune` cuts each set into a tree of parts (bisection rounds, or
 one grid; :data:`STRATEGIES`), pruning between rounds, and returns what survives as
@@ -24,7 +27,6 @@ import numpy as np
 
 from . import linalg
 from .interval import Interval, concatenate, point
-from .sets import DoubletonSets
 
 __all__ = ["STRATEGIES", "PruneResult", "branch_and_prune", "checks", "inconsistent", "largest_consistent_subtrees",
            "pick", "worth_refining"]
@@ -93,7 +95,7 @@ class PruneResult:
     ``tested_hulls`` (per cutting round, (k, n_x) state hulls of the parts made) and
     ``tested_kept`` (per round, (k,) bool) are what the record shows."""
 
-    parts: DoubletonSets
+    parts: object  # DoubletonSets or QuadraticSets, as the sets tested
     root: np.ndarray
     alive: np.ndarray
     tested_hulls: list
@@ -164,7 +166,7 @@ def worth_refining(sets, parts, root, min_gain: float):
     gain = ((own - kept_w) > min_gain * own).any(axis=1) & has
     whole = has & ~gain
     use_parts = gain[root]
-    out = DoubletonSets.concatenate([sets.take(np.flatnonzero(whole)), parts.take(np.flatnonzero(use_parts))])
+    out = type(sets).concatenate([sets.take(np.flatnonzero(whole)), parts.take(np.flatnonzero(use_parts))])
     return out, np.concatenate([np.flatnonzero(whole), root[use_parts]])
 
 
@@ -201,4 +203,4 @@ def largest_consistent_subtrees(levels, refine: str):
             take = clean[l] & ~clean[l - 1][parent_of_made[ok]]
         pick_sets.append(levels[l][0].take(np.flatnonzero(take)))
         pick_root.append(roots[l][take])
-    return DoubletonSets.concatenate(pick_sets), np.concatenate(pick_root)
+    return type(levels[0][0]).concatenate(pick_sets), np.concatenate(pick_root)

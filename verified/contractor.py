@@ -596,7 +596,8 @@ def mean_value_row(graph: Graph, c, A, R, h=0.0, params=None, *, output: int = 0
     Args:
         graph: ``g`` with ``n`` inputs; output ``output`` is used.
         c: float (B, n) or thin Interval (B, n): the set's centre.
-        A: float (B, n, m) or (n, m).
+        A: float (B, n, m) or (n, m), or Interval (B, n, m): then the set is every
+            ``c + A' r`` with ``A'`` a point matrix of ``A`` (which may depend on ``r``).
         R: Interval (B, m).
         h: Interval or float, shape (B,) or (): the level (e.g. the ``H_V`` enclosure).
         params: as for :meth:`HC4.contract`.
@@ -610,7 +611,12 @@ def mean_value_row(graph: Graph, c, A, R, h=0.0, params=None, *, output: int = 0
     B, m = R.shape
     Cc = c if isinstance(c, Interval) else Interval(np.asarray(c, float))
     n = Cc.shape[-1]
-    A = np.broadcast_to(np.asarray(A, float), (B, n, m))
+    if isinstance(A, Interval):
+        # columns known only as intervals (second-order sets: C + S r0): X still holds
+        # every segment from c, as x - c = A_point (r) for some point matrix in A
+        A = A.broadcast_to((B, n, m))
+    else:
+        A = np.broadcast_to(np.asarray(A, float), (B, n, m))
     R0 = R.hull(0.0)
     X = linalg.matvec(A, R0) + Cc  # (B, n)
     p = params

@@ -49,6 +49,7 @@ from . import linalg
 from .contractor import contract_linear_row, mean_value_row
 from .graph import Graph
 from .interval import Interval
+from .quadratic import QuadraticSets
 from .sets import DoubletonSets
 
 __all__ = ["EnergyContraction", "ContractionResult", "recentre"]
@@ -115,7 +116,8 @@ class EnergyContraction:
             raise ValueError(f"the residual takes {self.residual.n_inputs} states, the sets have {N}")
         if nb == 0:
             return ContractionResult(sets, np.zeros(0, bool), np.ones(0), None)
-        A = np.concatenate([sets.C, sets.Q], axis=2)  # (B, N, 2N)
+        m = sets.C.shape[2]
+        A = sets.direction_columns()  # (B, N, m + N): floats, or intervals for second-order sets
         R = _concat(sets.r0, sets.r)
         p = params
         if p is not None and p.ndim == 1:
@@ -126,9 +128,9 @@ class EnergyContraction:
                 & np.isfinite(rem.lo) & np.isfinite(rem.hi)
             a = np.where(ok[:, None], a, 0.0)
             g0 = Interval._from_bounds(np.where(ok, g0.lo, -np.inf), np.where(ok, g0.hi, np.inf))
-            which = np.ones(2 * N, bool)
+            which = np.ones(m + N, bool)
             if not self.contract_r0:
-                which[:N] = False
+                which[:m] = False
             Rn, empty = contract_linear_row(a, g0, R, rem, which=which, sweeps=self.sweeps)
         empty = empty & ok
         keep = np.flatnonzero(~empty)
@@ -136,7 +138,13 @@ class EnergyContraction:
         w1 = np.where(empty, 0.0, Rn.width().sum(axis=1))
         ratio = np.where(w0 > 0, w1 / np.where(w0 > 0, w0, 1.0), 1.0)
         Rk = Rn[keep]
-        kept = DoubletonSets(sets.c[keep], sets.C[keep], Rk[:, :N], sets.Q[keep], Rk[:, N:])
+        if isinstance(sets, QuadraticSets):
+            # recentred as a whole batch (a centred set is left as it is; the
+            # recentring encloses its own rounding, QuadraticSets.recentred)
+            kept = QuadraticSets(c=sets.c[keep], C=sets.C[keep], r0=Rk[:, :m], S=sets.S[keep], Q=sets.Q[keep],
+                                 r=Rk[:, m:]).recentred()
+            return ContractionResult(kept, empty, ratio, Rk)
+        kept = DoubletonSets(sets.c[keep], sets.C[keep], Rk[:, :m], sets.Q[keep], Rk[:, m:])
         # recentre only the sets whose box no longer holds 0 (the others stay as they are)
         off = ~((Rk.lo <= 0) & (0 <= Rk.hi)).all(axis=1)
         if off.any():

@@ -11,6 +11,8 @@ graph comes from :mod:`verified.consistency_graphs`.
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
 from . import linalg
@@ -21,32 +23,42 @@ __all__ = ["assign", "initial_sets", "reset_h"]
 
 
 def initial_sets(lifted, sets):
-    """Append ``h(0) = H(x0)`` to the initial doubleton sets, correlated with ``r0``:
-    ``H(x0) ∈ H(c) + DH(X0) (x0 - c)`` (mean value theorem), the midpoint of
-    ``DH(X0) C`` entering the linear part and everything else the error part.
+    """Append ``h(0) = H(x0)`` to the initial sets, correlated with their parameters:
+    ``H(x0) ∈ H(c) + DH(X0) (x0 - c)`` (mean value theorem), the midpoint of ``DH(X0)``
+    times the parameter columns entering the linear part and everything else the error
+    part. Doubleton sets (columns ``C``) and second-order sets
+    (:class:`verified.quadratic.QuadraticSets`: columns ``C + S r0``, see its
+    ``direction_columns``; ``h`` gets no quadratic term of its own) alike.
     ``lifted``: the :class:`verified.consistency_graphs.LiftedGraphs` of the run."""
     if lifted.energy is None:
         return sets
     nb, n = sets.c.shape
-    X0 = sets.hull()
+    m = sets.C.shape[2]
+    X0 = sets.hull().hull(point(sets.c))  # (the segments from c into the set)
     Hc = lifted.eval(lifted.energy, point(sets.c))[:, 0]  # (B,)
     DH = lifted.jac(lifted.energy, X0)[:, 0, :]  # (B, n)
-    row = _row_times(DH, sets.C)
-    row_mid = row.mid()  # (B, n)
+    rows = _row_times(DH, sets.direction_columns())  # (B, m + n): over r0, then over r
+    row = rows[:, :m]
+    row_mid = row.mid()  # (B, m)
     c_h = Hc.mid()
-    # everything that is not row_mid . r0, enclosed: H(c) - c_h, (DH C - row_mid) r0, DH Q r
-    rest = (Hc - c_h) + _dot(row - row_mid, sets.r0) + _dot(_row_times(DH, sets.Q), sets.r)
+    # everything that is not row_mid . r0, enclosed: H(c) - c_h, (row - row_mid) r0, (DH Q) r
+    rest = (Hc - c_h) + _dot(row - row_mid, sets.r0) + _dot(rows[:, m:], sets.r)
     c = np.concatenate([sets.c, c_h[:, None]], axis=1)
-    C = np.zeros((nb, n + 1, n + 1))
-    C[:, :n, :n] = sets.C
-    C[:, n, :n] = row_mid
+    # h gets a parameter of its own (width 0), so that a set of n states starting
+    # from boxes keeps n parameters (the square C the QR-Lohner steppers start from)
+    C = np.zeros((nb, n + 1, m + 1))
+    C[:, :n, :m] = sets.C
+    C[:, n, :m] = row_mid
     Q = np.zeros((nb, n + 1, n + 1))
     Q[:, :n, :n] = sets.Q
     Q[:, n, n] = 1.0
-    zero = point(np.zeros((nb, 1)))
-    r0 = concatenate([sets.r0, zero], axis=1)
+    r0 = concatenate([sets.r0, point(np.zeros((nb, 1)))], axis=1)
     r = concatenate([sets.r, rest.reshape((nb, 1))], axis=1)
-    return DoubletonSets(c, C, r0, Q, r)
+    if isinstance(sets, DoubletonSets):
+        return DoubletonSets(c, C, r0, Q, r)
+    S = np.zeros((nb, n + 1, m + 1, m + 1))
+    S[:, :n, :m, :m] = sets.S
+    return type(sets)(c=c, C=C, r0=r0, S=S, Q=Q, r=r)
 
 
 def reset_h(lifted, sets):
@@ -107,7 +119,8 @@ def assign(sets: DoubletonSets, new: DoubletonSets) -> None:
     place, so the solver still sees the step's own sets (adaptive splitting uses the
     step's per-set widths, and a rollback to the step before stays possible); both
     enclose the same true states set by set."""
-    sets.c, sets.C, sets.r0, sets.Q, sets.r = new.c, new.C, new.r0, new.Q, new.r
+    for f in fields(new):  # (c, C, r0, Q, r, and S for second-order sets)
+        setattr(sets, f.name, getattr(new, f.name))
 
 
 def _row_times(row: Interval, M: np.ndarray) -> Interval:

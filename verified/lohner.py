@@ -81,6 +81,9 @@ class LohnerStepper:
         # the same cost.
         self.absorb = bool(absorb)
         self.absorb_ratio = self.ABSORB_RATIO
+        #: the first states, which decide absorbing (None: all); states past them were
+        #: appended by a hook (the solver sets it to its setup's n_steer)
+        self.steer = None
         self.max_params = self.PARAMS_PER_STATE * self.n if max_params is None else int(max_params)
         self.absorbed = 0
         # at the cap, merge the least wide absorbed parameters to make room (doubletons)
@@ -188,11 +191,15 @@ class LohnerStepper:
         at_cap = m + self.n > self.max_params
         if at_cap and not (self.merge and hasattr(sets, "merge_params")):
             return sets
-        carried = sets.linear_width()
-        err = linalg.matvec(sets.Q, sets.r).width()
+        # only the states that steer the step decide (``steer``, set by the solver), as
+        # for the step size: a state appended by a hook (the energy test's h) carries
+        # next to no width of its own, so any error of its would look large
+        k = self.steer
+        carried = sets.linear_width()[:, :k]
+        err = linalg.matvec(sets.Q, sets.r).width()[:, :k]
         # (an error at the rounding level does not count: an exact state such as the
         # time t of a controller has no carried width, and must not decide anything)
-        floor = 1e-12 * (1.0 + np.abs(sets.c))
+        floor = 1e-12 * (1.0 + np.abs(sets.c[:, :k]))
         if not (err > self.absorb_ratio * carried + floor).any():
             return sets
         if at_cap:

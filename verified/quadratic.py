@@ -323,6 +323,58 @@ class QuadraticSets:
         keep = self.take(np.flatnonzero(~np.asarray(mask, dtype=bool)))
         return QuadraticSets.concatenate([keep] + halves)
 
+    def direction_widths(self) -> np.ndarray:
+        """The width each parameter direction gives the set, shape (B, m + n): the
+        interface :mod:`verified.branch_prune` picks cuts with (:meth:`split_widths`)."""
+        return self.split_widths()
+
+    def direction_columns(self) -> Interval:
+        """``x - c = (C + S u) u + Q r`` exactly (``q_i(u) = (S_i u) . u``), so with ``S u``
+        enclosed over ``r0`` the columns of ``[C + S r0 | Q]``, Interval (B, n, m + n),
+        give the set in mean-value form: for every point ``x(u, r)`` of the set,
+        ``g(x) in g(c) + Dg(X) [C + S r0 | Q] (u, r)`` with ``X`` any box holding the
+        segment from ``c`` to ``x`` (the energy test's checks and contraction)."""
+        nb, n = self.c.shape
+        m = self.C.shape[2]
+        Su = linalg.matvec(point(self.S.reshape(nb, n * m, m)), self.r0).reshape((nb, n, m))
+        return concatenate([Su + self.C, point(self.Q)], axis=2)
+
+    def subdivide_along(self, which: np.ndarray, pieces: int) -> "QuadraticSets":
+        """Cut every set into ``pieces`` parts along one parameter direction, as
+        :meth:`verified.sets.DoubletonSets.subdivide_along`: ``which[b]`` in ``[0, m + n)``
+        picks ``r0_j`` (``j < m``) or ``r_{j-m}``; set-major order; consecutive parts share
+        their float breakpoints, so the parts' union is the set exactly; each part is
+        recentred (:meth:`recentred`, which encloses its rounding)."""
+        nb, n = self.c.shape
+        which = np.asarray(which, dtype=np.int64).reshape(nb)
+        pieces = int(pieces)
+        if pieces < 1:
+            raise ValueError(f"pieces must be >= 1, got {pieces}")
+        if pieces == 1 or nb == 0:
+            return self
+        rows = np.arange(nb)
+        m = self.C.shape[2]
+        in_r0 = which < m
+        j = np.where(in_r0, which, which - m)
+        j0, j1 = np.minimum(j, m - 1), np.minimum(j, n - 1)
+        lo = np.where(in_r0, self.r0.lo[rows, j0], self.r.lo[rows, j1])
+        hi = np.where(in_r0, self.r0.hi[rows, j0], self.r.hi[rows, j1])
+        frac = np.arange(pieces + 1) / pieces
+        cuts = lo[:, None] + (hi - lo)[:, None] * frac[None, :]
+        cuts[:, 0], cuts[:, -1] = lo, hi
+        cuts = np.maximum.accumulate(np.minimum(cuts, hi[:, None]), axis=1)  # monotone despite rounding
+        parts = []
+        for p in range(pieces):
+            r0_lo, r0_hi = self.r0.lo.copy(), self.r0.hi.copy()
+            r_lo, r_hi = self.r.lo.copy(), self.r.hi.copy()
+            a, b = rows[in_r0], rows[~in_r0]
+            r0_lo[a, j[in_r0]], r0_hi[a, j[in_r0]] = cuts[in_r0, p], cuts[in_r0, p + 1]
+            r_lo[b, j[~in_r0]], r_hi[b, j[~in_r0]] = cuts[~in_r0, p], cuts[~in_r0, p + 1]
+            parts.append(QuadraticSets(c=self.c.copy(), C=self.C.copy(), r0=Interval._from_bounds(r0_lo, r0_hi),
+                                       S=self.S.copy(), Q=self.Q.copy(), r=Interval._from_bounds(r_lo, r_hi)))
+        order = np.arange(nb * pieces).reshape(pieces, nb).T.ravel()  # set-major
+        return QuadraticSets.concatenate(parts).take(order).recentred()
+
     def merge_overlapping(self, slack: float = 0.05) -> tuple["QuadraticSets", int]:
         return self, 0  # (no merging of second-order sets)
 

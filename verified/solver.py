@@ -302,8 +302,10 @@ def solve(
         curvature is carried instead of wrapped every step; costs the second
         variational equations (n (n + 1) / 2 more directions). With ``adaptive=True``
         a set is split along the parameter or error component that gives it the most
-        width (:meth:`verified.quadratic.QuadraticSets.split`). Not yet with a
-        consistency test.
+        width (:meth:`verified.quadratic.QuadraticSets.split`). With a consistency test
+        the energy state ``h`` is carried in the sets, they are contracted with
+        ``H(x) - h = 0`` and branched and pruned in their own parameters (not the
+        backward test, not ``reset_h``).
     set_step : "mean_value" (default) or "composition": how a second-order set
         (``set_order=2``) is advanced. "mean_value": by the Taylor map's derivatives at
         the centre (second variational equations) plus the Hessian's spread over the
@@ -408,8 +410,6 @@ def solve(
         wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, progress=progress)
     if set_order not in (1, 2) or isinstance(set_order, bool):
         raise ValueError(f"set_order must be 1 or 2, got {set_order!r}")
-    if set_order == 2 and consistency is not None:
-        raise ValueError("set_order=2 does not support a consistency test yet; use set_order=1 for it")
     if set_step not in ("mean_value", "composition"):
         raise ValueError(f"set_step must be 'mean_value' or 'composition', got {set_step!r}")
     if set_step == "composition" and set_order != 2:
@@ -448,6 +448,7 @@ def solve(
                          "states appended by a hook")
     stepper = _stepper(prob, order, setup.params, error_basis, set_order, bool(absorb), params_per_state, set_step,
                        model_degree)
+    stepper.steer = setup.n_steer
     control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
     wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
     split = SplitPolicy(split_ratio, max_boxes, tol) if adaptive else None

@@ -81,8 +81,8 @@ def test_clear_errors():
         simulate("double_pendulum_paper", Interval(lo, hi), 1.0, split_strategy="random")
     with pytest.raises(ValueError, match="mode i"):
         simulate("double_pendulum_paper", Interval(lo, hi), 1.0, mode="i", constraints=[object()])
-    with pytest.raises(ValueError, match="set_order=2 runs without the energy test.*mode='i'"):
-        simulate("double_pendulum_paper", Interval(lo, hi), 1.0, set_order=2)
+    with pytest.raises(ValueError, match="backward test needs first-order sets"):
+        simulate("double_pendulum_paper", Interval(lo, hi), 1.0, set_order=2, backward_depth=2)
 
 
 # --------------------------------------------------------------------------- issue 14, item 5
