@@ -78,6 +78,28 @@ def _renamed(value, old_value, name: str, old_name: str, default):
     return default if value is None else value
 
 
+class BackOff:
+    """Skip an optional, sound-either-way action after it gained nothing: wait 1, 2,
+    4, ... calls (at most ``cap``) after each fruitless one, none after one that
+    gained. ``cap = 0``: never skip."""
+
+    def __init__(self, cap: int = 0):
+        self.cap = int(cap)
+        self.wait = self.idle = 0
+
+    def skip(self) -> bool:
+        """Whether to skip this call (counts the wait down)."""
+        if self.idle > 0:
+            self.idle -= 1
+            return True
+        return False
+
+    def done(self, gained: bool) -> None:
+        """After the action: reset the wait if it gained, else double it."""
+        self.wait = 0 if gained or self.cap == 0 else min(max(1, 2 * self.wait), self.cap)
+        self.idle = self.wait
+
+
 class EnergyTest(Hook):
     """The energy consistency test, optional further constraints, and the backward test.
 
@@ -136,6 +158,12 @@ class EnergyTest(Hook):
         row's mean-value remainder is wider than what the sets leave to cut, and on the
         UR5 (q +- 1e-3, T = 1) none of 358 contractions narrowed anything, at 4.9 s of
         a 64-s run.
+    test_backoff : int or None
+        The same for the tests at ``RA``'s peaks (``t*``): after a test that pruned
+        nothing, the next 1, 2, 4, ... (at most this many) steps' peaks are passed by;
+        a test due by ``test_interval`` always runs. None: 16 on second-order sets, 0 on
+        doubletons. (On the UR5 run above ``RA`` peaked 99 times, every test pruned
+        nothing and each one rolled the run back a step.)
     """
 
     def __init__(self, energy: Graph | None = None, energy_rate="derive", constraints=(), *,
@@ -143,7 +171,8 @@ class EnergyTest(Hook):
                  strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
                  backward_depth: int = 0, max_boxes: int = 4096, contract: str = "step",
                  prune: bool = True, align=None, check_claim: bool = True, reset_h: bool = False,
-                 max_interval: float | None = None, splits: int | None = None, contract_backoff: int | None = None):
+                 max_interval: float | None = None, splits: int | None = None, contract_backoff: int | None = None,
+                 test_backoff: int | None = None):
         # one name per knob (issue 15): test_interval / test_splits as everywhere else;
         # the old names are accepted so that existing callers keep working, and the
         # error messages below name whichever the caller used
@@ -190,6 +219,10 @@ class EnergyTest(Hook):
                                              or contract_backoff < 0):
             raise ValueError(f"contract_backoff must be an integer >= 0 or None, got {contract_backoff!r}")
         self.contract_backoff = contract_backoff
+        if test_backoff is not None and (isinstance(test_backoff, (bool, np.bool_))
+                                         or not isinstance(test_backoff, (int, np.integer)) or test_backoff < 0):
+            raise ValueError(f"test_backoff must be an integer >= 0 or None, got {test_backoff!r}")
+        self.test_backoff = test_backoff
         self.prune = bool(prune)
         if align is not None and not callable(getattr(align, "set_direction", None)):
             raise ValueError("align must be an error-basis policy with set_direction "
@@ -210,8 +243,11 @@ class EnergyTest(Hook):
             if self.backward_depth:
                 raise ValueError("the backward test (backward_depth > 0) needs first-order sets (set_order=1)")
         graph = self.prepare(setup.user_graph, setup.graph, setup.n_state, setup.params, t0=setup.t0)
-        if self.contract_backoff is None and not isinstance(setup.sets, DoubletonSets):
-            self._backoff_cap = 16  # (see contract_backoff)
+        if not isinstance(setup.sets, DoubletonSets):  # (see contract_backoff, test_backoff)
+            if self.contract_backoff is None:
+                self._contract_wait = BackOff(16)
+            if self.test_backoff is None:
+                self._test_wait = BackOff(16)
         self._refute_claim(setup.sets.hull(), setup.sets.c, setup.t0)
         # "a test at least every test_interval seconds" (contraction alone needs no cap:
         # it runs after every step, and a cap changes the steps of the run it is compared with)
@@ -244,17 +280,20 @@ class EnergyTest(Hook):
         if self._lifted.claim is not None:
             # the claim over every state the step's tube encloses, and at the new centres
             self._refute_claim(step.tube, sets.c, step.t)
-        if self.contract == "step" and self._contraction is not None and self._skip_contraction():
-            pass
+        if self.contract == "step" and self._contraction is not None and self._contract_wait.skip():
+            self.stats["contractions_skipped"] += 1
         elif self.contract == "step" and self._contraction is not None:
             sets, ch = self._contract(sets)
-            self._back_off(ch or self._narrowed)
+            self._contract_wait.done(ch or self._narrowed)
             changed |= ch
             if sets.n_sets == 0:
                 run.stop("the energy contraction removed every set (inconsistent model or energy rate?)",
                          "breakdown")
                 return sets
         decision = self.observe(step.t, sets)
+        if self._test_wait.skip() and decision == "previous":
+            decision = None  # (backing off: an RA peak, but the last tests pruned nothing)
+            self.stats["tests_skipped"] += 1
         only = None
         if decision == "previous":
             only = self._tracker.peaked  # the sets whose RA peaked (same order before and after the step)
@@ -273,12 +312,14 @@ class EnergyTest(Hook):
             sets, _ = self._contract(sets)
         if self.prune:
             prev = (step.previous, step.h, run.make_stepper) if self.backward_depth else None
+            pruned_before = self.stats["pruned_boxes"]
             if only is not None and only.shape == (sets.n_sets,) and not only.all():
                 # test only the sets whose RA peaked; the others continue unchanged
                 tested = self.apply(step.t, step.t_enclosure, sets.take(np.flatnonzero(only)), prev)
                 sets = type(sets).concatenate([sets.take(np.flatnonzero(~only)), tested])
             else:
                 sets = self.apply(step.t, step.t_enclosure, sets, prev)
+            self._test_wait.done(self.stats["pruned_boxes"] > pruned_before)
         else:
             self._tracker.tested(step.t)
         if sets.n_sets == 0:
@@ -292,23 +333,6 @@ class EnergyTest(Hook):
         sets, resets = reset_h(self._lifted, sets)
         self.stats["h_resets"] += resets
         return sets, False
-
-    def _skip_contraction(self) -> bool:
-        """Whether this step's contraction is skipped (``contract_backoff``)."""
-        if self._idle > 0:
-            self._idle -= 1
-            self.stats["contractions_skipped"] += 1
-            return True
-        return False
-
-    def _back_off(self, narrowed: bool):
-        """After a contraction: wait 1, 2, 4, ... (at most ``_backoff_cap``) steps
-        after each one that narrowed nothing; none after one that did."""
-        if narrowed or self._backoff_cap == 0:
-            self._wait = 0
-        else:
-            self._wait = min(max(1, 2 * self._wait), self._backoff_cap)
-        self._idle = self._wait
 
     def _contract(self, sets):
         """``(sets, changed)``: the sets contracted with ``H(x) - h = 0``
@@ -350,10 +374,11 @@ class EnergyTest(Hook):
         self.record = self._tracker.record
         self.stats = dict(tests=0, pruned_boxes=0, test_s=0.0, backward_s=0.0, backward_runs=0,
                           backward_deleted=0, refinements_skipped=0, contractions=0, contracted_empty=0,
-                          contraction_s=0.0, contraction_ratio_min=1.0, h_resets=0, contractions_skipped=0)
-        self._idle = self._wait = 0
+                          contraction_s=0.0, contraction_ratio_min=1.0, h_resets=0, contractions_skipped=0,
+                          tests_skipped=0)
         self._narrowed = False
-        self._backoff_cap = 0 if self.contract_backoff is None else self.contract_backoff
+        self._contract_wait = BackOff(0 if self.contract_backoff is None else self.contract_backoff)
+        self._test_wait = BackOff(0 if self.test_backoff is None else self.test_backoff)
         return lifted.graph
 
     def initial_sets(self, sets):

@@ -269,3 +269,63 @@ def test_contractions_back_off_where_they_narrow_nothing():
     assert runs[None]["contractions"] + runs[None]["contractions_skipped"] == runs[0]["contractions"]
     with pytest.raises(ValueError, match="contract_backoff"):
         EnergyTest(H, "derive", contract_backoff=-1)
+
+
+def test_symbols_are_ordered_by_the_steering_states():
+    """set_models(..., steer=k) orders parameters and errors by their width in the
+    first k states: a parameter (and an error) wide only in an appended state (h, in
+    J) comes after the ones the states need, so the quadratic monomials go to those."""
+    from verified.tm_flow import set_models
+    nb, n, m = 1, 3, 3
+    C = np.zeros((nb, n, m))
+    C[0, 2, 0] = 50.0  # parameter 0: only in h
+    C[0, 0, 1] = 1.0   # parameter 1: in the first state
+    C[0, 1, 2] = 0.5   # parameter 2: in the second state
+    Q = np.eye(n)[None].copy()
+    r = Interval(-np.array([[1e-3, 2e-3, 1.0]]), np.array([[1e-3, 2e-3, 1.0]]))  # h's error the widest
+    sets = QuadraticSets(c=np.zeros((nb, n)), C=C, r0=Interval(-np.ones((nb, m)), np.ones((nb, m))),
+                         S=np.zeros((nb, n, m, m)), Q=Q, r=r)
+    _, live_all, errors_all, _, _ = set_models(sets, 3)
+    _, live, errors, _, _ = set_models(sets, 3, steer=2)
+    assert live_all.tolist() == [0, 1, 2] and errors_all[0] == 2
+    assert live.tolist() == [1, 2, 0] and errors.tolist() == [1, 0, 2]
+
+
+def test_back_off_waits_1_2_4_up_to_its_cap_and_resets_on_a_gain():
+    from verified.consistency import BackOff
+    b = BackOff(4)
+    pattern = []
+    for gained in (False, False, False, False, True):
+        b.done(gained)
+        skipped = 0
+        while b.skip():
+            skipped += 1
+        pattern.append(skipped)
+    assert pattern == [1, 2, 4, 4, 0]
+    never = BackOff(0)
+    never.done(False)
+    assert not never.skip()
+
+
+@pytest.mark.slow  # ~3 s: the default run's budget is tight (CI 168 s of 180)
+def test_tests_back_off_where_they_prune_nothing():
+    """The 3-link arm +- 1e-3 in mode ii's graphs, composition sets, T = 0.6: an RA
+    peak that comes while the last test pruned nothing is passed by (test_backoff None
+    = 16 on second-order sets; measured 6 tests, 1 passed by); test_backoff=0 tests at
+    every peak (measured 7)."""
+    from mbs.simulate import system_for
+    from models.planar import planar_chain
+    system = system_for(planar_chain(3), "ii")
+    x0 = np.concatenate([ARM_Q0, np.zeros(3)])
+    r = np.array([1e-3] * 3 + [0.0] * 3)
+    stats = {}
+    for backoff in (None, 0):
+        test = EnergyTest(system.energy, system.energy_rate, test_backoff=backoff)
+        sol = solve(system.rhs, Interval(x0 - r, x0 + r), (0.0, 0.6), consistency=test, order=8, tol=1e-10,
+                    **COMPOSITION)
+        assert sol.status == "completed"
+        stats[backoff] = sol.stats
+    assert stats[None]["tests_skipped"] > 0 and stats[0]["tests_skipped"] == 0
+    assert stats[None]["tests"] < stats[0]["tests"] and stats[0]["pruned_boxes"] == 0
+    with pytest.raises(ValueError, match="test_backoff"):
+        EnergyTest(system.energy, "derive", test_backoff=1.5)
