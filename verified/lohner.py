@@ -206,7 +206,7 @@ class LohnerStepper:
             # make room: the least wide absorbed parameters become n covering ones
             # (DoubletonSets.merge_params), so the error part keeps being absorbed
             # instead of wrapping at the rate of ||J|| from here on
-            merged = sets.merge_params(m + 2 * self.n - self.max_params, keep_first=self.n)
+            merged = sets.merge_params(m + 2 * self.n - self.max_params, keep_first=self.n, steer=k)
             if merged.C.shape[2] + self.n > self.max_params:
                 return sets
             sets = merged

@@ -175,7 +175,7 @@ class DoubletonSets:
             return self
         return DoubletonSets(c=c_new, C=self.C, r0=self.r0 - mid0, Q=self.Q, r=r)
 
-    def merge_params(self, count: int, keep_first: int) -> "DoubletonSets":
+    def merge_params(self, count: int, keep_first: int, steer: int | None = None) -> "DoubletonSets":
         """The same sets with their ``count`` least wide parameters past the first
         ``keep_first`` replaced by ``n`` parameters that cover them (a zonotope's order
         reduction into a parallelepiped): ``sum_{j in S} C_j r0_j`` lies in ``B b`` with
@@ -193,7 +193,9 @@ class DoubletonSets:
         count = int(count)
         if count <= 0 or keep_first + count > m:
             return self
-        w = np.abs(self.C).sum(axis=1) * self.r0.width()  # (B, m): width each parameter gives
+        # (B, m): width each parameter gives the first ``steer`` states (the ones that
+        # steer the step; a state a hook appended, such as the energy's h, does not decide)
+        w = np.abs(self.C[:, :steer]).sum(axis=1) * self.r0.width()
         w[:, :keep_first] = np.inf
         # the same columns for every set of the batch (it keeps one parameter count)
         sel = np.sort(np.argsort(w.max(axis=0), kind="stable")[:count])

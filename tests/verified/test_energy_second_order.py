@@ -329,3 +329,24 @@ def test_tests_back_off_where_they_prune_nothing():
     assert stats[None]["tests"] < stats[0]["tests"] and stats[0]["pruned_boxes"] == 0
     with pytest.raises(ValueError, match="test_backoff"):
         EnergyTest(system.energy, "derive", test_backoff=1.5)
+
+
+@pytest.mark.parametrize("kind", ["quadratic", "doubleton"])
+def test_merging_keeps_the_parameters_the_steering_states_need(kind):
+    """merge_params(..., steer=1) ranks parameters by their width in the first state
+    only: the two that matter for h alone (row 2, in J) are merged, the two the state
+    needs are kept; without steer it is the other way round. Either way the merged
+    set still covers every point (the merge's own tests), so this is about tightness."""
+    from verified.sets import DoubletonSets
+    nb, n, m = 1, 2, 6
+    C = np.array([[[1.0, 1.0, 1e-3, 1e-3, 1.0, 1.0], [0.0, 0.0, 100.0, 100.0, 0.0, 0.0]]])
+    r0 = Interval(-np.ones((nb, m)), np.ones((nb, m)))
+    r = Interval(np.zeros((nb, n)), np.zeros((nb, n)))
+    if kind == "quadratic":
+        sets = QuadraticSets(c=np.zeros((nb, n)), C=C, r0=r0, S=np.zeros((nb, n, m, m)), Q=np.eye(n)[None].copy(), r=r)
+    else:
+        sets = DoubletonSets(np.zeros((nb, n)), C, r0, np.eye(n)[None].copy(), r)
+    kept_all = sets.merge_params(2, keep_first=2).C[0, :, :4]
+    kept_steer = sets.merge_params(2, keep_first=2, steer=1).C[0, :, :4]
+    assert np.array_equal(kept_all, C[0][:, [0, 1, 2, 3]])
+    assert np.array_equal(kept_steer, C[0][:, [0, 1, 4, 5]])
