@@ -55,7 +55,7 @@ from . import linalg
 from .interval import Interval, concatenate, point, sqr
 from .lohner import LohnerStepper, horner
 from .policies import orthonormal_basis
-from .sets import DoubletonSets
+from .sets import DoubletonSets, parameter_cuts
 from .stepper import StepResult
 from .variational import pair_index
 
@@ -349,24 +349,13 @@ class QuadraticSets:
         picks ``r0_j`` (``j < m``) or ``r_{j-m}``; set-major order; consecutive parts share
         their float breakpoints, so the parts' union is the set exactly; each part is
         recentred (:meth:`recentred`, which encloses its rounding)."""
-        nb, n = self.c.shape
-        which = np.asarray(which, dtype=np.int64).reshape(nb)
-        pieces = int(pieces)
-        if pieces < 1:
-            raise ValueError(f"pieces must be >= 1, got {pieces}")
-        if pieces == 1 or nb == 0:
+        nb = self.n_sets
+        cut = parameter_cuts(self.r0, self.r, which, pieces)
+        if cut is None:
             return self
+        in_r0, j, _, _, cuts = cut
+        pieces = cuts.shape[1] - 1
         rows = np.arange(nb)
-        m = self.C.shape[2]
-        in_r0 = which < m
-        j = np.where(in_r0, which, which - m)
-        j0, j1 = np.minimum(j, m - 1), np.minimum(j, n - 1)
-        lo = np.where(in_r0, self.r0.lo[rows, j0], self.r.lo[rows, j1])
-        hi = np.where(in_r0, self.r0.hi[rows, j0], self.r.hi[rows, j1])
-        frac = np.arange(pieces + 1) / pieces
-        cuts = lo[:, None] + (hi - lo)[:, None] * frac[None, :]
-        cuts[:, 0], cuts[:, -1] = lo, hi
-        cuts = np.maximum.accumulate(np.minimum(cuts, hi[:, None]), axis=1)  # monotone despite rounding
         parts = []
         for p in range(pieces):
             r0_lo, r0_hi = self.r0.lo.copy(), self.r0.hi.copy()

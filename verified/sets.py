@@ -56,6 +56,38 @@ class SetBatch(Protocol):
         times as wide as their union's hull; returns the batch and the number of merges."""
 
 
+def parameter_cuts(r0: Interval, r: Interval, which, pieces: int):
+    """The float breakpoints for cutting each set of a batch into ``pieces`` along one
+    parameter direction (``which[b]`` in ``[0, m + n)``: ``r0_j`` for ``j < m``, else
+    ``r_{j-m}``), shared by :meth:`DoubletonSets.subdivide_along` and
+    :meth:`verified.quadratic.QuadraticSets.subdivide_along`.
+
+    Returns None when there is nothing to cut (one piece, no sets), else ``(in_r0,
+    j, j0, j1, cuts)``: ``in_r0`` (B,) whether the direction is a parameter, ``j`` its
+    index in ``r0`` or ``r`` (``j0``, ``j1`` clipped so both branches can be indexed)
+    and ``cuts`` (B, pieces + 1) from the interval's lower to its upper end, monotone
+    despite rounding, so consecutive parts share their breakpoints exactly."""
+    nb, m = r0.shape
+    n = r.shape[1]
+    which = np.asarray(which, dtype=np.int64).reshape(nb)
+    pieces = int(pieces)
+    if pieces < 1:
+        raise ValueError(f"pieces must be >= 1, got {pieces}")
+    if pieces == 1 or nb == 0:
+        return None
+    rows = np.arange(nb)
+    in_r0 = which < m
+    j = np.where(in_r0, which, which - m)
+    j0, j1 = np.minimum(j, m - 1), np.minimum(j, n - 1)  # (both branches are indexed)
+    lo = np.where(in_r0, r0.lo[rows, j0], r.lo[rows, j1])
+    hi = np.where(in_r0, r0.hi[rows, j0], r.hi[rows, j1])
+    frac = np.arange(pieces + 1) / pieces
+    cuts = lo[:, None] + (hi - lo)[:, None] * frac[None, :]
+    cuts[:, 0], cuts[:, -1] = lo, hi
+    cuts = np.maximum.accumulate(np.minimum(cuts, hi[:, None]), axis=1)  # monotone despite rounding
+    return in_r0, j, j0, j1, cuts
+
+
 @dataclass
 class DoubletonSets:
     """A batch of sets ``c + C r0 + Q r``; every array has the batch as first axis."""
@@ -271,23 +303,12 @@ class DoubletonSets:
         their float breakpoints, so the union of the parts covers the set exactly.
         """
         nb, n = self.c.shape
-        which = np.asarray(which, dtype=np.int64).reshape(nb)
-        pieces = int(pieces)
-        if pieces < 1:
-            raise ValueError(f"pieces must be >= 1, got {pieces}")
-        if pieces == 1 or nb == 0:
+        cut = parameter_cuts(self.r0, self.r, which, pieces)
+        if cut is None:
             return self
+        in_r0, j, j0, j1, cuts = cut
+        pieces = cuts.shape[1] - 1
         rows = np.arange(nb)
-        m = self.C.shape[2]
-        in_r0 = which < m
-        j = np.where(in_r0, which, which - m)
-        j0, j1 = np.minimum(j, m - 1), np.minimum(j, n - 1)  # (both branches are indexed)
-        lo = np.where(in_r0, self.r0.lo[rows, j0], self.r.lo[rows, j1])
-        hi = np.where(in_r0, self.r0.hi[rows, j0], self.r.hi[rows, j1])
-        frac = np.arange(pieces + 1) / pieces
-        cuts = lo[:, None] + (hi - lo)[:, None] * frac[None, :]
-        cuts[:, 0], cuts[:, -1] = lo, hi
-        cuts = np.maximum.accumulate(np.minimum(cuts, hi[:, None]), axis=1)  # monotone despite rounding
         column = np.where(in_r0[:, None], self.C[rows, :, j0], self.Q[rows, :, j1])
         parts = []
         for p in range(pieces):
