@@ -16,8 +16,15 @@ results intersected (each encloses the true range, so the intersection does too)
   input; keeps the dependence of every intermediate of the kinematic chain);
 - ``interval``: plain interval evaluation (only matters for wide boxes).
 
-The solution keeps boxes (the hulls of its sets), so this is the range over each
-box, not over the (possibly thinner, rotated) set inside it.
+At the output times the solver also keeps its sets in a linear view over their own
+parameters (``sol.views``, :class:`verified.sets.SetView`: every state is ``c + A' p``,
+``p`` in ``R``), and a fourth form is intersected in:
+
+- ``set``: ``FK(c) + (J_FK(box) A) R``, the mean value theorem over the set's own
+  parameters: a thin, rotated set is not widened to its hull box first (the
+  parameters' box enters as ``J_p (p - mid p)``).
+
+Over the tube (every step) only boxes are kept: the first three forms.
 ``mbs.frames.frame_enclosure(sol, chain, "tool0")`` does the same for a solution of
 :func:`verified.solver.solve` whose first ``2 n`` states are ``(q, qd)``.
 """
@@ -32,7 +39,7 @@ from .errors import ModelError
 __all__ = ["FrameEnclosure", "Frames", "frame_enclosure", "frame_graph", "attach_frames", "default_frame",
            "evaluate_frame", "METHODS"]
 
-METHODS = ("both", "mean-value", "affine", "interval")
+METHODS = ("both", "set", "mean-value", "affine", "interval")
 
 
 class FrameEnclosure:
@@ -150,12 +157,43 @@ def _mean_value(graph, X: Interval) -> Interval:
     return out
 
 
-def evaluate_frame(graph, X: Interval, method: str = "both") -> Interval:
-    """The graph's outputs over boxes ``X`` (B, k) by ``method`` (see module docstring)."""
+def _over_set(graph, view, X: Interval, n: int, pbox) -> Interval:
+    """``FK(c, mid p) + (J_q A) R + J_p (p - mid p)`` over the sets of ``view`` (a
+    :class:`verified.sets.SetView` whose first ``n`` states are q), ``J`` the interval
+    Jacobian over the box ``X`` (B, n + parameters) widened to hold ``c``: every segment
+    from ``(c, mid p)`` into the set lies in it, so the mean value theorem applies
+    with ``x_q - c = A' p``, ``A'`` a point matrix of ``A``."""
+    from verified import linalg
+    cq = view.c[:, :n]
+    if pbox is not None:
+        pm = 0.5 * (np.asarray(pbox[0], float) + np.asarray(pbox[1], float))
+        cfull = np.concatenate([cq, np.broadcast_to(pm, (cq.shape[0], pm.size))], axis=1)
+    else:
+        cfull = cq
+    C = Interval(cfull, cfull)
+    fc = graph.eval_interval(C)                             # (B, m), rounding enclosed
+    J = graph.jacobian_interval(X.hull(C))                  # (B, m, n + params)
+    out = fc + linalg.matvec(linalg.matmul(J[:, :, :n], view.A[:, :n, :]), view.R)
+    if pbox is not None:
+        P = Interval(np.broadcast_to(np.asarray(pbox[0], float), (cq.shape[0], pm.size)),
+                     np.broadcast_to(np.asarray(pbox[1], float), (cq.shape[0], pm.size)))
+        out = out + linalg.matvec(J[:, :, n:], P - Interval(cfull[:, n:], cfull[:, n:]))
+    return out
+
+
+def evaluate_frame(graph, X: Interval, method: str = "both", view=None, n: int | None = None,
+                   pbox=None) -> Interval:
+    """The graph's outputs over boxes ``X`` (B, k) by ``method`` (see module
+    docstring); ``view`` (a :class:`verified.sets.SetView` of the same B sets, its
+    first ``n`` states q; ``pbox`` the parameters' (lo, hi)) adds the ``set`` form."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if X.shape[0] == 0:
         return Interval(np.zeros((0, graph.n_outputs)))
+    if method == "set":
+        if view is None:
+            raise ValueError("method 'set' needs the sets' view (Solution.views)")
+        return _over_set(graph, view, X, n, pbox)
     if method == "interval":
         return graph.eval_interval(X)
     if method == "mean-value":
@@ -165,6 +203,8 @@ def evaluate_frame(graph, X: Interval, method: str = "both") -> Interval:
     if method == "affine":
         return A
     out = _mean_value(graph, X).intersect(A).intersect(graph.eval_interval(X))
+    if view is not None:
+        out = out.intersect(_over_set(graph, view, X, n, pbox))
     return out
 
 
@@ -179,8 +219,16 @@ def frame_enclosure(sol, chain, frame: str, cparams=None, *, method: str = "both
     n = chain.n
     pbox = (cparams.lo, cparams.hi) if cparams is not None and cparams.n else None
     pos, rot = [], []
-    for b in sol.boxes:
-        Y = evaluate_frame(g, _boxes_for(b, n, pbox), method)
+    views = getattr(sol, "views", None) or []
+    for j, b in enumerate(sol.boxes):
+        X = _boxes_for(b, n, pbox)
+        view = views[j] if j < len(views) else None
+        if view is not None and view.n_sets != X.shape[0]:
+            view = None
+        if method == "set" and view is None:
+            Y = evaluate_frame(g, X, "both")  # (an output without sets: boxes a hook wrote)
+        else:
+            Y = evaluate_frame(g, X, method, view if method in ("both", "set") else None, n, pbox)
         pos.append(Interval(Y.lo[:, :3], Y.hi[:, :3]))
         rot.append(Interval(Y.lo[:, 3:], Y.hi[:, 3:]))
     tb = []
@@ -188,7 +236,7 @@ def frame_enclosure(sol, chain, frame: str, cparams=None, *, method: str = "both
         sizes = [b.reshape(-1, b.shape[-1]).shape[0] if b.ndim > 1 else 1 for b in sol.tube]
         allx = Interval(np.concatenate([_boxes_for(b, n, pbox).lo for b in sol.tube]),
                         np.concatenate([_boxes_for(b, n, pbox).hi for b in sol.tube]))
-        Y = evaluate_frame(g, allx, method)
+        Y = evaluate_frame(g, allx, "both" if method == "set" else method)
         k = 0
         for s in sizes:
             tb.append(Interval(Y.lo[k:k + s, :3], Y.hi[k:k + s, :3]))

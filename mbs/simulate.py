@@ -742,6 +742,8 @@ def _truncate(sol: Solution, T: float):
     keep = np.flatnonzero(sol.t <= T)
     sol.t = sol.t[keep]
     sol.boxes = [sol.boxes[i] for i in keep]
+    if sol.views:
+        sol.views = [sol.views[i] if i < len(sol.views) else None for i in keep]
     sol.hull = sol.hull[keep]
     steps = int(np.sum(sol.tube_t[1:] <= T))
     sol.tube = sol.tube[:steps]

@@ -1092,6 +1092,8 @@ class InvariantHook(Hook):
         later = self.t_eval[(self.t_eval > t1) & (self.t_eval <= self.t_end)]
         solution.t = np.concatenate([solution.t, later])
         solution.boxes = list(solution.boxes) + [at(t) for t in later]
+        if solution.views:
+            solution.views = list(solution.views) + [None] * len(later)  # (boxes, no sets)
         solution.hull = _stack_hulls(solution.boxes)
         if self.t_end > t1:
             # tube pieces at the output times and on a grid of 100 (each the box at its

@@ -21,7 +21,7 @@ from . import linalg
 from .interval import Interval, concatenate, point
 from .policies import orthonormal_basis
 
-__all__ = ["SetBatch", "DoubletonSets"]
+__all__ = ["SetBatch", "DoubletonSets", "SetView", "set_view"]
 
 
 @runtime_checkable
@@ -54,6 +54,41 @@ class SetBatch(Protocol):
     def merge_overlapping(self, slack: float) -> tuple["SetBatch", int]:
         """Neighbouring sets merged where one set covering both is at most ``1 + slack``
         times as wide as their union's hull; returns the batch and the number of merges."""
+
+
+@dataclass
+class SetView:
+    """The first ``k`` states of a batch of sets in a linear view over the sets' own
+    parameters: every point of set ``b`` is ``c[b] + A' p`` for some ``p`` in ``R[b]``
+    and some point matrix ``A'`` in ``A[b]`` (``A'`` may depend on ``p``). Doubleton
+    sets give ``A = [C | Q]`` (points); second-order sets ``[C + S r0 | Q]``
+    (:meth:`verified.quadratic.QuadraticSets.direction_columns`).
+
+    Why: a function of the states over a thin, rotated set is much narrower in
+    mean-value form over these parameters, ``g(c) + (Dg(X) A) R``, than over the set's
+    hull box (the frames of :mod:`mbs.frames` use it). Shapes: c (B, k) float,
+    A Interval (B, k, P), R Interval (B, P)."""
+
+    c: np.ndarray
+    A: Interval
+    R: Interval
+
+    @property
+    def n_sets(self) -> int:
+        return self.c.shape[0]
+
+    def hull(self) -> Interval:
+        """A box holding every point of the view and the segments from ``c`` into it."""
+        return linalg.matvec(self.A, self.R.hull(0.0)) + self.c
+
+
+def set_view(sets, k: int) -> SetView:
+    """The :class:`SetView` of the first ``k`` states of ``sets`` (doubleton or
+    second-order, anything with ``direction_columns``, ``r0`` and ``r``)."""
+    cols = sets.direction_columns()
+    A = cols if isinstance(cols, Interval) else point(np.asarray(cols, float))
+    R = concatenate([sets.r0, sets.r], axis=1)
+    return SetView(c=np.array(sets.c[:, :k], dtype=float), A=A[:, :k, :], R=R)
 
 
 def parameter_cuts(r0: Interval, r: Interval, which, pieces: int):

@@ -42,7 +42,7 @@ from .linalg import SingularMatrixError
 from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
 from .policies import REMAINDER_SLACK, BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl  # noqa: F401
-from .sets import DoubletonSets
+from .sets import DoubletonSets, set_view
 from .quadratic import QuadraticSets, QuadraticStepper
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from .taylor import TaylorODE
@@ -177,6 +177,12 @@ class Solution:
         RA(t), H_H and H_V per step and a record of every test (paper Figs. 2-3).
     mode : str
         Set by :func:`mbs.simulate.simulate` ("i", "ii", "iii"; "" otherwise).
+    views : list of verified.sets.SetView or None
+        For each output time (as ``boxes``), the solver's sets there in a linear view
+        over their own parameters (:func:`verified.sets.set_view`, the ``n`` states), so
+        that a function of the states can be enclosed over the sets rather than their
+        hull boxes (:mod:`mbs.frames`); ``None`` where an output has no view (boxes a
+        hook wrote), and ``[]`` when the run kept none (the parallel path).
     """
 
     t: np.ndarray
@@ -192,6 +198,7 @@ class Solution:
     state_names: tuple = ()
     consistency: object = None
     mode: str = ""
+    views: list = field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -567,6 +574,8 @@ class _Run:
         self.t_exact = Fraction(setup.t0)
         self.t = setup.t0
         self.out_t, self.out_boxes = [setup.t0], [initial]  # initial (B, n_state): the boxes at t0
+        # the sets at each output time over their own parameters (Solution.views)
+        self.out_views = [set_view(setup.sets, setup.n_state)] if initial.shape[0] == setup.sets.n_sets else [None]
         self.tube_t, self.tube = [setup.t0], []
         self.step = None  # the last accepted step (after a rollback: the one before)
         self.recent = []  # the last two steps since a hook last replaced the sets (for rollback)
@@ -657,6 +666,7 @@ class _Run:
 
     def record_output(self):
         boxes = self.sets.hull()[:, :self.n_state]
+        self.out_views.append(set_view(self.sets, self.n_state))
         self.out_t.append(self.t)
         self.out_boxes.append(boxes)
         self.next_out += 1
@@ -693,6 +703,7 @@ class _Run:
                 order=order,
             ),
             state_names=state_names,
+            views=(self.out_views + [None] * k)[:k],
         )
 
 
