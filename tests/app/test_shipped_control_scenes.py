@@ -29,15 +29,8 @@ def test_the_closed_loop_oracle_bites(monkeypatch):
     """The same run with every output box narrowed to 90 % about its midpoint: sampled
     states must fall outside, so the check above can fail."""
     import mbs.simulate
-    from verified.interval import Interval
-    real = mbs.simulate.solve
-
-    def narrowed(*args, **kwargs):
-        sol = real(*args, **kwargs)
-        sol.boxes = [Interval(b.mid() - 0.45 * b.width(), b.mid() + 0.45 * b.width()) for b in sol.boxes]
-        return sol
-
-    monkeypatch.setattr(mbs.simulate, "solve", narrowed)
+    from oracles.mutants import narrows_output_boxes
+    monkeypatch.setattr(mbs.simulate, "solve", narrows_output_boxes(mbs.simulate.solve))
     monkeypatch.setitem(bench_control.TARGET_T, "ur5_quintic", 0.3)
     row = bench_control.run_case("quintic", "ur5_quintic", 120.0, None, None, samples=12)
     assert not row["inside"]

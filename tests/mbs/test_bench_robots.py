@@ -11,6 +11,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
 import bench_robots  # noqa: E402
+from oracles.mutants import narrows_output_boxes  # noqa: E402
 import mbs.simulate  # noqa: E402
 from verified.interval import Interval  # noqa: E402
 
@@ -45,15 +46,8 @@ def test_quick_qdd_enclosures_are_sound():
 # (4-5 s: behind the slow marker to keep the default run under 3 minutes)
 @pytest.mark.slow
 def test_a_too_narrow_enclosure_is_reported_unsound(monkeypatch):
-    real = mbs.simulate.solve
-
-    def narrowed(*args, **kwargs):
-        sol = real(*args, **kwargs)
-        # 10% narrower about the midpoints: the sampled corners leave the enclosure
-        sol.boxes = [Interval(b.mid() - 0.45 * b.width(), b.mid() + 0.45 * b.width()) for b in sol.boxes]
-        return sol
-
-    monkeypatch.setattr(mbs.simulate, "solve", narrowed)
+    # 10% narrower about the midpoints: the sampled corners leave the enclosure
+    monkeypatch.setattr(mbs.simulate, "solve", narrows_output_boxes(mbs.simulate.solve))
     bench, text = _quick("1")
     assert all(not r.sound for r in bench.runs())
     assert "UNSOUND" in text

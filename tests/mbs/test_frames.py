@@ -40,6 +40,18 @@ def frame_misses(enc, trajs, fk, per_step=3):
     return bad
 
 
+def _pin_fk(chain, frame):
+    """(Pinocchio model, data, fk(x) -> the frame's world position) of ``chain``."""
+    model = pin.Model(chain.to_pinocchio())
+    data = model.createData()
+    fid = model.getFrameId(frame)
+
+    def fk(x):
+        pin.framesForwardKinematics(model, data, x[:chain.n])
+        return data.oMf[fid].translation.copy()
+    return model, data, fk
+
+
 @pytest.fixture(scope="module")
 def arm_run():
     chain = get("planar2")
@@ -109,13 +121,7 @@ def test_ur5_tool0_over_the_sets_is_tighter_and_holds_pinocchio_frames():
     w_set = np.asarray(sol.frame("tool0", method="set").position.width())[-1]
     w_box = np.asarray(sol.frame("tool0", method="mean-value").position.width())[-1]
     assert w_set.max() < 0.5 * w_box.max()
-    model = pin.Model(chain.to_pinocchio())
-    data = model.createData()
-    fid = model.getFrameId("tool0")
-
-    def fk(x):
-        pin.framesForwardKinematics(model, data, x[:6])
-        return data.oMf[fid].translation.copy()
+    model, data, fk = _pin_fk(chain, "tool0")
     zero = np.zeros(6)
     trajs = [solve_ivp(lambda t, x: np.r_[x[6:], pin.aba(model, data, x[:6], x[6:], zero)], (0, T), x,
                        method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True).sol
@@ -141,13 +147,7 @@ def test_ur5_tool0_with_payload_contains_pinocchio_frames():
     nd = nominal.createData()
     M0 = pin.crba(nominal, nd, q0)          # bandwidth gains: w^2 M(q_ref), 2 w M(q_ref)
     kp, kd = 9.0 * M0, 6.0 * M0
-    model = pin.Model(chain.to_pinocchio())
-    data = model.createData()
-    fid = model.getFrameId("tool0")
-
-    def fk(x):
-        pin.framesForwardKinematics(model, data, x[:6])
-        return data.oMf[fid].translation.copy()
+    model, data, fk = _pin_fk(chain, "tool0")
     trajs = []
     for k, m in enumerate([0.9, 1.1]):
         plant = pin_model(chain, payloads=[("tool0", m, [0, 0, 0])])
@@ -159,7 +159,7 @@ def test_ur5_tool0_with_payload_contains_pinocchio_frames():
     # orientation too: Pinocchio's rotation inside the rotation enclosure at the end
     for tr in trajs:
         pin.framesForwardKinematics(model, data, tr(T)[:6])
-        R = data.oMf[fid].rotation
+        R = data.oMf[model.getFrameId("tool0")].rotation
         assert np.all(enc.rotation.lo[-1] - SLACK <= R) and np.all(R <= enc.rotation.hi[-1] + SLACK)
 
 

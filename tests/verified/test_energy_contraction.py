@@ -9,6 +9,7 @@ whose boundary point is known exactly, 20 % on a real run by the sampling oracle
 import numpy as np
 import pytest
 
+from oracles.mutants import keeps_lower_quarter
 from oracles.sampling import misses, sample_initial_points, trajectories
 from verified import energy_contraction as ec
 from verified.consistency import EnergyClaimError, EnergyTest, prove_energy_rate
@@ -156,14 +157,7 @@ def test_double_pendulum_contracted_boxes_keep_every_sampled_trajectory(scale, t
 
 def test_a_contraction_that_cuts_too_far_is_caught_by_the_sampling_oracle(monkeypatch):
     """The same run with a contractor keeping only the lower quarter of every narrowed component: the oracle must see sampled states outside (so the test above can fail)."""
-    real = ec.contract_linear_row
-
-    def too_far(a, g0, r, rem=0.0, **k):
-        R, empty = real(a, g0, r, rem, **k)
-        narrowed = (R.width() < r.width()) & (R.hi >= R.lo)
-        return Interval._from_bounds(R.lo, np.where(narrowed, R.lo + 0.25 * R.width(), R.hi)), empty
-
-    monkeypatch.setattr(ec, "contract_linear_row", too_far)
+    monkeypatch.setattr(ec, "contract_linear_row", keeps_lower_quarter(ec.contract_linear_row))
     rhs, H = _dp()
     lo, hi = dp.initial_box()
     test = EnergyTest(H, "derive", contract="step", prune=False)

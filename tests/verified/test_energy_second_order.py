@@ -13,6 +13,7 @@ from fractions import Fraction as F
 import numpy as np
 import pytest
 
+from oracles.mutants import keeps_lower_quarter
 from oracles.sampling import misses, sample_initial_points, trajectories
 from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
 from verified import energy_contraction as ec
@@ -163,14 +164,7 @@ def test_contraction_of_a_bent_set_keeps_every_true_state_and_narrows():
 def test_a_bent_set_contraction_that_cuts_too_far_is_caught(monkeypatch):
     """A contractor keeping the lower quarter of each narrowed component loses the true
     states near u = sqrt(3) - 1: the check above must see it."""
-    real = ec.contract_linear_row
-
-    def too_far(a, g0, r, rem=0.0, **k):
-        R, empty = real(a, g0, r, rem, **k)
-        narrowed = (R.width() < r.width()) & (R.hi >= R.lo)
-        return Interval._from_bounds(R.lo, np.where(narrowed, R.lo + 0.25 * R.width(), R.hi)), empty
-
-    monkeypatch.setattr(ec, "contract_linear_row", too_far)
+    monkeypatch.setattr(ec, "contract_linear_row", keeps_lower_quarter(ec.contract_linear_row))
     res, sets = _bent_case()
     R = ec.EnergyContraction(res).contract(sets).params[0]
     u = F(float(np.sqrt(3) - 1))
