@@ -297,6 +297,7 @@ def random_urdf(draw):
     return '<robot name="rnd">' + "".join(links) + "".join(joints) + "</robot>"
 
 
+@pytest.mark.slow  # default-run budget (CI's cold default step measured 187 s of 180 at ec9790f)
 @settings(max_examples=6, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(xml=random_urdf())

@@ -98,6 +98,7 @@ def test_dask_chunks_contain_samples(ode, box, oracle, single, client):
     assert sol.stats["sent_bytes"] > 0 and sol.stats["received_bytes"] > 0
 
 
+@pytest.mark.slow  # default-run budget (CI's cold default step measured 187 s of 180 at ec9790f)
 def test_uncertain_parameters_per_chunk(client):
     """Per-box parameter rows travel with their boxes; a graph with parameters ships."""
     g = trace(lambda x, p: [x[1], -p[0] * np.sin(x[0])], 2, 1)
@@ -135,6 +136,7 @@ class SlowSteps(Hook):
         return None
 
 
+@pytest.mark.slow  # default-run budget (CI's cold default step measured 187 s of 180 at ec9790f)
 def test_killed_worker_chunk_is_retried(ode, box, oracle, single, client):
     pids = client.run(os.getpid)
     killed = {}
