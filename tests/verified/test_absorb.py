@@ -192,10 +192,10 @@ def test_oracle_bites_when_merged_parameters_are_dropped(monkeypatch):
     with the cap lowered so that it merges)."""
     import verified.lohner as vl
 
-    def broken(self, count, keep_first):
+    def broken(self, count, keep_first, steer=None):
         nb, n = self.c.shape
         m = self.C.shape[2]
-        w = np.abs(self.C).sum(axis=1) * self.r0.width()
+        w = np.abs(self.C[:, :steer]).sum(axis=1) * self.r0.width()
         w[:, :keep_first] = np.inf
         sel = np.sort(np.argsort(w.max(axis=0), kind="stable")[:count])
         rest = np.setdiff1d(np.arange(m), sel)
