@@ -87,6 +87,7 @@ def _J_M_abs_J(m1, m2, l1, l2, x2):
                          [m2 * l2 ** 2 + m2 * l1 * l2 * c, m2 * l2 ** 2]])
 
 
+@pytest.mark.slow  # default-run budget (CI's cold default step measured 170-183 s of 180 at 1e891d1/1caded6)
 def test_double_pendulum_eq22_numeric():
     xs, f, H = dp.sympy_model()
     r = recover_hamiltonian(f, xs[:2], xs[2:])

@@ -64,6 +64,7 @@ def test_scene_keys():
         loads_scene(SCENE + 'prune = "no"\n')
 
 
+@pytest.mark.slow  # default-run budget (CI's cold default step measured 170-183 s of 180 at 1e891d1/1caded6)
 def test_energy_shell_through_simulate_holds_the_pendulum_and_stays_sound():
     """``simulate(..., energy_shell=True)``: the chain's M(q) and P(q) give the shell, the
     initial box its hmax; the pendulum over the top (mode i)

@@ -342,6 +342,7 @@ def test_system_parameters_by_name():
         simulate(system, box, 0.1, mode="i")
 
 
+@pytest.mark.slow  # default-run budget (CI's cold default step measured 170-183 s of 180 at 1e891d1/1caded6)
 def test_shipped_payload_scene_runs_from_the_cli(tmp_path, capsys):
     """models/scenes/double_pendulum_payload.toml (to 0.1 s here; its full 0.5 s run is
     in the slow test of every shipped scene): parameters sampled, figures with them."""
