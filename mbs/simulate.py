@@ -383,9 +383,6 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     if split_strategy not in STRATEGIES:
         raise ValueError(f"split_strategy must be one of {STRATEGIES}, got {split_strategy!r}")
     mode = get_mode(mode)  # validated above (_system_and_chain, _controlled_system)
-    if mode.energy_test and solver_kwargs.get("set_order", 1) == 2 and backward_depth:
-        raise ValueError(f"backward_depth={backward_depth!r}: the backward test needs first-order sets "
-                         "(set_order=1); second-order sets run the energy test without it")
     test = None
     if mode.energy_test:
         test = EnergyTest(system.energy, system.energy_rate, constraints,

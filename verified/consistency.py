@@ -214,14 +214,11 @@ class EnergyTest(Hook):
         self.backward_depth = int(backward_depth)
         self.max_boxes = int(max_boxes)
         self.contract = contract
-        if contract_backoff is not None and (isinstance(contract_backoff, (bool, np.bool_))
-                                             or not isinstance(contract_backoff, (int, np.integer))
-                                             or contract_backoff < 0):
-            raise ValueError(f"contract_backoff must be an integer >= 0 or None, got {contract_backoff!r}")
+        for name, value in (("contract_backoff", contract_backoff), ("test_backoff", test_backoff)):
+            if value is not None and (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer))
+                                      or value < 0):
+                raise ValueError(f"{name} must be an integer >= 0 or None, got {value!r}")
         self.contract_backoff = contract_backoff
-        if test_backoff is not None and (isinstance(test_backoff, (bool, np.bool_))
-                                         or not isinstance(test_backoff, (int, np.integer)) or test_backoff < 0):
-            raise ValueError(f"test_backoff must be an integer >= 0 or None, got {test_backoff!r}")
         self.test_backoff = test_backoff
         self.prune = bool(prune)
         if align is not None and not callable(getattr(align, "set_direction", None)):
@@ -241,13 +238,11 @@ class EnergyTest(Hook):
             if self.reset_h:
                 raise ValueError("reset_h=True needs first-order sets (set_order=1)")
             if self.backward_depth:
-                raise ValueError("the backward test (backward_depth > 0) needs first-order sets (set_order=1)")
+                raise ValueError(f"backward_depth={self.backward_depth!r}: the backward test needs first-order sets "
+                                 "(set_order=1); second-order sets run the energy test without it")
         graph = self.prepare(setup.user_graph, setup.graph, setup.n_state, setup.params, t0=setup.t0)
-        if not isinstance(setup.sets, DoubletonSets):  # (see contract_backoff, test_backoff)
-            if self.contract_backoff is None:
-                self._contract_wait = BackOff(16)
-            if self.test_backoff is None:
-                self._test_wait = BackOff(16)
+        # (see contract_backoff, test_backoff)
+        self._set_waits(0 if isinstance(setup.sets, DoubletonSets) else 16)
         self._refute_claim(setup.sets.hull(), setup.sets.c, setup.t0)
         # "a test at least every test_interval seconds" (contraction alone needs no cap:
         # it runs after every step, and a cap changes the steps of the run it is compared with)
@@ -283,8 +278,8 @@ class EnergyTest(Hook):
         if self.contract == "step" and self._contraction is not None and self._contract_wait.skip():
             self.stats["contractions_skipped"] += 1
         elif self.contract == "step" and self._contraction is not None:
-            sets, ch = self._contract(sets)
-            self._contract_wait.done(ch or self._narrowed)
+            sets, ch, narrowed = self._contract(sets)
+            self._contract_wait.done(narrowed)
             changed |= ch
             if sets.n_sets == 0:
                 run.stop("the energy contraction removed every set (inconsistent model or energy rate?)",
@@ -309,7 +304,7 @@ class EnergyTest(Hook):
                 self._tracker.tested(step.t)
             return sets if changed else None
         if self.contract == "test" and self._contraction is not None:
-            sets, _ = self._contract(sets)
+            sets, _, _ = self._contract(sets)
         if self.prune:
             prev = (step.previous, step.h, run.make_stepper) if self.backward_depth else None
             pruned_before = self.stats["pruned_boxes"]
@@ -335,8 +330,9 @@ class EnergyTest(Hook):
         return sets, False
 
     def _contract(self, sets):
-        """``(sets, changed)``: the sets contracted with ``H(x) - h = 0``
-        (:mod:`verified.energy_contraction`); empty sets dropped."""
+        """``(sets, changed, narrowed)``: the sets contracted with ``H(x) - h = 0``
+        (:mod:`verified.energy_contraction`); empty sets dropped (``changed``: the batch
+        was replaced; ``narrowed``: some set was narrowed or dropped)."""
         w0 = time.perf_counter()
         lifted = self._lifted
         res = self._contraction.contract(sets, lifted.p(sets.n_sets) if lifted.residual.n_params else None)
@@ -345,12 +341,12 @@ class EnergyTest(Hook):
         if res.ratio.size:
             self.stats["contraction_ratio_min"] = min(self.stats["contraction_ratio_min"], float(res.ratio.min()))
         self.stats["contraction_s"] += time.perf_counter() - w0
-        self._narrowed = bool(res.empty.any() or (res.ratio < 1).any())
         if res.empty.any():
-            return res.sets, True
-        if (res.ratio < 1).any():
+            return res.sets, True, True
+        narrowed = bool((res.ratio < 1).any())
+        if narrowed:
             assign(sets, res.sets)
-        return sets, False
+        return sets, False, narrowed
 
     def after_run(self, solution):
         solution.consistency = self.finish()
@@ -376,10 +372,16 @@ class EnergyTest(Hook):
                           backward_deleted=0, refinements_skipped=0, contractions=0, contracted_empty=0,
                           contraction_s=0.0, contraction_ratio_min=1.0, h_resets=0, contractions_skipped=0,
                           tests_skipped=0)
-        self._narrowed = False
-        self._contract_wait = BackOff(0 if self.contract_backoff is None else self.contract_backoff)
-        self._test_wait = BackOff(0 if self.test_backoff is None else self.test_backoff)
+        self._set_waits(0)
         return lifted.graph
+
+    def _set_waits(self, default_cap: int):
+        """The back-offs of the contraction and the RA-peak tests: the caps given, or
+        ``default_cap`` where None was (0 on doubletons, 16 on second-order sets)."""
+        def cap(value):
+            return default_cap if value is None else value
+        self._contract_wait = BackOff(cap(self.contract_backoff))
+        self._test_wait = BackOff(cap(self.test_backoff))
 
     def initial_sets(self, sets):
         """Append ``h(0) = H(x0)`` to the initial sets, correlated with ``r0``

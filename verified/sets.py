@@ -77,10 +77,6 @@ class SetView:
     def n_sets(self) -> int:
         return self.c.shape[0]
 
-    def hull(self) -> Interval:
-        """A box holding every point of the view and the segments from ``c`` into it."""
-        return linalg.matvec(self.A, self.R.hull(0.0)) + self.c
-
 
 def set_view(sets, k: int) -> SetView:
     """The :class:`SetView` of the first ``k`` states of ``sets`` (doubleton or
