@@ -24,7 +24,10 @@ parameters (``sol.views``, :class:`verified.sets.SetView`: every state is ``c + 
   parameters: a thin, rotated set is not widened to its hull box first (the
   parameters' box enters as ``J_p (p - mid p)``).
 
-Over the tube (every step) only boxes are kept: the first three forms.
+Over the tube (every step) the same forms are taken over the tube boxes, and where the
+solver kept the step's a-priori enclosure as a linear view (``sol.tube_views``: the
+composition step, ``set_step="composition"``) the ``set`` form over it is intersected
+in as well.
 ``mbs.frames.frame_enclosure(sol, chain, "tool0")`` does the same for a solution of
 :func:`verified.solver.solve` whose first ``2 n`` states are ``(q, qd)``.
 """
@@ -208,6 +211,36 @@ def evaluate_frame(graph, X: Interval, method: str = "both", view=None, n: int |
     return out
 
 
+def _tube_over_views(graph, Y: Interval, X: Interval, sizes, views, n: int, pbox) -> Interval:
+    """``Y`` (the frame over the stacked tube boxes ``X``) intersected with the set form
+    over each step's view (``sol.tube_views``), where the step kept one; the steps'
+    views are evaluated in one batch."""
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    idx = [j for j, v in enumerate(views) if j < len(sizes) and v is not None and v.n_sets == sizes[j]]
+    if not idx:
+        return Y
+    from verified.interval import concatenate
+    from verified.sets import SetView
+    P = max(views[j].A.shape[-1] for j in idx)
+
+    def padded(a: Interval, width: int) -> Interval:  # (zero columns: the same points)
+        extra = P - width
+        if not extra:
+            return a
+        z = np.zeros(a.shape[:-1] + (extra,))
+        return Interval(np.concatenate([a.lo, z], axis=-1), np.concatenate([a.hi, z], axis=-1))
+
+    view = SetView(c=np.concatenate([views[j].c for j in idx]),
+                   A=concatenate([padded(views[j].A, views[j].A.shape[-1]) for j in idx], axis=0),
+                   R=concatenate([padded(views[j].R, views[j].R.shape[-1]) for j in idx], axis=0))
+    rows = np.concatenate([np.arange(starts[j], starts[j + 1]) for j in idx])
+    over = _over_set(graph, view, X[rows], n, pbox)
+    lo, hi = Y.lo.copy(), Y.hi.copy()
+    lo[rows] = np.maximum(lo[rows], over.lo)
+    hi[rows] = np.minimum(hi[rows], over.hi)
+    return Interval._from_bounds(lo, hi)
+
+
 def frame_enclosure(sol, chain, frame: str, cparams=None, *, method: str = "both",
                     tube: bool = True) -> FrameEnclosure:
     """The :class:`FrameEnclosure` of ``frame`` (a link or frame name of ``chain``)
@@ -237,6 +270,8 @@ def frame_enclosure(sol, chain, frame: str, cparams=None, *, method: str = "both
         allx = Interval(np.concatenate([_boxes_for(b, n, pbox).lo for b in sol.tube]),
                         np.concatenate([_boxes_for(b, n, pbox).hi for b in sol.tube]))
         Y = evaluate_frame(g, allx, "both" if method == "set" else method)
+        if method in ("both", "set"):
+            Y = _tube_over_views(g, Y, allx, sizes, getattr(sol, "tube_views", None) or [], n, pbox)
         k = 0
         for s in sizes:
             tb.append(Interval(Y.lo[k:k + s, :3], Y.hi[k:k + s, :3]))

@@ -744,6 +744,8 @@ def _truncate(sol: Solution, T: float):
     sol.hull = sol.hull[keep]
     steps = int(np.sum(sol.tube_t[1:] <= T))
     sol.tube = sol.tube[:steps]
+    if sol.tube_views:
+        sol.tube_views = sol.tube_views[:steps]
     sol.tube_t = sol.tube_t[:steps + 1]
     sol.tube_hull = sol.tube_hull[:steps]
     sol.t_reached = T

@@ -1100,6 +1100,8 @@ class InvariantHook(Hook):
             # start: the bound of V~ only falls with time; the energy box holds throughout)
             edges = np.unique(np.concatenate([[t1], later, np.linspace(t1, self.t_end, 101)[1:-1],
                                               [self.t_end]]))
+            if solution.tube_views:
+                solution.tube_views = list(solution.tube_views) + [None] * (edges.size - 1)  # (boxes)
             solution.tube = list(solution.tube) + [at(a) for a in edges[:-1]]
             solution.tube_t = np.concatenate([solution.tube_t, edges[1:]])
             solution.tube_hull = _stack_hulls(solution.tube)

@@ -42,7 +42,7 @@ from .linalg import SingularMatrixError
 from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
 from .policies import REMAINDER_SLACK, BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl  # noqa: F401
-from .sets import DoubletonSets, set_view
+from .sets import DoubletonSets, SetView, set_view
 from .quadratic import QuadraticSets, QuadraticStepper
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from .taylor import TaylorODE
@@ -183,6 +183,11 @@ class Solution:
         that a function of the states can be enclosed over the sets rather than their
         hull boxes (:mod:`mbs.frames`); ``None`` where an output has no view (boxes a
         hook wrote), and ``[]`` when the run kept none (the parallel path).
+    tube_views : list of verified.sets.SetView or None
+        For each step (as ``tube``), the a-priori enclosure as a linear view over
+        symbols of its own (the ``n`` states), where the stepper keeps one (the
+        composition step, ``set_step="composition"``; None elsewhere, and ``[]`` when
+        the run kept none): :mod:`mbs.frames` encloses the frames over the tube in it.
     """
 
     t: np.ndarray
@@ -199,6 +204,7 @@ class Solution:
     consistency: object = None
     mode: str = ""
     views: list = field(default_factory=list)
+    tube_views: list = field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -576,7 +582,7 @@ class _Run:
         self.out_t, self.out_boxes = [setup.t0], [initial]  # initial (B, n_state): the boxes at t0
         # the sets at each output time over their own parameters (Solution.views)
         self.out_views = [set_view(setup.sets, setup.n_state)] if initial.shape[0] == setup.sets.n_sets else [None]
-        self.tube_t, self.tube = [setup.t0], []
+        self.tube_t, self.tube, self.tube_views = [setup.t0], [], []
         self.step = None  # the last accepted step (after a rollback: the one before)
         self.recent = []  # the last two steps since a hook last replaced the sets (for rollback)
         self.status, self.reason = "", ""
@@ -595,6 +601,7 @@ class _Run:
         last = self.recent.pop()
         self.tube.pop()
         self.tube_t.pop()
+        self.tube_views.pop()
         self.sets, self.t, self.t_exact = last.previous, last.t_start, last.t_exact_start
         self.step = self.recent[-1]
         return self.step, self.sets
@@ -649,6 +656,9 @@ class _Run:
         self.sets, self.t, self.t_exact, self.step = step.sets, step.t, t_exact, step
         self.recent = (self.recent + [step])[-2:]
         self.tube.append(E[:, :self.n_state])
+        view = step.tube_view
+        self.tube_views.append(None if view is None or view.n_sets != E.shape[0] else
+                               SetView(c=view.c[:, :self.n_state], A=view.A[:, :self.n_state], R=view.R))
         self.tube_t.append(step.t)
         return step
 
@@ -704,6 +714,7 @@ class _Run:
             ),
             state_names=state_names,
             views=(self.out_views + [None] * k)[:k],
+            tube_views=(self.tube_views + [None] * n_tube)[:n_tube],
         )
 
 

@@ -56,6 +56,11 @@ class StepResult:
         The exact times (a sum of float steps; every enclosure belongs to them).
     landed : bool
         The step ended on a requested output time.
+    tube_view : verified.sets.SetView or None
+        The a-priori enclosure as a linear view over symbols of its own (every
+        solution from ``previous`` is some ``c + A' p`` over the step), where the
+        stepper keeps one (the composition step, :func:`verified.tm_flow.tube_view`);
+        :mod:`mbs.frames` takes the frames over the tube in it.
     """
 
     sets: object
@@ -69,6 +74,7 @@ class StepResult:
     t_exact_start: Fraction | None = None
     t_exact: Fraction | None = None
     landed: bool = False
+    tube_view: object = None
 
     @property
     def length(self) -> float:

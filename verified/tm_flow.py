@@ -77,11 +77,12 @@ from .interval import Interval, _k_round_up, point
 from .lohner import LohnerStepper, _inflate
 from .policies import REMAINDER_SLACK
 from .quadratic import QuadraticSets
+from .sets import SetView
 from .stepper import StepResult
 from .taylor_model import (_acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length,
                            models_to_interval, star_base)
 
-__all__ = ["TaylorModelFlowStepper", "set_models", "ModelCaps"]
+__all__ = ["TaylorModelFlowStepper", "set_models", "ModelCaps", "tube_view"]
 
 #: default cap on the symbols with cubic monomials in degree-3 arithmetic (the set's
 #: widest parameters first); a product costs O(cap^3). See TaylorModelFlowStepper.
@@ -229,6 +230,29 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
         X[:, bad, :] = 0.0
         X[:, bad, -1] = np.inf
     return X, live, errors, rho, caps
+
+
+def tube_view(models: np.ndarray, M: int, mq: int) -> SetView:
+    """The a-priori enclosure's models (n, B, L) over ``M`` symbols (the set's and one
+    per power of ``s / h``, :meth:`TaylorModelFlowStepper.apriori`) as a
+    :class:`verified.sets.SetView`: ``x = c + A' p`` with ``A = [linear part | I]``,
+    ``p`` the ``M`` symbols in ``[-1, 1]`` and, per state, the range of the rest (the
+    monomials of degree 2 and more and the remainder, rounded outward). Every solution
+    from the set stays in the models' range over the step, so it is some ``c + A' p``.
+    Why: the frames over the tube (:mod:`mbs.frames`) are then taken in mean-value form
+    over these symbols, not over the tube's hull box (the step's motion and the set's
+    shape stay lines in it)."""
+    n, nb, _ = models.shape
+    c = np.ascontiguousarray(models[:, :, 0].T)
+    A = np.zeros((nb, n, M + n))
+    A[:, :, :M] = models[:, :, 1: M + 1].transpose(1, 0, 2)
+    A[:, np.arange(n), M + np.arange(n)] = 1.0
+    rest = models.copy()
+    rest[:, :, : M + 1] = 0.0
+    lo, hi = models_to_interval(rest, M, mq)  # (n, B)
+    R = Interval._from_bounds(np.concatenate([-np.ones((nb, M)), lo.T], axis=1),
+                              np.concatenate([np.ones((nb, M)), hi.T], axis=1))
+    return SetView(c=c, A=point(A), R=R)
 
 
 def more_symbols(X: np.ndarray, M: int, extra: int) -> np.ndarray:
@@ -527,6 +551,7 @@ class TaylorModelFlowStepper(LohnerStepper):
                 self._widen = np.where(np.isfinite(w), np.maximum(w, 1.0), 1.0)
                 lo, hi = models_to_interval(trial, M2, mq)
                 E = Interval._from_bounds(np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T))
+                self._tube = (E, tube_view(trial, M2, mq))
                 return E, cE
             Bx = _inflate(Bx.hull(new).hull(0.0), factor=0.5)
         return None
@@ -619,4 +644,8 @@ class TaylorModelFlowStepper(LohnerStepper):
         new = QuadraticSets(c=c_new, C=C_new, r0=r0_new, S=S_new, Q=Q_out, r=r_new)
         if self.absorb:
             new = self.absorb_error(new)
-        return StepResult(sets=new, previous=sets, h=h, hull=X, tube=E, nonlinear_width=nonlinear.width())
+        tube = getattr(self, "_tube", None)
+        view = tube[1] if tube is not None and tube[0] is E else None
+        self._tube = None
+        return StepResult(sets=new, previous=sets, h=h, hull=X, tube=E, nonlinear_width=nonlinear.width(),
+                          tube_view=view)
