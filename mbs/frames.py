@@ -263,7 +263,8 @@ def frame_enclosure(sol, chain, frame: str, cparams=None, *, method: str = "both
         else:
             Y = evaluate_frame(g, X, method, view if method in ("both", "set") else None, n, pbox)
         pos.append(Interval(Y.lo[:, :3], Y.hi[:, :3]))
-        rot.append(Interval(Y.lo[:, 3:], Y.hi[:, 3:]))
+        # a rotation matrix's entries lie in [-1, 1] (its columns are unit vectors)
+        rot.append(Interval(np.clip(Y.lo[:, 3:], -1.0, 1.0), np.clip(Y.hi[:, 3:], -1.0, 1.0)))
     tb = []
     if tube and len(sol.tube):
         sizes = [b.reshape(-1, b.shape[-1]).shape[0] if b.ndim > 1 else 1 for b in sol.tube]

@@ -123,7 +123,7 @@ def _model_chain(model, params):
                         f"got {type(model).__name__}")
     cp = None
     if params is not None or chain.free_symbols:
-        _require_dict(params if params is not None else {}, name or chain.name)
+        _require_dict(params if params is not None else {}, name or chain.name, chain)
         cp = ChainParameters(chain, params or {}, model_name=name)
     return chain, cp, name or chain.name
 
@@ -168,8 +168,9 @@ def _system_and_chain(model, mode: str | Mode, energy_rate: str, params=None):
             # a registry System factory (the paper's models): its chain in modes i and
             # ii, its own System (hand-written, the same M) where it has one
             cp = None
+            if params is not None:
+                _require_dict(params, model, names=getattr(entry, "param_names", ()))
             if params:
-                _require_dict(params, model)
                 chain = entry.chain(params)
                 cp = ChainParameters(chain, params, model_name=model)
             else:
@@ -187,17 +188,20 @@ def _system_and_chain(model, mode: str | Mode, energy_rate: str, params=None):
         raise TypeError(f"model must be a model name, an mbs.Chain or an mbs.system.System, "
                         f"got {type(model).__name__}")
     if params is not None or chain.free_symbols:
-        _require_dict(params if params is not None else {}, name or chain.name)
+        _require_dict(params if params is not None else {}, name or chain.name, chain)
         cp = ChainParameters(chain, params or {}, model_name=name)
         return _chain_system(chain, mode, energy_rate, name=name, cparams=cp), _MassMatrix(chain, cp)
     return _chain_system(chain, mode, energy_rate, name=name), _MassMatrix(chain)
 
 
-def _require_dict(params, name):
+def _require_dict(params, name, chain=None, names=()):
     if not isinstance(params, dict):
+        syms = list(names) or (sorted(str(x) for x in chain.free_symbols) if chain is not None else [])
+        own = f", or the model's own parameters by name: {{{', '.join(repr(x) + ': [lo, hi]' for x in syms)}}}" \
+            if syms else ""
         raise ValueError(f"params for the chain model {name!r} must be a dict such as "
                          "{'payload': {'link': ..., 'mass': [lo, hi]}, 'mass_scale': [lo, hi], "
-                         f"'damping': {{joint: [lo, hi]}}}} (see mbs.uncertain), got {type(params).__name__}")
+                         f"'damping': {{joint: [lo, hi]}}}}{own} (see mbs.uncertain), got {type(params).__name__}")
 
 
 def _system_params(system: System, params):
@@ -587,10 +591,12 @@ def _check_solver_kwargs(kwargs: dict):
         return
     theirs = set(sig.parameters) - {"ode", "x0", "t_span", "t_eval", "params", "order", "tol",
                                     "subdivision", "consistency", "progress"}
+    # names users bring from scipy's solve_ivp and what they are called here
+    known = {"t_eval": "output_dt", "rtol": "tol", "atol": "tol", "method": "set_step", "t_span": "t_end"}
     for k in kwargs:
         if k not in theirs:
             import difflib
-            close = difflib.get_close_matches(k, sorted(ours | theirs), n=1)
+            close = [known[k]] if k in known else difflib.get_close_matches(k, sorted(ours | theirs), n=1)
             raise TypeError(f"simulate() got an unexpected keyword argument {k!r}"
                             + (f" (did you mean {close[0]!r}?)" if close else "")
                             + f"; solver settings it passes on: {', '.join(sorted(theirs))}")

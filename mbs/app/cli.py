@@ -131,7 +131,8 @@ def main(argv=None):
     prog = "mbs" if Path(sys.argv[0]).name == "mbs" else "python -m mbs"
     parser = _Parser(prog=prog, description="Guaranteed simulation of multibody systems.",
                      epilog="simulate exits with 0 (completed), 1 (a sampled trajectory escaped: a bug), "
-                            "2 (bad input) or 3 (break-down before t_end)")
+                            "2 (bad input), 3 (break-down before t_end), 4 (stopped by --max-wall) or "
+                            "130 (interrupted by Ctrl-C); in the last two, result.json holds what is verified")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     p = sub.add_parser("simulate", help="run a scene file; write result.json and figures")
     p.add_argument("scene", help="TOML scene file (or the name of a shipped scene)")
@@ -145,7 +146,8 @@ def main(argv=None):
     p.add_argument("--no-figures", action="store_true", help="write result.json only")
     p.add_argument("--max-wall", type=float, default=None, metavar="SECONDS",
                    help="stop the integration after SECONDS of wall-clock time and write what is verified "
-                        "(exit 4; Ctrl-C does the same with exit 130)")
+                        "(exit 4; Ctrl-C does the same with exit 130). Checked between steps: the step "
+                        "under way when the time is up still finishes")
     p.add_argument("--workers", default="auto", metavar="N",
                    help="run the initial boxes in chunks on N local worker processes (Dask; default 'auto': "
                         "every core when there are >= 128 pieces and dask is installed; 1: one batch in-process)")

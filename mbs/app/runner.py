@@ -265,7 +265,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
             sol.status, f"widths when {sol.status}")
         log(f"{what} ({t_w}): " + ", ".join(f"{n} {_fmt_width(v)}" for n, v in zip(names, w)))
     if report["checked"]:
-        log(f"{report['checked']} sampled trajectories: "
+        log(f"{report['checked']} sampled trajector{'y' if report['checked'] == 1 else 'ies'}: "
             f"{'all inside' if not report['escaped'] else str(report['escaped']) + ' states OUTSIDE'}")
     for k, p in report["paths"].items():
         log(f"wrote {p}")

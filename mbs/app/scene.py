@@ -471,8 +471,11 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         from ..robots import ALIASES
         known = tuple(NAMES) + PAPER_MODELS + tuple(sorted(set(ALIASES) - set(NAMES)))
         if model["name"] not in known:
-            raise SceneError(f"{where} name: unknown model {model['name']!r}; choose one of "
-                             f"{', '.join(known)}")
+            nm = model["name"]
+            hint = (f" (a URDF file or an example-robot-data model goes in urdf = {nm!r})"
+                    if isinstance(nm, str) and (nm.startswith(ERD_PREFIX) or nm.lower().endswith((".urdf", ".xml")))
+                    else "")
+            raise SceneError(f"{where} name: unknown model {nm!r}{hint}; choose one of {', '.join(known)}")
         extra = [k for k in ("lock", "gravity", "convention") if k in model]
         if extra:
             raise SceneError(f"{where}: {', '.join(extra)} only apply to urdf and dh models")

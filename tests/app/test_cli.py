@@ -112,6 +112,15 @@ def test_check_accepts_what_scenes_accept(spec, capsys):
     assert "max relative error" in capsys.readouterr().out
 
 
+def test_help_lists_every_exit_code(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    for words in ("0 (completed)", "2 (bad input)", "3 (break-down", "4 (stopped by --max-wall)",
+                  "130 (interrupted by Ctrl-C)"):
+        assert words in out
+
+
 def test_check_unknown_model_is_one_line(capsys):
     assert main(["check", "pandas"]) == 2
     err = capsys.readouterr().err.strip()

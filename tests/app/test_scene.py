@@ -109,6 +109,9 @@ def test_bad_scenes_name_the_problem(tmp_path):
     text = GOOD.split("[initial]")[0] + GOOD.split('x4 = "67/100"')[1]
     _err(text, "missing [initial]")
     _err(GOOD.replace("double_pendulum_paper", "triple_pendulum"), "unknown model", "'triple_pendulum'")
+    # what `check` takes as a name belongs in urdf = in a scene: the error says so
+    _err(GOOD.replace("double_pendulum_paper", "example-robot-data:ur5"), "unknown model",
+         "urdf = 'example-robot-data:ur5'")
     _err(GOOD.replace('name = "double_pendulum_paper"', 'urdf = "nope.urdf"'), "nope.urdf", "not found")
     bad = tmp_path / "bad.urdf"
     bad.write_text("<robot name='x'><link name='a'/><joint name='j' type='revolute'>")

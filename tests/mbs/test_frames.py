@@ -71,6 +71,15 @@ def test_planar_tip_enclosure_contains_closed_form_kinematics(arm_run, method):
     assert not frame_misses(enc, trajs, lambda x: tip(x[:2]))
 
 
+def test_rotation_entries_stay_within_unit_bounds(arm_run):
+    """A rotation matrix's entries lie in [-1, 1]; the enclosures are clipped there
+    (the box forms reached -1.000001 on the UR5)."""
+    sol, _ = arm_run
+    for m in ("both", "interval"):
+        rot = sol.frame("link2", method=m).rotation
+        assert np.all(rot.lo >= -1.0) and np.all(rot.hi <= 1.0)
+
+
 def test_both_is_the_tightest(arm_run):
     sol, _ = arm_run
     w = {m: np.asarray(sol.frame("link2", method=m).position.width())[1:, :2] for m in

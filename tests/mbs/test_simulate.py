@@ -92,6 +92,20 @@ def test_wrong_keyword_names_simulate():
         simulate("pendulum_paper", Interval(lo, hi), 0.1, h_maxx=0.01)
     with pytest.raises(TypeError, match=r"^simulate\(\)"):
         simulate("pendulum_paper", Interval(lo, hi), 0.1, foo=1)
+    # solve_ivp's names point to this API's
+    with pytest.raises(TypeError, match=r"'t_eval' \(did you mean 'output_dt'\?\)"):
+        simulate("pendulum_paper", Interval(lo, hi), 0.1, t_eval=[0.1])
+
+
+def test_params_of_the_wrong_type_name_the_models_own_parameters():
+    """``params`` as an Interval or a list: a one-line ValueError that shows the dict
+    forms, including the paper model's own parameter names (was a TypeError from
+    ``if params:`` on an Interval)."""
+    lo, hi = dp.initial_box()
+    for bad in (Interval([0.9], [1.1]), [1.0]):
+        with pytest.raises(ValueError, match=r"must be a dict.*'m1': \[lo, hi\]") as e:
+            simulate("double_pendulum_paper", Interval(lo, hi), 0.1, params=bad)
+        assert "\n" not in str(e.value)
 
 
 def test_progress_bar_by_default_only_when_interactive(monkeypatch):
