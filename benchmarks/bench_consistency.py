@@ -15,7 +15,9 @@ Tables:
 7. work-precision (issue 13): the same solver without the test, with the energy
    contraction, with contraction + pruning, with pruning only, over piece counts
    (work_precision.png, work_precision.json in ``--out DIR``, default the current
-   working directory; the docs' copies: ``--out docs``).
+   working directory; the docs' copies: ``--out docs``);
+8. long horizon (issue 13): the double pendulum to T = 5 with the test, second-order
+   sets by composition, box (25) in pieces along x1 (~15 min).
 Ratios are measured side by side in one run (the machine is shared and noisy).
 """
 from __future__ import annotations
@@ -174,6 +176,42 @@ def urdf_robot(T):
         print(_row(mode, s, true_w), flush=True)
 
 
+def long_horizon(T=5.0, pieces=48, cap=900.0):
+    """Issue 13's long-horizon target: box (25) to T = 5 with the test (ratio, aim <= 2),
+    and the same solver without it (eq. (22) through ``solve``; mode i)."""
+    from verified.hooks import StopAfterWall
+    from verified.solver import solve
+    lo, hi = dp.initial_box()
+    ts = np.round(np.arange(1, 6) * (T / 5), 12)  # five output times
+    true_w = sampled_hull(lambda x: dp.rhs(x), lo, hi, ts, n=401)
+    so2 = dict(set_order=2, set_step="composition", arithmetic="taylor_model", error_basis="auto", order=6,
+               tol=1e-10, params_per_state=12)
+    print(f"\n## 8. Long horizon: box (25) in {pieces} pieces along x1, T = {T}, second-order sets by "
+          f"composition (order 6, tol 1e-10, 'auto', 12 parameters per state), {cap:.0f}-s cap per run")
+    print("(i)/(ii): numeric model of the DH chain; (iii): eq. (22)/(24); tests as the modes' defaults")
+    print(HEADER)
+    sols = {"eq22 no test": solve(dp.rhs_graph(), Interval(lo, hi), (0, T), t_eval=ts,
+                                  subdivision=[pieces, 1, 1, 1], hooks=[StopAfterWall(cap)], **so2)}
+    print(_row("eq22 no test", sols["eq22 no test"], true_w[-1]), flush=True)
+    # mode iii at the paper's settings (tests every 0.01 s, 50 parts) reached 3.9 s of 5 in
+    # 600 s with 32 pieces, 434 s of it in tests (33,072 parts pruned): tested every 0.1 s here
+    for name, kw in [("i", dict(mode="i")), ("ii (0.1 s, 10)", dict(mode="ii")),
+                     ("iii (0.1 s, 10)", dict(mode="iii", test_interval=0.1, test_splits=10))]:
+        sols[name] = simulate("double_pendulum_paper", Interval(lo, hi), T, output_dt=T / 5,
+                              subdivision=[pieces, 1, 1, 1], progress=False, max_wall=cap, **kw, **so2)
+        print(_row(name, sols[name], true_w[-1]), flush=True)
+    print("\nworst width ratio to the sampled hull per output time:")
+    print("t     " + " ".join(f"{k:>14}" for k in sols))
+    for j, t in enumerate(ts):
+        cells = []
+        for name, s in sols.items():
+            k = int(np.searchsorted(s.t, t - 1e-9))
+            ok = k < len(s.t) and abs(s.t[k] - t) < 1e-9
+            cells.append(f"{np.max(s.hull[k].width() / true_w[j]):14.3f}" if ok else f"{'-':>14}")
+        print(f"{t:5.2f} " + " ".join(cells))
+    return sols
+
+
 def _test_for(system, **kw):
     from verified.consistency import EnergyTest
     return EnergyTest(system.energy, system.energy_rate, **kw)  # "derive", "zero" or a graph (verified.energy_rate)
@@ -282,7 +320,7 @@ def _plot_work_precision(results, path):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (seconds)")
-    ap.add_argument("--only", type=int, nargs="*", help="run only these sections (1-7)")
+    ap.add_argument("--only", type=int, nargs="*", help="run only these sections (1-8)")
     ap.add_argument("--out", default=".", metavar="DIR",
                     help="section 7 writes work_precision.json and .png here (default: the current "
                          "directory; docs/work_precision.*: --out docs)")
@@ -294,7 +332,7 @@ def main(argv=None):
     else:
         sections = {1: lambda: double_pendulum_modes(1.0, 64, False), 2: lambda: single_box_breakdown(1.2),
                     3: lambda: strategies(0.8, 16), 4: lambda: simplified_vs_not(0.8, 16), 5: pendulum_ra,
-                    6: lambda: urdf_robot(0.3), 7: lambda: work_precision(out=args.out)}
+                    6: lambda: urdf_robot(0.3), 7: lambda: work_precision(out=args.out), 8: long_horizon}
         for k in args.only or sorted(sections):
             sections[k]()
     print(f"\ntotal {time.perf_counter() - t0:.1f} s")
