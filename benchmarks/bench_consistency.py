@@ -17,7 +17,7 @@ Tables:
    (work_precision.png, work_precision.json in ``--out DIR``, default the current
    working directory; the docs' copies: ``--out docs``);
 8. long horizon (issue 13): the double pendulum to T = 5 with the test, second-order
-   sets by composition, box (25) in pieces along x1 (~15 min).
+   sets by composition, box (25) in 48 pieces along x1 (~20 min).
 Ratios are measured side by side in one run (the machine is shared and noisy).
 """
 from __future__ import annotations
