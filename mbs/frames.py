@@ -35,7 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from verified.interval import Interval
+from verified.interval import Interval, concatenate
+from verified.sets import SetView
 
 from .errors import ModelError
 
@@ -219,8 +220,6 @@ def _tube_over_views(graph, Y: Interval, X: Interval, sizes, views, n: int, pbox
     idx = [j for j, v in enumerate(views) if j < len(sizes) and v is not None and v.n_sets == sizes[j]]
     if not idx:
         return Y
-    from verified.interval import concatenate
-    from verified.sets import SetView
     P = max(views[j].A.shape[-1] for j in idx)
 
     def padded(a: Interval, width: int) -> Interval:  # (zero columns: the same points)

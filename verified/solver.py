@@ -565,6 +565,15 @@ def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, set_order=1):
     return setup, prob, param_boxes, boxes
 
 
+def _state_view(view, n_sets: int, n_state: int):
+    """The first ``n_state`` states of a step's tube view (copied, so that the step's
+    full arrays are not kept alive for every step of a run), or None."""
+    if view is None or view.n_sets != n_sets:
+        return None
+    A = np.ascontiguousarray(view.A.lo[:, :n_state])  # (a point matrix)
+    return SetView(c=np.ascontiguousarray(view.c[:, :n_state]), A=Interval._from_bounds(A, A), R=view.R)
+
+
 class _Run:
     """The state of one integration: the sets, the exact time, what has been recorded,
     and the counters. It is the :class:`~verified.hooks.RunControl` the hooks get."""
@@ -656,9 +665,7 @@ class _Run:
         self.sets, self.t, self.t_exact, self.step = step.sets, step.t, t_exact, step
         self.recent = (self.recent + [step])[-2:]
         self.tube.append(E[:, :self.n_state])
-        view = step.tube_view
-        self.tube_views.append(None if view is None or view.n_sets != E.shape[0] else
-                               SetView(c=view.c[:, :self.n_state], A=view.A[:, :self.n_state], R=view.R))
+        self.tube_views.append(_state_view(step.tube_view, E.shape[0], self.n_state))
         self.tube_t.append(step.t)
         return step
 

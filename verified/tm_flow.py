@@ -252,7 +252,7 @@ def tube_view(models: np.ndarray, M: int, mq: int) -> SetView:
     lo, hi = models_to_interval(rest, M, mq)  # (n, B)
     R = Interval._from_bounds(np.concatenate([-np.ones((nb, M)), lo.T], axis=1),
                               np.concatenate([np.ones((nb, M)), hi.T], axis=1))
-    return SetView(c=c, A=point(A), R=R)
+    return SetView(c=c, A=Interval._from_bounds(A, A), R=R)  # (a point matrix: one array for both bounds)
 
 
 def more_symbols(X: np.ndarray, M: int, extra: int) -> np.ndarray:
