@@ -158,10 +158,19 @@ def evaluate(graph: Graph, domain: Domain, inputs: Sequence, params: Sequence = 
 
 class FloatDomain(Domain):
     """float64 ndarrays; constants are their nearest double (numpy scalars, so that
-    division by an exact 0 gives inf/nan with a warning rather than an exception)."""
+    division by an exact 0 gives inf/nan with a warning rather than an exception).
+
+    ``shape``: constants as arrays of the batch's shape instead. Then a subexpression
+    of constants is computed with the same numpy kernels as everything else: numpy's
+    scalar and array kernels of ``power``, ``exp``, ``sin``, ... may differ in the last
+    bit (SIMD), and :func:`eval_float` should equal the model code run on arrays."""
+
+    def __init__(self, shape=None):
+        self.shape = shape
 
     def const(self, lo, hi, value):
-        return np.float64(value)
+        v = np.float64(value)
+        return v if self.shape is None else np.full(self.shape, v)
 
     def sqr(self, a):
         return a * a
@@ -467,7 +476,7 @@ def _interval_inputs(graph: Graph, x, p, fn: str):
 def eval_float(graph: Graph, x, p=None) -> np.ndarray:
     """Float values: ``x`` (..., n), ``p`` (..., p) / (p,) -> ndarray (..., m)."""
     xs, ps, shape = _float_inputs(graph, x, p, "eval_float")
-    domain = FloatDomain()
+    domain = FloatDomain(shape)
     return domain.pack(evaluate(graph, domain, xs, ps), shape)
 
 

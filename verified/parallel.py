@@ -95,10 +95,17 @@ from .interval import Interval, concatenate, hull, stack
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "SchedulerError", "WorkerStartError", "CONNECT_TIMEOUT", "CHUNK_TARGET",
-           "MIN_CHUNK_BOXES"]
+           "MIN_CHUNK_BOXES", "interrupt_runs"]
 
 #: seconds to wait for a scheduler before :class:`SchedulerError`
 CONNECT_TIMEOUT = 10.0
+
+#: seconds on top of the connect timeout for the scheduler's handshake (:func:`connect`)
+HANDSHAKE_GRACE = 5.0
+
+#: set by :func:`interrupt_runs`: every chunked run waiting on Dask in this process stops
+#: as Ctrl-C stops it (a scenario batch runs them in threads, where no signal arrives)
+_INTERRUPT = threading.Event()
 #: default chunk size aimed at (boxes): below ~128 boxes per batch the fixed cost of a
 #: step (~2-4 ms of Python per step and chunk) shows; measured on the double pendulum,
 #: T = 1, 256 boxes in 1/2/4/8/16 chunks on one core: 5.7/4.9/5.5/7.0/9.0 s
@@ -376,11 +383,24 @@ def connect(address: str, timeout: float | None = None):
         raise SchedulerError(f"cannot use the Dask scheduler at {address}: dask.distributed is not installed "
                              "(pip install 'mbs-verified[parallel]')") from None
     timeout = CONNECT_TIMEOUT if timeout is None else float(timeout)
-    try:
-        return Client(address, timeout=timeout, set_as_default=False)
-    except (OSError, TimeoutError) as e:
-        raise SchedulerError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s "
-                             f"({type(e).__name__})") from None
+    # Client(timeout=) bounds the connection but not the handshake: an address that
+    # accepts connections and does not answer as a scheduler (a dashboard port, an HTTP
+    # server) hung for ever. So the client is made in a daemon thread and waited for.
+    out: dict = {}
+
+    def make():
+        try:
+            out["client"] = Client(address, timeout=timeout, set_as_default=False)
+        except BaseException as e:  # noqa: BLE001 - reported below, in one line
+            out["error"] = e
+    th = threading.Thread(target=make, name="mbs-verified-connect", daemon=True)
+    th.start()
+    th.join(timeout + HANDSHAKE_GRACE)
+    if "client" in out:
+        return out["client"]
+    e = out.get("error")
+    why = "no answer as a Dask scheduler" if e is None else type(e).__name__
+    raise SchedulerError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s ({why})")
 
 
 def _identity(x):
@@ -563,6 +583,16 @@ class _EmitEvery(Hook):
         return None
 
 
+def interrupt_runs(on: bool = True) -> None:
+    """Make every chunked run that waits on Dask in this process stop as Ctrl-C stops
+    it: its chunks are cancelled and its Solution says "interrupted" (``on=False``
+    clears the request). For runs in threads (a scenario batch), which no signal reaches."""
+    if on:
+        _INTERRUPT.set()
+    else:
+        _INTERRUPT.clear()
+
+
 class _SigintRaises:
     """While waiting for the workers (main thread only): Ctrl-C raises
     KeyboardInterrupt at once (no kernel of ours runs in this process then)."""
@@ -636,6 +666,8 @@ def _run_on_dask(client, graph, arithmetic, boxes, ranges, chunk_params, base, c
             f.add_done_callback(one_done)
         with _SigintRaises():
             while not all_done.wait(0.25):
+                if _INTERRUPT.is_set():
+                    raise KeyboardInterrupt
                 board.emit()
         for i, f in enumerate(futures):
             results[i] = f.result()
@@ -751,29 +783,51 @@ def merge_solutions(results, ranges, initial, outs, t0, state_names, interrupted
 
 
 def _merge_records(records):
-    """The chunks' consistency records interleaved by time (None without a test)."""
+    """The chunks' consistency records on the union of their step times (None without a
+    test). At each time every chunk that has started contributes its latest entry (its
+    series is a step function of time): ``RA`` is the largest of them and ``h_h``,
+    ``h_v`` their hull, as one in-process record takes them over all sets; ``h_h_set``
+    and ``h_v_set`` are those of the chunk with that ``RA``. (The series interleaved
+    by time alternated between the chunks: a sawtooth in Fig. 2.)"""
     records = [r for r in records if r is not None]
     if not records:
         return None
     if len(records) == 1:
         return records[0]
     from .consistency import ConsistencyRecord
-    ra_t = np.concatenate([np.asarray(r.ra_t, float) for r in records])
-    order = np.argsort(ra_t, kind="stable")
-
-    def cat(name):
-        parts = [getattr(r, name) for r in records]
-        if any(p is None for p in parts):
-            return None
-        try:
-            return concatenate(parts, axis=0)[order]
-        except Exception:  # noqa: BLE001 - shapes that do not line up: leave it out
-            return None
-
     tests = sorted((t for r in records for t in r.tests), key=lambda t: t.t)
-    ra = np.concatenate([np.asarray(r.ra, float) for r in records])[order]
-    h_h, h_v = cat("h_h"), cat("h_v")
-    rec = ConsistencyRecord(ra_t=ra_t[order], ra=ra, h_h=h_h if h_h is not None else records[0].h_h,
-                            h_v=h_v if h_v is not None else records[0].h_v, tests=tests,
-                            h_h_set=cat("h_h_set"), h_v_set=cat("h_v_set"))
-    return rec
+    series = [r for r in records if len(r.ra_t)]
+    if not series:
+        return ConsistencyRecord(ra_t=np.zeros(0), ra=np.zeros(0), h_h=records[0].h_h, h_v=records[0].h_v,
+                                 tests=tests)
+    grid = np.unique(np.concatenate([np.asarray(r.ra_t, float) for r in series]))
+    at = [np.searchsorted(np.asarray(r.ra_t, float), grid, side="right") - 1 for r in series]  # (G,) each
+    ra = np.full((len(series), grid.size), -np.inf)
+    for c, (r, k) in enumerate(zip(series, at)):
+        ra[c, k >= 0] = np.asarray(r.ra, float)[k[k >= 0]]
+    best = np.argmax(ra, axis=0)
+
+    def hull_of(name):
+        lo = np.full(grid.size, np.inf)
+        hi = np.full(grid.size, -np.inf)
+        for r, k in zip(series, at):
+            v = getattr(r, name)
+            if v is None or np.shape(v.lo) != np.shape(r.ra_t):
+                return None
+            on = k >= 0
+            lo[on] = np.minimum(lo[on], np.asarray(v.lo)[k[on]])
+            hi[on] = np.maximum(hi[on], np.asarray(v.hi)[k[on]])
+        return Interval._from_bounds(lo, hi)
+
+    def of_best(name):
+        parts = [getattr(r, name) for r in series]
+        if any(v is None or np.shape(v.lo) != np.shape(r.ra_t) for v, r in zip(parts, series)):
+            return None
+        lo = np.array([parts[b].lo[at[b][j]] for j, b in enumerate(best)], float)
+        hi = np.array([parts[b].hi[at[b][j]] for j, b in enumerate(best)], float)
+        return Interval._from_bounds(lo, hi)
+
+    h_h, h_v = hull_of("h_h"), hull_of("h_v")
+    return ConsistencyRecord(ra_t=grid, ra=ra.max(axis=0), h_h=h_h if h_h is not None else records[0].h_h,
+                             h_v=h_v if h_v is not None else records[0].h_v, tests=tests,
+                             h_h_set=of_best("h_h_set"), h_v_set=of_best("h_v_set"))

@@ -153,6 +153,7 @@ def _subdivision(subdivision, n: int) -> np.ndarray:
 def initial_boxes(x0, n: int, subdivision) -> Interval:
     """The initial boxes as an Interval (B, n), ``B >= 1``, subdivided."""
     pieces = None if subdivision is None else _subdivision(subdivision, n)
+    _refuse_bounds_pair(x0, n)
     try:
         if isinstance(x0, (list, tuple)) and x0 and isinstance(x0[0], Interval):
             parts = [_as_interval(b) for b in x0]
@@ -186,6 +187,22 @@ def initial_boxes(x0, n: int, subdivision) -> Interval:
                              f"than the {MAX_INITIAL_BOXES} supported (each set holds two {n}x{n} matrices)")
         boxes = boxes.subdivide(pieces).reshape(-1, n)
     return boxes
+
+
+def _refuse_bounds_pair(x0, n: int) -> None:
+    """``x0 = (lo, hi)`` (a tuple or list of two vectors, as ``initial_box()`` functions
+    return them) would be taken as two *point* states: a run from two points where a
+    box was meant, with no error. Refused unless the two are equal (then it is the same
+    point twice, whichever was meant)."""
+    if not isinstance(x0, (list, tuple)) or len(x0) != 2 or any(isinstance(v, Interval) for v in x0):
+        return
+    try:
+        a, b = (np.asarray(v, dtype=float) for v in x0)
+    except (TypeError, ValueError):
+        return
+    if a.shape == b.shape == (n,) and not np.array_equal(a, b):
+        raise ValueError(f"x0 is a pair of {n}-vectors, which would be two point states; for the box between "
+                         "them pass Interval(lo, hi), for two points a (2, n) array")
 
 
 #: initial boxes at most (after subdivision): [1000] * 4 used to die in a MemoryError

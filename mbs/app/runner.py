@@ -2,6 +2,7 @@
 the figures (the body of ``python -m mbs simulate``)."""
 from __future__ import annotations
 
+import threading
 import time
 from pathlib import Path
 
@@ -176,7 +177,9 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     if system.rhs.n_params:
         log("uncertain parameters: " + ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in
                                                  ((k, system.params[k]) for k in system.rhs.param_names)))
-    bar = Progress(t_end, f"mode {mode}", enabled=None if progress else False)
+    # progress: True/False (a bar of our own, interactive only), or a callable (t, t_end)
+    # of the caller's (a scenario batch's one bar over all its runs)
+    bar = progress if callable(progress) else Progress(t_end, f"mode {mode}", enabled=None if progress else False)
     try:
         x_sim = x0 if x_user is not None else x0[:len(names)]
         sol = simulate(model, x_sim, t_end, output_dt=dt, progress=bar, max_wall=max_wall, **kw,
@@ -184,7 +187,8 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     except (ValueError, TypeError, ModelError) as e:  # settings the solver refuses
         raise SceneError(f"{scene.source}: cannot simulate: {e}") from None
     finally:
-        bar.close()
+        if not callable(progress):
+            bar.close()
     wall = time.perf_counter() - t0
     want = output_times(t_end, dt)
     report = {"solution": sol, "system": system, "escaped": 0, "checked": 0, "paths": {}}
@@ -348,17 +352,20 @@ def scenario_batch(path):
         if not isinstance(name, str) or not name or name in seen:
             raise SceneError(f"{src}: [[scenarios]] {i + 1}: name must be a unique non-empty string, got {name!r}")
         seen.add(name)
-        merged = {k: (dict(v) if isinstance(v, dict) else v) for k, v in data.items()}
-        for k, v in item.items():
-            if k == "name":
-                continue
-            if k not in merged or not isinstance(v, dict) or not isinstance(merged.get(k), dict):
-                merged[k] = v
-            else:
-                merged[k].update(v)
+        merged = _overridden(data, {k: v for k, v in item.items() if k != "name"})
         merged["name"] = f"{data.get('name', p.stem)} [{name}]"
         scenes.append((name, parse_scene(merged, f"{src} [scenario {name!r}]", p.parent)))
     return scenes
+
+
+def _overridden(base: dict, over: dict) -> dict:
+    """``base`` with the entries of ``over``, tables merged at every depth (a scenario's
+    ``parameters.payload = { mass = ... }`` keeps the base payload's ``link`` and
+    ``com``; it replaced the whole payload table before); anything else replaced."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _overridden(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+    return out
 
 
 def run_scenarios(scenes, out, *, log=None, workers=None, client=None, **run_kw) -> dict:
@@ -381,20 +388,54 @@ def run_scenarios(scenes, out, *, log=None, workers=None, client=None, **run_kw)
         if dask_available() and n > 1:
             client = local_client(n)  # one cluster for every scenario's chunks
     lines = {}
+    # one bar over the batch: the simulated seconds of every scenario summed (interactive only)
+    from ..progress import Progress
+    horizon = {name: float(run_kw.get("t_end") or scene.t_end) for name, scene in scenes}
+    bar = Progress(sum(horizon.values()), f"{len(scenes)} scenarios", enabled=run_kw.pop("progress", None))
+    done, lock = dict.fromkeys(horizon, 0.0), threading.Lock()
+
+    def advance(name):
+        def tick(t_now, t_end=None):
+            with lock:
+                done[name] = min(float(t_now), horizon[name])
+                bar(sum(done.values()))
+        return tick
 
     def one(item):
         name, scene = item
         def say(*a, **k):
             lines.setdefault(name, []).append(" ".join(str(x) for x in a))
-        rep = run_scene(scene, out / _safe_name(name), log=say, progress=False, figures=False,
+        rep = run_scene(scene, out / _safe_name(name), log=say, progress=advance(name), figures=False,
                         client=client, workers=None if client is not None else workers, **run_kw)
         return name, scene, rep
 
-    if client is not None:
-        with ThreadPoolExecutor(max_workers=len(scenes)) as ex:
-            reports = list(ex.map(one, scenes))
-    else:
-        reports = [one(x) for x in scenes]
+    try:
+        if client is not None:
+            from verified.parallel import interrupt_runs
+            with ThreadPoolExecutor(max_workers=len(scenes)) as ex:
+                futures = [ex.submit(one, x) for x in scenes]
+                try:
+                    reports = [f.result() for f in futures]
+                except KeyboardInterrupt:
+                    # Ctrl-C reaches this thread only (and the local workers, which die of it):
+                    # the scenarios' threads wait on Dask, so tell their runs to stop as Ctrl-C
+                    # stops one, and collect what each verified
+                    interrupt_runs()
+                    try:
+                        reports = [f.result() for f in futures]
+                    finally:
+                        interrupt_runs(False)
+        else:
+            reports = []
+            for k, x in enumerate(scenes):
+                reports.append(one(x))
+                if reports[-1][2]["solution"].status == "interrupted":  # Ctrl-C stops the batch
+                    skipped = [name for name, _ in scenes[k + 1:]]
+                    if skipped:
+                        log(f"interrupted: scenario(s) not run: {', '.join(skipped)}")
+                    break
+    finally:
+        bar.close()
     rank = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
     rows, worst, t_min = [], "completed", float("inf")
     for name, scene, rep in reports:

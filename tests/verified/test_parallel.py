@@ -176,6 +176,72 @@ def test_unreachable_scheduler_is_one_line_error(monkeypatch, box):
         parallel.connect("nonsense")
 
 
+def test_an_address_that_is_no_scheduler_is_one_line_error(monkeypatch):
+    """A port that accepts connections but does not answer as a Dask scheduler (the
+    dashboard, an HTTP server) hung for ever: the handshake is bounded too."""
+    import socket
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(4)
+    held = []
+    stop = threading.Event()
+
+    def accept():  # accept and say nothing
+        srv.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                held.append(srv.accept()[0])
+            except OSError:
+                pass
+    th = threading.Thread(target=accept, daemon=True)
+    th.start()
+    monkeypatch.setattr(parallel, "HANDSHAKE_GRACE", 1.0)
+    address = f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+    try:
+        with pytest.raises(parallel.SchedulerError) as e:
+            parallel.connect(address, timeout=1.0)
+    finally:
+        stop.set()
+        th.join()
+        for c in held:
+            c.close()
+        srv.close()
+    assert address in str(e.value) and "\n" not in str(e.value)
+
+
+def test_interrupt_runs_stops_a_run_waiting_in_a_thread(ode, box, client):
+    """A scenario batch waits on Dask in threads, which Ctrl-C does not reach (it hung
+    once the local workers died of the same Ctrl-C): parallel.interrupt_runs() stops
+    such a run as Ctrl-C stops one, its chunks cancelled and its Solution "interrupted"."""
+    out = {}
+    th = threading.Thread(target=lambda: out.setdefault(
+        "sol", solve(ode, box, (0.0, T), subdivision=SUB, client=client, chunks=2, hooks=[SlowSteps(0.2)])))
+    th.start()
+    time.sleep(1.0)
+    parallel.interrupt_runs()
+    try:
+        th.join(120)  # (a guard against a hang, not a timing)
+    finally:
+        parallel.interrupt_runs(False)
+    assert not th.is_alive() and out["sol"].status == "interrupted"
+
+
+def test_merged_consistency_record_is_the_max_over_chunks_not_a_sawtooth():
+    """Two chunks' RA series at their own step times merge on the union of the times:
+    at each time the largest latest value and the hull of H_H (the series interleaved
+    by time alternated between the chunks)."""
+    from verified.reduction_area import ConsistencyRecord
+    a = ConsistencyRecord(ra_t=np.array([0.1, 0.3]), ra=np.array([5.0, 6.0]),
+                          h_h=Interval([1.0, 1.0], [2.0, 2.0]), h_v=Interval([1.0, 1.0], [2.0, 2.0]))
+    b = ConsistencyRecord(ra_t=np.array([0.2, 0.4]), ra=np.array([1.0, 2.0]),
+                          h_h=Interval([0.5, 0.5], [1.5, 1.5]), h_v=Interval([0.5, 0.5], [1.5, 1.5]))
+    m = parallel._merge_records([a, b])
+    np.testing.assert_array_equal(m.ra_t, [0.1, 0.2, 0.3, 0.4])
+    np.testing.assert_array_equal(m.ra, [5.0, 5.0, 6.0, 6.0])  # (interleaved: 5, 1, 6, 2)
+    np.testing.assert_array_equal(m.h_h.lo, [1.0, 0.5, 0.5, 0.5])
+    np.testing.assert_array_equal(m.h_h.hi, [2.0, 2.0, 2.0, 2.0])
+
+
 def test_local_workers_that_cannot_start_are_one_clear_error(monkeypatch):
     """Dask's "Nanny failed to start" (what an unguarded script gets: the spawned workers
     re-run its top level) becomes WorkerStartError naming the fix."""
@@ -347,6 +413,61 @@ def test_cli_scenarios_one_combined_result(tmp_path, capsys):
     assert (tmp_path / "o" / "g_low" / "result.json").is_file()
     out = capsys.readouterr().out
     assert "g high" in out and "scenarios.json" in out
+
+
+def test_scenario_tables_override_at_every_depth(tmp_path):
+    """A scenario's payload mass keeps the base payload's link and com (the override
+    replaced the whole payload table, dropping com without a word)."""
+    from mbs.app.runner import scenario_batch
+    text = """
+[model]
+name = "planar2"
+[parameters]
+payload = { link = "link2", mass = [0.9, 1.1], com = [0.1, 0.0, 0.0] }
+[initial]
+q1 = 0.5
+q2 = -0.3
+qd1 = 0.0
+qd2 = 0.0
+[simulation]
+t_end = 0.1
+
+[[scenarios]]
+name = "heavy"
+parameters = { payload = { mass = [1.0, 1.2] } }
+"""
+    path = tmp_path / "p.toml"
+    path.write_text(text)
+    ((name, scene),) = scenario_batch(path)
+    pay = scene.physical["payload"]
+    pay = pay[0] if isinstance(pay, list) else pay
+    com = np.array(pay["com"], float).reshape(3, -1)  # (parsed to enclosing intervals)
+    assert name == "heavy" and pay["link"] == "link2"
+    assert np.all(com.min(axis=1) <= [0.1, 0.0, 0.0]) and np.all(com.max(axis=1) >= [0.1, 0.0, 0.0])
+    mass = np.array(pay["mass"], float).ravel()
+    assert mass.min() <= 1.0 and mass.max() >= 1.2 and mass.min() > 0.95
+
+
+def test_ctrl_c_stops_an_in_process_scenario_batch(tmp_path, monkeypatch, capsys):
+    """With --workers 1, Ctrl-C interrupted only the running scenario and the batch went
+    on with the next: it stops the batch now, and the summary names what was not run."""
+    from types import SimpleNamespace
+    from mbs.app import runner
+    from mbs.app.cli import main
+    calls = []
+
+    def interrupted_run(scene, out, **kw):
+        calls.append(out.name)
+        sol = SimpleNamespace(status="interrupted", t_reached=0.05, reason="interrupted (KeyboardInterrupt)",
+                              stats={}, params={}, t=np.array([0.0]), hull=None, tube=[])
+        return {"solution": sol, "checked": 0, "escaped": 0, "paths": {}}
+    monkeypatch.setattr(runner, "run_scene", interrupted_run)
+    monkeypatch.setattr(runner, "final_widths", lambda sol: ("at t = 0.05", None))
+    scene = tmp_path / "sweep.toml"
+    scene.write_text(SWEEP)
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--workers", "1"]) == 130
+    assert calls == ["g_low"]
+    assert "not run: g high" in capsys.readouterr().out
 
 
 def test_cli_scenarios_on_a_cluster(tmp_path, client, monkeypatch, capsys):

@@ -127,10 +127,20 @@ def test_h_max_nan_is_not_ignored(no_work):
     (empty((2,)), "empty"),                                          # an empty interval [inf, -inf]
     (Interval([-INF, 0.0], [0.0, 0.0], allow_unbounded=True), "bounded"),
     ([BOX2, Interval([0.0, 0.0, 0.0])], "2 components"),
+    # (lo, hi) as initial_box() returns it: was taken as two point states, silently
+    ((np.array([0.0, 1.0]), np.array([0.1, 1.1])), "Interval(lo, hi)"),
+    ([[0.0, 1.0], [0.1, 1.1]], "two point states"),
 ])
 def test_bad_initial_boxes(no_work, x0, words):
     msg = _refused("^x0", lambda: solve(_oscillator(), x0, (0.0, 1.0)))
     assert words in msg, msg
+
+
+def test_two_equal_points_or_an_array_of_points_are_still_taken():
+    """The refusal is only for a pair of different vectors in a tuple or list: a (2, n)
+    array stays two point states."""
+    sol = solve(_oscillator(), np.array([[0.0, 1.0], [0.1, 1.1]]), (0.0, 0.01))
+    assert sol.boxes[0].shape == (2, 2) and np.all(sol.boxes[0].width() < 1e-300)  # (width() rounds up)
 
 
 def test_zero_dimensional_system(no_work):
