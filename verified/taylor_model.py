@@ -159,6 +159,10 @@ def _quads(m4: int) -> np.ndarray:
 #: 2^14 terms
 _MAX_PAIRS = 2**14
 
+#: the most kept pairs of a product that land on one monomial (_acc_mul's rounding bound
+#: relies on it; product_table checks it): 14 for a quartic eps_i eps_j eps_k eps_l
+_MAX_HITS = 16.0
+
 
 @functools.lru_cache(maxsize=64)
 def product_table(m: int, mq: int, m3: int = 0, m4: int = 0, ms: int = 0,
@@ -219,6 +223,9 @@ def product_table(m: int, mq: int, m3: int = 0, m4: int = 0, ms: int = 0,
         A += list(1 + si) + list(1 + sj)
         B += list(1 + sj) + list(1 + si)
         C += list(idx) + list(idx)
+    hits = np.bincount(np.asarray(C, dtype=np.int64)).max() if C else 0
+    if hits > _MAX_HITS:  # (a new monomial class would break _acc_mul's rounding bound)
+        raise ValueError(f"{hits} kept products land on one monomial, more than _acc_mul allows ({_MAX_HITS:g})")
     if len(A) > _MAX_PAIRS:
         raise ValueError(f"{len(A)} kept products per model product exceed {_MAX_PAIRS}: fewer quadratic "
                          f"or cubic symbols")
@@ -242,14 +249,29 @@ def _poison(T):
     T[T.size - 1] = INF
 
 
+@njit(cache=True, fastmath={"reassoc"})
+def _abs_sum(x, lo, hi):
+    """An upper bound of ``sum |x[lo:hi]|``.
+
+    The only function of this module compiled with reassociation (``fastmath``
+    ``reassoc``, which lets LLVM vectorize the sum): a float sum of ``n`` non-negative
+    terms, in any order, is within ``(n - 1) u`` of the exact sum relative to it
+    (Higham, *Accuracy and Stability*, 4.2), which the factor ``1 + n 2^-52`` covers
+    with the rounding of that product. No other operation may be reassociated: the
+    model coefficients' rounding bounds depend on the order of their operations. It
+    must not be inlined by numba (``inline="always"``), which would compile it with the
+    caller's flags. Measured: 12x faster than the sequential sum over 1,484 terms."""
+    t = 0.0
+    for i in range(lo, hi):
+        t += abs(x[i])
+    return _up(t * (1.0 + (hi - lo + 1) * 2.0**-52))
+
+
 @njit(cache=True)
 def _spread(x):
     """Sum of |coefficients| of the non-constant monomials, rounded up: a bound of
     |x - c - e| over the symbols' box."""
-    t = 0.0
-    for i in range(1, x.size - 1):
-        t += abs(x[i])
-    return _up(t)
+    return _abs_sum(x, 1, x.size - 1)
 
 
 @njit(cache=True)
@@ -266,7 +288,18 @@ def _acc_mul(T, x, y, PA, PB, PC, w):
     The centre times every monomial and the table's pairs are kept; every other pair of
     non-constant monomials (degree above the model's, or a symbol without monomials of
     that degree) is bounded by its ``|x_a| |y_b|``: their sum is ``Sx Sy`` (``S`` the
-    spreads) minus the kept pairs' sum, the latter taken as a lower bound."""
+    spreads) minus the kept pairs' sum, the latter taken as a lower bound.
+
+    Rounding, in units of ``u = 2^-53`` (``rnd * 2^-52`` below, a factor 2 to spare):
+    the centre terms ``w x0 y_i + w y0 x_i`` added to ``T_i`` err by at most ``3 |p1| +
+    3 |p2| + |T_i'|`` (two products, two sums), and ``sum |p1| <= |w x0| Sy (1 + 2u)^2``;
+    a kept pair's ``T_s += w (x_a y_b)`` by ``2 |q| + |T_s'|``, where ``T_s'``, a partial
+    sum, is at most ``|T_s|`` after the centre terms plus the ``|q|`` of the pairs into
+    ``s`` so far, so the pairs' sum of ``|T_s'|`` is at most ``_MAX_HITS`` (the most
+    pairs into one monomial, checked by :func:`product_table`) times ``sum |T_s| + sum
+    |q|``. Bounding the rounding from these sums, not term by term, keeps the loops
+    free of sequential float reductions (numba vectorizes them): 2.4x faster on a
+    Panda-sized model (1,484 coefficients, 2,500 pairs)."""
     E = T.size - 1
     x0 = x[0]
     y0 = y[0]
@@ -275,64 +308,54 @@ def _acc_mul(T, x, y, PA, PB, PC, w):
     rnd = 2.0 * abs(t0) + abs(c)
     T[0] = c
     for i in range(1, E):
-        p1 = w * (x0 * y[i])
-        p2 = w * (y0 * x[i])
-        ti = T[i] + (p1 + p2)
-        rnd += 2.0 * (abs(p1) + abs(p2)) + abs(ti)
-        T[i] = ti
+        T[i] = T[i] + (w * (x0 * y[i]) + w * (y0 * x[i]))
+    sx = _spread(x)
+    sy = _spread(y)
+    tc = _spread(T)
+    aw = abs(w)
+    rnd += 2.0 * _up(_pm(aw, _pm(abs(x0), sy) + _pm(abs(y0), sx)) * (1.0 + 2.0**-48)) + tc
     kept = 0.0
     for t in range(PA.size):
         p = x[PA[t]] * y[PB[t]]
         kept += abs(p)
-        q = w * p
         s = PC[t]
-        ts = T[s] + q
-        rnd += 3.0 * abs(q) + abs(ts)
-        T[s] = ts
-    sx = _spread(x)
-    sy = _spread(y)
+        T[s] = T[s] + w * p
     # |computed kept - true kept| <= (size + 1) u kept, size <= 2^14: 2^-36 covers it
+    kq = _up(_pm(aw, kept) * (1.0 + 2.0**-36))
+    rnd += 3.0 * kq + _MAX_HITS * (tc + kq)
     dropped = max(_pm(sx, sy) * _UPF - kept * (1.0 - 2.0**-36), 0.0)
     ex = x[E]
     ey = y[E]
     nl = dropped + _pm(abs(x0) + sx, ey) + _pm(abs(y0) + sy, ex) + _pm(ex, ey)
-    T[E] = _up(T[E] + _pm(abs(w), _up(nl)) + rnd * _U)
+    T[E] = _up(T[E] + _pm(aw, _up(nl)) + _up(rnd) * _U)
 
 
 @njit(cache=True)
 def _acc_add(T, x, sign):
     """T += sign * x (sign = +1 or -1)."""
     E = T.size - 1
-    rnd = 0.0
     for i in range(E):
-        t = T[i] + sign * x[i]
-        rnd += abs(t)
-        T[i] = t
-    T[E] = _up(T[E] + x[E] + rnd * _U)
+        T[i] = T[i] + sign * x[i]
+    # one rounding per coefficient, at most u |result| (the sum bound is vectorized)
+    T[E] = _up(T[E] + x[E] + _abs_sum(T, 0, E) * _U)
 
 
 @njit(cache=True)
 def _scale_into(Z, x, d):
     """Z = d * x for a float d."""
     E = Z.size - 1
-    rnd = 0.0
     for i in range(E):
-        t = d * x[i]
-        rnd += abs(t)
-        Z[i] = t
-    Z[E] = _up(_pm(abs(d), x[E]) + rnd * _U)
+        Z[i] = d * x[i]
+    Z[E] = _up(_pm(abs(d), x[E]) + _abs_sum(Z, 0, E) * _U)
 
 
 @njit(cache=True)
 def _div_int_into(Z, x, kf):
     """Z = x / kf for a positive integer kf."""
     E = Z.size - 1
-    rnd = 0.0
     for i in range(E):
-        t = x[i] / kf
-        rnd += abs(t)
-        Z[i] = t
-    Z[E] = _up(x[E] / kf + rnd * _U)
+        Z[i] = x[i] / kf
+    Z[E] = _up(x[E] / kf + _abs_sum(Z, 0, E) * _U)
 
 
 @njit(cache=True)

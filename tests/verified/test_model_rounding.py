@@ -1,0 +1,146 @@
+"""The rounding bounds of the Taylor-model kernel's coefficient loops, against exact rationals.
+
+``verified.taylor_model._acc_mul``, ``_acc_add``, ``_scale_into`` and ``_div_int_into``
+bound the rounding of their float coefficient updates from sums of magnitudes (vectorized,
+``_abs_sum``), not term by term. Oracle: the same operation in ``fractions.Fraction`` (exact);
+the computed model must contain it, i.e. the sum of ``|computed - exact|`` over its
+coefficients must not exceed the remainder it adds. The inputs are chosen to cancel
+(``T`` close to ``-w x y``), where rounding is all there is. The oracle bites: a product
+without its rounding term fails.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import verified.taylor_model as tm
+
+pytestmark = pytest.mark.slow  # (the kernel module compiles in the slow step, as test_taylor_model)
+
+M = 5  # symbols, all with quadratic monomials: a product of linear models drops no pair
+PA, PB, PC = tm.product_table(M, M)
+L = tm.model_length(M, M)
+E = L - 1
+
+finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False, allow_subnormal=False)
+
+
+def _exact_product(T0, x, y, w):
+    """T0 + w x y for linear models x, y (centre and M linear coefficients), exactly."""
+    F = [Fraction(v) for v in T0[:E]]
+    fw = Fraction(w)
+    for a in range(M + 1):
+        for b in range(M + 1):
+            if x[a] == 0.0 or y[b] == 0.0:
+                continue
+            p = fw * Fraction(x[a]) * Fraction(y[b])
+            if a == 0:
+                F[b] += p
+            elif b == 0:
+                F[a] += p
+            else:
+                i, j = min(a, b) - 1, max(a, b) - 1
+                F[M + 1 + _pair_index(i, j)] += p
+    return F
+
+
+def _pair_index(i, j):
+    pi, pj = tm._pairs(M)
+    return int(np.flatnonzero((pi == i) & (pj == j))[0])
+
+
+def _excess(T, exact, e0=0.0):
+    """sum |T - exact| minus the remainder T gained over e0 (> 0: not contained)."""
+    dev = sum(abs(Fraction(T[i]) - exact[i]) for i in range(E))
+    return dev - (Fraction(T[E]) - Fraction(e0))
+
+
+def _linear(c, lin):
+    x = np.zeros(L)
+    x[0] = c
+    x[1: M + 1] = lin
+    return x
+
+
+def _cancelling_start(x, y, w, jitter):
+    """T0 = -(w x y) rounded, plus a small jitter: the update cancels to rounding level."""
+    T0 = np.zeros(L)
+    T0[0] = -(w * (x[0] * y[0])) + jitter
+    for i in range(1, M + 1):
+        T0[i] = -(w * (x[0] * y[i]) + w * (y[0] * x[i])) * (1.0 + jitter * 1e-9)
+    return T0
+
+
+@settings(max_examples=150, deadline=None)
+@given(cx=finite, cy=finite, lx=st.lists(finite, min_size=M, max_size=M), ly=st.lists(finite, min_size=M, max_size=M),
+       w=st.floats(-1e3, 1e3, allow_nan=False, allow_subnormal=False), jitter=st.floats(-1.0, 1.0),
+       cancel=st.booleans())
+def test_product_contains_the_exact_product(cx, cy, lx, ly, w, jitter, cancel):
+    x, y = _linear(cx, lx), _linear(cy, ly)
+    T0 = _cancelling_start(x, y, w, jitter) if cancel else np.zeros(L)
+    exact = _exact_product(T0, x, y, w)
+    T = T0.copy()
+    tm._acc_mul(T, x, y, PA, PB, PC, w)
+    assert _excess(T, exact) <= 0
+
+
+@settings(max_examples=100, deadline=None)
+@given(a=st.lists(finite, min_size=L - 1, max_size=L - 1), b=st.lists(finite, min_size=L - 1, max_size=L - 1),
+       d=st.floats(-1e3, 1e3, allow_nan=False, allow_subnormal=False), k=st.integers(1, 40),
+       sign=st.sampled_from([1.0, -1.0]))
+def test_sum_scale_and_division_contain_the_exact_results(a, b, d, k, sign):
+    x = np.array(a + [0.0])
+    T = np.array(b + [0.0])
+    exact = [Fraction(T[i]) + Fraction(sign) * Fraction(x[i]) for i in range(E)]
+    tm._acc_add(T, x, sign)
+    assert _excess(T, exact) <= 0
+    Z = np.zeros(L)
+    tm._scale_into(Z, x, d)
+    assert _excess(Z, [Fraction(d) * Fraction(v) for v in x[:E]]) <= 0
+    tm._div_int_into(Z, x, float(k))
+    assert _excess(Z, [Fraction(v) / k for v in x[:E]]) <= 0
+
+
+def test_the_oracle_bites_a_product_without_its_rounding():
+    """The same product with its rounding term dropped is caught on a cancelling input."""
+
+    def product_without_rounding(T, x, y, w):
+        x0, y0 = x[0], y[0]
+        T[0] = T[0] + w * (x0 * y0)
+        for i in range(1, E):
+            T[i] = T[i] + (w * (x0 * y[i]) + w * (y0 * x[i]))
+        for t in range(PA.size):
+            T[PC[t]] = T[PC[t]] + w * (x[PA[t]] * y[PB[t]])
+        # (every pair is kept here: no truncation term; and no rounding term: the bug)
+
+    rng = np.random.default_rng(3)
+    caught = 0
+    for _ in range(20):
+        x = _linear(*rng.uniform(-1e3, 1e3, 1), rng.uniform(-1e3, 1e3, M) / 3.0)
+        y = _linear(*rng.uniform(-1e3, 1e3, 1), rng.uniform(-1e3, 1e3, M) / 7.0)
+        w = float(rng.uniform(0.1, 10.0)) / 3.0
+        T0 = _cancelling_start(x, y, w, float(rng.uniform(-1, 1)))
+        exact = _exact_product(T0, x, y, w)
+        T = T0.copy()
+        product_without_rounding(T, x, y, w)
+        caught += _excess(T, exact) > 0
+        T = T0.copy()
+        tm._acc_mul(T, x, y, PA, PB, PC, w)
+        assert _excess(T, exact) <= 0
+    assert caught > 0
+
+
+def test_product_table_refuses_more_hits_than_the_rounding_bound_allows(monkeypatch):
+    # every table the models use lands at most 14 pairs on one monomial (a quartic one)
+    PA4, PB4, PC4 = tm.product_table(8, 8, 8, 8)
+    assert np.bincount(PC4).max() <= tm._MAX_HITS
+    tm.product_table.cache_clear()
+    monkeypatch.setattr(tm, "_MAX_HITS", 2.0)
+    with pytest.raises(ValueError, match="land on one monomial"):
+        tm.product_table(4, 4, 4)
+    tm.product_table.cache_clear()
