@@ -55,10 +55,10 @@ The paper's pendulum and double pendulum use their closed-form numpy right-hand 
 the double pendulum's ratio at T uses ``bench_solver.true_hull_widths`` (2001 points).
 
 Runs: ``mbs.simulate.simulate`` (cases 1-3, outputs every T/20) or
-``verified.solver.solve`` (cases 4-6), with a progress callback that stops a run at
-the wall cap (``--cap``, default 60 s = the targets' budget; a setting may carry its
-own); a capped run keeps everything verified up to then (read from the solver's
-frame), and for simulate() runs the M(q) > 0 proof is run on it as simulate() would.
+``verified.solver.solve`` (cases 4-6), with a hook that stops a run at the wall cap
+(``--cap``, default 60 s = the targets' budget; a setting may carry its own); a
+capped run is a solver result like any other, with everything verified up to then
+(and for simulate() runs the M(q) > 0 proof).
 Several solver settings are tried per case and arithmetic (the same for both); the
 summary tables show the best per arithmetic (completed first, then the smallest
 ratio, then the fastest; among break-downs the furthest), "All runs" every setting.
@@ -101,6 +101,7 @@ from mbs.simulate import simulate  # noqa: E402
 from models import double_pendulum as dp  # noqa: E402
 from models import pendulum as pd  # noqa: E402
 from verified.graph import trace  # noqa: E402
+from verified.hooks import Hook  # noqa: E402
 from verified.interval import Interval  # noqa: E402
 from verified.solver import Solution, VerifiedODE, solve  # noqa: E402
 
@@ -280,49 +281,30 @@ def containment(sol, oracle):
 
 # -------------------------------------------------------------------------- runs
 
-class _WallCap(Exception):
-    pass
+class _WallCap(Hook):
+    """Stops a run (``status="stopped"``, reason "wall cap (S s)") once ``cap`` seconds
+    have passed since ``start``, checked after every accepted step like
+    :class:`verified.hooks.StopAfterWall` (which counts from the integration's start,
+    after the tapes are built; the bench counts the set-up too). ``on_progress(t,
+    wall)`` is called after every accepted step."""
+
+    def __init__(self, cap, start, on_progress=None):
+        self.cap, self.start, self.on_progress = cap, start, on_progress
+
+    def after_step(self, step, sets, run):
+        wall = time.perf_counter() - self.start
+        if self.on_progress is not None:
+            self.on_progress(step.t, wall)
+        if wall > self.cap:
+            run.stop(f"wall cap ({self.cap:g} s)")
 
 
-def _partial_solution(exc, cap):
-    """The verified part of a solve() stopped by _WallCap: read from solve's frame."""
-    tb, loc = exc.__traceback__, None
-    while tb is not None:
-        f = tb.tb_frame.f_locals
-        if "out_boxes" in f and "tube" in f and "tube_t" in f:
-            loc = f
-        tb = tb.tb_next
-    if loc is None:  # pragma: no cover - solve() changed its local names
-        raise RuntimeError("wall cap: cannot find the solver's state") from exc
-    tube = list(loc["tube"])
-    n = loc["out_boxes"][0].shape[-1]
-    return Solution(t=np.array(loc["out_t"]), boxes=list(loc["out_boxes"]), hull=_hulls(loc["out_boxes"], n),
-                    tube_t=np.array(loc["tube_t"][:len(tube) + 1]), tube=tube,
-                    tube_hull=_hulls(tube, n), t_reached=float(loc["t"]),
-                    status="capped", reason=f"wall cap ({cap:g} s)", stats=dict(steps=int(loc["steps"])))
-
-
-def capped(call, cap, chain=None, on_progress=None):
-    """``call(progress)`` -> (Solution, wall s), stopped at ``cap`` seconds of wall time.
-    ``on_progress(t, wall)`` is called after every accepted step."""
+def capped(call, cap, on_progress=None):
+    """``call(hooks)`` -> (Solution, wall s), stopped at ``cap`` seconds of wall time:
+    ``call`` passes ``hooks`` to ``solve`` or ``simulate``. ``on_progress(t, wall)`` is
+    called after every accepted step."""
     start = time.perf_counter()
-
-    def progress(t, t1):
-        wall = time.perf_counter() - start
-        if on_progress is not None:
-            on_progress(t, wall)
-        if wall > cap:
-            raise _WallCap
-
-    try:
-        sol = call(progress)
-    except _WallCap as e:
-        sol = _partial_solution(e, cap)
-        if chain is not None:
-            from mbs.simulate import _prove_mass_matrix  # what simulate() runs after solve()
-            _prove_mass_matrix(chain, sol)
-            if sol.status == "breakdown":  # cut back: keep it a break-down with the reason
-                sol.reason = f"wall cap ({cap:g} s); {sol.reason}"
+    sol = call([_WallCap(cap, start, on_progress)])
     return sol, time.perf_counter() - start
 
 
@@ -462,11 +444,11 @@ def run_chain(chain, lo, hi, T, mode, arithmetic, opts, cap, subdivision=None):
     box = Interval(lo, hi)
     opts, cap = split_opts(opts, cap)
 
-    def call(progress):
+    def call(hooks):
         return simulate(chain, box, T, mode=mode, arithmetic=arithmetic, output_dt=T / 20,
-                        subdivision=subdivision, progress=progress, **opts)
+                        subdivision=subdivision, hooks=hooks, **opts)
 
-    return capped(call, cap, chain)
+    return capped(call, cap)
 
 
 _ODES = {}
@@ -481,9 +463,9 @@ def run_chain_solver(chain, lo, hi, T, arithmetic, opts, cap):
         _ODES[key] = VerifiedODE(system_for(chain, "i").rhs, arithmetic)
     opts, cap = split_opts(opts, cap)
 
-    def call(progress):
+    def call(hooks):
         return solve(_ODES[key], Interval(lo, hi), (0.0, T), t_eval=output_times(0.0, T, T / 20),
-                     progress=progress, **opts)
+                     hooks=hooks, **opts)
 
     return capped(call, cap)
 
@@ -729,9 +711,9 @@ class Bench:
                 opts, cap = split_opts(setting, self.cap)
                 ode = VerifiedODE(graph, opts.pop("arithmetic")) if "arithmetic" in opts else odes[a]
 
-                def call(progress):
+                def call(hooks):
                     return solve(ode, Interval(lo, hi), (0.0, T), t_eval=t_eval,
-                                 subdivision=[pieces, 1, 1, 1], progress=progress, **opts)
+                                 subdivision=[pieces, 1, 1, 1], hooks=hooks, **opts)
                 sol, wall = capped(call, cap)
                 return measure("dp", a, setting_label(setting), T, sol, wall, oracle, names, final_widths=true)
 
@@ -787,9 +769,9 @@ class Bench:
 
                     run_opts, cap = split_opts(opts, self.cap)
 
-                    def call(progress, a=a, run_opts=run_opts):
+                    def call(hooks, a=a, run_opts=run_opts):
                         return solve(odes[a], Interval(lo, hi), (0.0, T_long), t_eval=t_eval, subdivision=[k, k],
-                                     max_width=1e6, progress=progress, **run_opts)
+                                     max_width=1e6, hooks=hooks, **run_opts)
                     sol, wall = capped(call, cap, on_progress=hook)
                     r_long = measure("pendulum", a, setting_label(opts), T_long, sol, wall, oracle, names)
                     part = truncated(sol, T_short)
@@ -902,8 +884,8 @@ class Bench:
             for step, extra in STEPS_8.items():
                 opts = dict(base, order=6, **extra)
 
-                def call(progress, opts=opts):
-                    return solve(g, Interval(lo, hi), (0.0, 3.0), t_eval=np.arange(61) / 20, progress=progress,
+                def call(hooks, opts=opts):
+                    return solve(g, Interval(lo, hi), (0.0, 3.0), t_eval=np.arange(61) / 20, hooks=hooks,
                                  **opts)
 
                 sol, wall = capped(call, self.cap)
@@ -941,9 +923,9 @@ class Bench:
         for k, T in plan:
             opts = dict(order=12, tol=1e-10, error_basis="auto", set_order=2, set_step="composition")
 
-            def call(progress, T=T, k=k):
+            def call(hooks, T=T, k=k):
                 return solve(g, Interval(lo, hi), (0.0, T), t_eval=np.arange(int(round(T * 10)) + 1) / 10,
-                             subdivision=[k, k], max_width=1e6, progress=progress, **opts)
+                             subdivision=[k, k], max_width=1e6, hooks=hooks, **opts)
 
             sol, wall = capped(call, self.cap)
             r = measure("pendulum_composition", "composition", setting_label(opts), T, sol, wall, oracle, names)

@@ -14,7 +14,7 @@ the sympy model (:mod:`mbs.symbolic`; for the paper's examples the hand-written 
 (18)/(19) and (22)/(24)). :func:`mbs.simulate.simulate`, the runner, bench, figures and
 demo read these fields instead of comparing mode names. Everywhere a mode is taken,
 its name (``"ii"``) or the :class:`Mode` itself will do; what is stored and written
-(``Solution.mode``, result.json) is the name.
+(``Simulation.mode``, result.json) is the name.
 """
 from __future__ import annotations
 

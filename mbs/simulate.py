@@ -27,6 +27,8 @@ model: it asks :func:`mbs.robots.system_entry` and :func:`mbs.robots.load_model`
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field, fields
+
 import numpy as np
 
 from verified.affine_taylor import affine_range
@@ -41,8 +43,33 @@ from .numeric import PIVOT_TOL
 from .robots import PAPER_MODELS, load_model, system_entry
 from .system import System
 
-__all__ = ["MODES", "Mode", "PAPER_MODELS", "simulate", "compare_modes", "system_for", "width_deviations",
-           "WidthDeviations", "output_times"]
+__all__ = ["MODES", "Mode", "PAPER_MODELS", "simulate", "Simulation", "compare_modes", "system_for",
+           "width_deviations", "WidthDeviations", "output_times"]
+
+
+@dataclass(repr=False)
+class Simulation(Solution):
+    """What :func:`simulate` returns: the solver's :class:`verified.solver.Solution`
+    (every field and property of it) plus what only the modeling side knows.
+
+    Attributes (beyond ``Solution``'s)
+    ----------------------------------
+    mode : str
+        The simulation mode, "i", "ii" or "iii" (paper sec. 5.2; :mod:`mbs.modes`).
+    params : dict
+        The uncertain physical parameters the run covered, ``{name: (lo, hi)}``.
+    control : object or None
+        The closed loop (:mod:`mbs.control`) when a controller drove the joints.
+    """
+
+    mode: str = ""
+    params: dict = field(default_factory=dict)
+    control: object = None
+
+    @classmethod
+    def of(cls, sol: Solution, **extra) -> "Simulation":
+        """``sol``'s fields (shared, not copied) with ``extra`` set."""
+        return cls(**{f.name: getattr(sol, f.name) for f in fields(Solution)}, **extra)
 
 #: consistency-test settings per mode (the paper's: 0.1 s / 10 parts in mode (ii),
 #: 0.01 s / 50 parts in mode (iii)); the fields of :mod:`mbs.modes`
@@ -350,8 +377,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
 
     Returns
     -------
-    verified.solver.Solution with ``mode``, ``state_names`` and ``params`` ({name: (lo, hi)})
-    set, and ``consistency`` (RA(t), H_H, H_V, tests) in modes ii and iii. ``status``:
+    Simulation: a verified.solver.Solution with ``mode``, ``params`` ({name: (lo, hi)}) and
+    ``control``, ``state_names`` set, and ``consistency`` (RA(t), H_H, H_V, tests) in modes ii and iii. ``status``:
     "completed", "breakdown", "stopped" (``max_wall``) or "interrupted" (Ctrl-C).
     """
     _check_solver_kwargs(solver_kwargs)
@@ -443,10 +470,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
             bar.close()
     if masses is not None:
         _prove_mass_matrix(masses, sol)
-    sol.mode = mode.name
+    sol = Simulation.of(sol, mode=mode.name, params=_params_record(system, ode_params), control=loop)
     sol.state_names = system.state_names
-    sol.params = _params_record(system, ode_params)
-    sol.control = loop
     if masses is not None:
         from .frames import attach_frames
         attach_frames(sol, masses.chain, loop.cparams if loop is not None else getattr(masses, "cparams", None))

@@ -95,6 +95,12 @@ class LohnerStepper:
         self.jacobian_over_set = hasattr(variational, "series")
 
     # -------------------------------------------------------------- pieces
+    def begin(self, sets) -> None:
+        """Called by the driver before each step with the sets it starts from: nothing to
+        prepare here (:class:`verified.tm_flow.TaylorModelFlowStepper` takes its
+        coefficients over the sets themselves)."""
+        return None
+
     def coefficients(self, x: Interval) -> Interval:
         return self.taylor.coefficients(x, self.order, self._params(x.shape[0]))
 

@@ -41,7 +41,7 @@ from .interval import Interval, concatenate, hull, stack
 from .linalg import SingularMatrixError
 from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
-from .policies import REMAINDER_SLACK, BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl  # noqa: F401
+from .policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
 from .sets import DoubletonSets, SetView, set_view
 from .quadratic import QuadraticSets, QuadraticStepper
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
@@ -175,8 +175,6 @@ class Solution:
     state_names : tuple of str
     consistency : verified.consistency.ConsistencyRecord or None
         RA(t), H_H and H_V per step and a record of every test (paper Figs. 2-3).
-    mode : str
-        Set by :func:`mbs.simulate.simulate` ("i", "ii", "iii"; "" otherwise).
     views : list of verified.sets.SetView or None
         For each output time (as ``boxes``), the solver's sets there in a linear view
         over their own parameters (:func:`verified.sets.set_view`, the ``n`` states), so
@@ -202,7 +200,6 @@ class Solution:
     stats: dict = field(default_factory=dict)
     state_names: tuple = ()
     consistency: object = None
-    mode: str = ""
     views: list = field(default_factory=list)
     tube_views: list = field(default_factory=list)
 
@@ -472,10 +469,7 @@ def solve(
                         set_step=set_step, model_degree=model_degree)
 
     run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper)
-    # benchmarks/bench_robots.py reads out_t, out_boxes, tube, tube_t, t and steps from this
-    # frame when its progress callback raises (its wall cap); StopAfterWall replaces that
-    out_t, out_boxes, tube, tube_t = run.out_t, run.out_boxes, run.tube, run.tube_t
-    t, steps = t0, 0
+    steps = 0
     try:
         while run.next_out < outs.size:
             if steps >= max_steps:
@@ -484,8 +478,7 @@ def solve(
             X = run.hull_for_step(param_boxes, setup.n_state, setup.n_steer, max_width)
             if X is None:
                 break
-            if hasattr(stepper, "begin"):
-                stepper.begin(run.sets)  # (a stepper that takes its coefficients over the sets)
+            stepper.begin(run.sets)
             cX = stepper.coefficients(X)
             run.evaluations += 1
             if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
@@ -505,10 +498,9 @@ def solve(
                 # more (non-finite or singular enclosures): everything up to here stands
                 run.stop(f"set update failed at t = {run.t:g}: {exc}", "breakdown")
                 break
-            t, steps = run.t, steps + 1
+            steps += 1
             wrap.update(step)
             run.call_hooks(hook_list, step)
-            t = run.t  # a hook may have rolled the step back
             if step.landed and run.sets.n_sets:
                 run.record_output()
             if run.status:
@@ -527,8 +519,8 @@ def solve(
         # Ctrl-C: everything recorded so far is verified; return it
         run.stop(f"interrupted (KeyboardInterrupt) after t = {run.tube_t[-1]:g}", "interrupted")
     result = run.solution(setup.n_state, order, boxes.shape[0], steps, tuple(prob.graph.input_names[:setup.n_state]))
-    result.stats["absorbed"] = getattr(stepper, "absorbed", 0)
-    result.stats["merged"] = getattr(stepper, "merged", 0)
+    result.stats["absorbed"] = stepper.absorbed
+    result.stats["merged"] = stepper.merged
     result.stats["wall_s"] = time.perf_counter() - wall0
     for hook in hook_list:
         hook.after_run(result)  # records and statistics of the hooks

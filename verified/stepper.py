@@ -91,12 +91,27 @@ class StepResult:
 class Stepper(Protocol):
     """One verified step for one set representation, batched over the sets.
 
-    The driver calls, per step: ``coefficients(X)`` on the hull ``X`` (B, N) of the
-    sets, ``suggest_step`` for a step size, ``apriori`` until an enclosure is
-    validated (shrinking ``h`` on failure), then ``step``.
+    The driver (:func:`verified.solver.solve`) sets ``steer`` once, then calls, per
+    step: ``begin(sets)`` with the sets the step starts from, ``coefficients(X)`` on
+    the hull ``X`` (B, N) of the sets, ``suggest_step`` for a step size, ``apriori``
+    until an enclosure is validated (shrinking ``h`` on failure), then ``step``. After
+    the run it reads ``absorbed`` and ``merged`` into the solution's statistics.
+    :class:`verified.lohner.LohnerStepper` implements all of it; the other steppers
+    subclass it.
     """
 
     order: int
+    #: the first states, which decide the stepper's own choices (absorbing, symbol
+    #: order); states past them were appended by a hook. None: all. Set by the driver.
+    steer: int | None
+    #: how many times the error part was absorbed into parameters, and how many times
+    #: parameters were merged to make room (statistics)
+    absorbed: int
+    merged: int
+
+    def begin(self, sets) -> None:
+        """Before each step, with the sets it starts from (a stepper that takes its
+        coefficients over the sets, not their hull, prepares them here)."""
 
     def coefficients(self, X: Interval) -> Interval:
         """Taylor coefficients of the solutions from the boxes ``X`` (B, N): shape
