@@ -26,6 +26,7 @@ import numpy as np
 
 from .errors import ModelError
 from .inertia import RigidInertia
+from .kinematics import joint_motion
 from .scalar import is_sympy
 from . import spatial as sp3
 
@@ -64,15 +65,6 @@ class RawJoint:
     placement: tuple
     axis: tuple = (0, 0, 1)
     damping: object = 0.0
-
-
-def joint_motion(kind, axis, q):
-    """Placement (R, p) of the moved joint frame in the joint frame at configuration q."""
-    if kind == "revolute":
-        return sp3.joint_rotation(axis, q), sp3.ZERO3
-    if kind == "prismatic":
-        return sp3.EYE3, sp3.vscale(q, axis)
-    raise ModelError(f"unknown joint type {kind!r}")
 
 
 def _float_or_none(x):

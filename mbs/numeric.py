@@ -13,7 +13,8 @@ The same code runs on
 
 Algorithms (Featherstone, "Rigid Body Dynamics Algorithms"; Pinocchio's names):
 
-- :meth:`forward_kinematics` -- world placements of the body (joint) frames,
+- :meth:`forward_kinematics` -- world placements of the body (joint) frames
+  (:mod:`mbs.kinematics`, shared with :mod:`mbs.symbolic`),
 - :meth:`kinetic_energy` / :meth:`potential_energy` -- SMARTMOBILE's getKineticEnergy /
   getPotentialEnergy; K [J] = sum 1/2 (m |v_c|^2 + w^T I_c w), P [J] = -sum m g . c
   (reference: base frame origin, fixed base included; see :mod:`mbs.symbolic`),
@@ -39,6 +40,7 @@ import numpy as np
 
 from .errors import ModelError, SingularMassMatrixError
 from .scalar import add, sub, mul, div, neg, dot, square, total, is_sympy, is_zero, is_const
+from . import kinematics as kin
 from . import spatial as sp3
 
 
@@ -140,24 +142,12 @@ class NumericModel:
     # ------------------------------------------------------------------ kinematics
     def joint_transforms(self, q):
         """Placement (R, p) of each body frame in its parent's frame at q."""
-        out = []
-        for i in range(self.n):
-            Rp, pp = self.placements[i]
-            if self.kinds[i] == "revolute":
-                out.append((sp3.mm(Rp, sp3.joint_rotation(self.axes[i], q[i])), pp))
-            else:
-                out.append((Rp, sp3.vadd(pp, sp3.mv(Rp, sp3.vscale(q[i], self.axes[i])))))
-        return out
+        return kin.joint_transforms(self.kinds, self.axes, self.placements, q)
 
     def forward_kinematics(self, q):
         """World placements [(R, p)] of the n body frames (Pinocchio's ``data.oMi[1:]``)."""
         q = _seq(q, self.n, "q")
-        X = self.joint_transforms(q)
-        world = []
-        for i in range(self.n):
-            p = self.parents[i]
-            world.append(X[i] if p < 0 else sp3.compose(world[p], X[i]))
-        return world
+        return kin.world_transforms(self.parents, self.joint_transforms(q))
 
     def frame_placement(self, name, q):
         """World placement of a named frame (URDF link, DH frame "link{i}", "tool")."""
@@ -165,9 +155,9 @@ class NumericModel:
             raise ModelError(f"unknown frame {name!r}; frames: {sorted(self.chain.frames)}")
         bi, T = self.chain.frames[name]
         T = _ff(T, "frame")
-        if bi < 0:
+        if bi < 0:  # a base frame does not depend on q (q is not even checked)
             return T
-        return sp3.compose(self.forward_kinematics(q)[bi], T)
+        return kin.frame_placement(self.forward_kinematics(q), bi, T)
 
     def _velocities(self, X, qd):
         vs = []
@@ -184,12 +174,11 @@ class NumericModel:
 
     def _S(self, i, s):
         """Motion subspace S_i times scalar s: (w, v)."""
-        a = sp3.vscale(s, self.axes[i])
-        return (a, sp3.ZERO3) if self.kinds[i] == "revolute" else (sp3.ZERO3, a)
+        return kin.motion_subspace(self.kinds[i], sp3.vscale(s, self.axes[i]))
 
     def _St(self, i, n, f):
         """S_i^T (n, f)."""
-        return dot(self.axes[i], n if self.kinds[i] == "revolute" else f)
+        return kin.subspace_transpose(self.kinds[i], self.axes[i], n, f)
 
     # ------------------------------------------------------------------ energies
     def kinetic_energy(self, q, qd):

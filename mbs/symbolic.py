@@ -5,6 +5,8 @@ derive the Coriolis terms, etc.
 
 Derivation (no Lagrange differentiation of the energies):
 
+- Joint transforms ``X_i``, world placements and motion subspaces ``S_i``:
+  :mod:`mbs.kinematics`, the same code as :mod:`mbs.numeric` runs, here on sympy scalars.
 - Body Jacobians in body coordinates, built recursively:
   ``J_i = X_{i,parent} J_parent + S_i e_i^T`` (6 x n, angular rows first).
 - ``M = sum_i J_i^T I_i J_i`` with the spatial inertia ``I_i`` about the body origin;
@@ -34,6 +36,7 @@ import sympy
 
 from .errors import ModelError, SingularMassMatrixError
 from .scalar import add, sub, mul, dot, total
+from . import kinematics as kin
 from . import spatial as sp3
 
 
@@ -88,40 +91,28 @@ class SymbolicModel:
     @cached_property
     def joint_transforms(self):
         """Placement (R, p) of each body frame in its parent frame, as sympy tuples."""
-        out = []
-        for i in range(self.n):
-            Rp, pp = self.placements[i]
-            qi = self.q[i]
-            if self.kinds[i] == "revolute":
-                out.append((sp3.mm(Rp, sp3.joint_rotation(self.axes[i], qi)), pp))
-            else:
-                out.append((Rp, sp3.vadd(pp, sp3.mv(Rp, sp3.vscale(qi, self.axes[i])))))
-        return out
+        return kin.joint_transforms(self.kinds, self.axes, self.placements, self.q)
 
     @cached_property
     def world_transforms(self):
-        """World placements (R (3x3 Matrix), p (3x1 Matrix)) of the body frames."""
-        X = self.joint_transforms
-        world = []
-        for i in range(self.n):
-            pa = self.parents[i]
-            world.append(X[i] if pa < 0 else sp3.compose(world[pa], X[i]))
-        return world
+        """World placements (R, p) of the body frames, as sympy tuples (nested 3x3 / 3)."""
+        return kin.world_transforms(self.parents, self.joint_transforms)
 
     def forward_kinematics(self):
+        """World placements (R (3x3 Matrix), p (3x1 Matrix)) of the body frames."""
         return [(sympy.Matrix(R), sympy.Matrix(p)) for R, p in self.world_transforms]
 
     def frame_placement(self, name):
+        """World placement (R (3x3 Matrix), p (3x1 Matrix)) of a named frame."""
         bi, T = self.chain.frames[name]
         T = _SS(T)
-        if bi < 0:
+        if bi < 0:  # a base frame needs no kinematics (world_transforms is lazy)
             return sympy.Matrix(T[0]), sympy.Matrix(T[1])
-        R, p = sp3.compose(self.world_transforms[bi], T)
+        R, p = kin.frame_placement(self.world_transforms, bi, T)
         return sympy.Matrix(R), sympy.Matrix(p)
 
     def _S(self, i):
-        a = self.axes[i]
-        return (a, sp3.ZERO3) if self.kinds[i] == "revolute" else (sp3.ZERO3, a)
+        return kin.motion_subspace(self.kinds[i], self.axes[i])
 
     @cached_property
     def body_jacobians(self):

@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from . import spatial as sp3
-from .chain import IDENTITY, RawJoint, build_tree, joint_motion
+from .chain import IDENTITY, RawJoint, build_tree
 from .errors import ModelError, UnsupportedJointError
 from .inertia import RigidInertia
+from .kinematics import joint_motion
 
 #: rotation-matrix entries closer than this to 0 or +-1 are snapped
 ROTATION_SNAP_TOL = 1e-10
