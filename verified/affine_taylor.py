@@ -988,11 +988,22 @@ def _highest_nonzero(A):
 @njit(cache=True)
 def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
                    sel, sel_base):
+    """:func:`_affine_kernel_into` with work memory of its own."""
+    return _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
+                               sel, sel_base, np.empty(0))
+
+
+@njit(cache=True)
+def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
+                        sel, sel_base, work):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
 
     Returns the forms of the coefficients, (B, order + 1, n, m + 2), and the order-0
     forms of the slots ``keep``, (len(keep), B, m + 2); ``lanes`` boxes at a time.
     The same numbers as :func:`_affine_kernel_reference` (see the comment above).
+    ``work``: a flat float array for the working forms, zeroed here, used when large
+    enough (the caller keeps it between calls: fresh memory costs page faults of tens
+    of MB per call on a 7-dof arm's tape), else the kernel allocates its own.
     """
     nslots = op.size
     n, nb, m2 = X.shape
@@ -1012,7 +1023,12 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
     TB = RB + nslots * m2
     SB = TB + m2
     OB = SB + m2
-    Af = np.zeros((OB + n * KM) * CB)
+    size = (OB + n * KM) * CB
+    if work.size >= size:
+        Af = work[:size]
+        Af[:] = 0.0  # (the loops rely on exact zeros past each form's last symbol)
+    else:
+        Af = np.zeros(size)
     A = Af.reshape((OB + n * KM, CB))  # the same numbers; Af for runs of whole rows
     R = np.zeros((3, CB))  # per-lane sums
     for b0 in range(0, nb, CB):
@@ -1403,8 +1419,20 @@ class AffineTaylorODE:
             # graph: 28k slots) the per-box reference measured 1.2-1.4x faster. Same bits.
             F, _ = _affine_kernel_reference(*args, sel, sel_base)
             return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
-        F, _ = _affine_kernel(*args, _NO_SLOTS, _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1]), sel, sel_base)
+        lanes = _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1])
+        F, _ = _affine_kernel_into(*args, _NO_SLOTS, lanes, sel, sel_base, self._work(t, order, X.shape[2], lanes,
+                                                                                     X.shape[1]))
         return F
+
+    def _work(self, tape, order, m2, lanes, nb):
+        """A flat work buffer for :func:`_affine_kernel_into`, kept between calls and
+        grown as needed (safe to share: the kernel holds the GIL)."""
+        size = (tape.op.size * (order + 2) + 2 + self.n * (order + 1)) * m2 * max(1, min(nb, lanes))
+        buf = getattr(self, "_work_buffer", None)
+        if buf is None or buf.size < size:
+            buf = np.empty(int(size * 1.25))
+            self._work_buffer = buf
+        return buf
 
     def coefficients(self, x, order, params=None):
         """Interval enclosures of ``x_[0..order]``, shape (B, order + 1, n)."""
