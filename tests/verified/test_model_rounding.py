@@ -1,4 +1,4 @@
-"""The rounding bounds of the Taylor-model kernel's coefficient loops, against exact rationals.
+"""The Taylor-model kernel's coefficient loops against exact rationals, and the kernels' work memory.
 
 ``verified.taylor_model._acc_mul``, ``_acc_add``, ``_scale_into`` and ``_div_int_into``
 bound the rounding of their float coefficient updates from sums of magnitudes (vectorized,
@@ -7,6 +7,9 @@ the computed model must contain it, i.e. the sum of ``|computed - exact|`` over 
 coefficients must not exceed the remainder it adds. The inputs are chosen to cancel
 (``T`` close to ``-w x y``), where rounding is all there is. The oracle bites: a product
 without its rounding term fails.
+
+The model and affine kernels reuse their work memory between calls: garbage (NaN) in it
+must change no result, on graphs with every operation the kernels have and the 3-link arm.
 """
 
 from __future__ import annotations
@@ -19,6 +22,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import verified.taylor_model as tm
+from oracles.graph_models import all_ops
+from oracles.taylor_cases import _arm
+from verified.affine_taylor import AffineTaylorODE
+from verified.graph import trace
+from verified.interval import Interval
+from verified.taylor_model import TaylorModelODE
 
 pytestmark = pytest.mark.slow  # (the kernel module compiles in the slow step, as test_taylor_model)
 
@@ -144,3 +153,31 @@ def test_product_table_refuses_more_hits_than_the_rounding_bound_allows(monkeypa
     with pytest.raises(ValueError, match="land on one monomial"):
         tm.product_table(4, 4, 4)
     tm.product_table.cache_clear()
+
+
+def _poison_work(ev):
+    bufs = getattr(ev, "_work_buffers", None) or (getattr(ev, "_work_buffer", None),)
+    assert all(b is not None and b.size for b in bufs), "the kernel kept no work memory: nothing tested"
+    for b in bufs:
+        b[...] = np.nan
+
+
+@pytest.mark.parametrize("make", [lambda g: TaylorModelODE(g, 12, 6, 4, 2), lambda g: AffineTaylorODE(g)],
+                         ids=["models", "affine"])
+def test_garbage_in_reused_work_memory_changes_nothing(make):
+    _, arm = _arm()
+    q = np.array([0.5, -0.3, 0.2, 0.1, -0.2, 0.3])
+    graphs = [(arm, Interval(q - 0.01, q + 0.01), None)]
+    g = trace(lambda x, p: all_ops((x[0], x[1]), p), 4, 1)  # every opcode, as a 4-state ODE
+    x = np.array([0.4, -0.3, 0.2, 0.1])
+    graphs.append((g, Interval(x - 0.05, x + 0.05), Interval(np.array([0.6]), np.array([0.8]))))
+    for graph, box, params in graphs:
+        # two boxes, one a point (one box alone takes the affine reference kernel, which keeps none)
+        box = Interval(np.stack([box.lo, box.mid()]), np.stack([box.hi, box.mid()]))
+        fresh = make(graph).coefficients(box, 6, params)
+        ev = make(graph)
+        ev.coefficients(Interval(box.lo - 0.1, box.hi + 0.1), 6, params)  # fills the work memory
+        _poison_work(ev)
+        again = ev.coefficients(box, 6, params)
+        np.testing.assert_array_equal(again.lo, fresh.lo)
+        np.testing.assert_array_equal(again.hi, fresh.hi)
