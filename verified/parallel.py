@@ -90,8 +90,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .graph import trace
 from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate, hull, stack
+# (solver imports this module only inside solve(), when workers or a client are asked for)
+from .solver import Solution, VerifiedODE, solve
+from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "SchedulerError", "WorkerStartError", "CONNECT_TIMEOUT", "CHUNK_TARGET",
@@ -209,7 +213,6 @@ def _tune_malloc():
 
 
 def _prepared(problem: _Problem):
-    from .solver import VerifiedODE
     _tune_malloc()
     ode = _PREPARED.get(problem.token)
     if ode is None:
@@ -229,8 +232,6 @@ def _warm_kernels() -> float:
     _WARM = True
     _tune_malloc()
     t = time.perf_counter()
-    from .graph import trace
-    from .solver import solve
     g = trace(lambda x, p: [x[1], -np.sin(x[0])], 2)
     for arithmetic in ("interval", "affine"):
         solve(g, Interval([0.1, 0.0], [0.11, 0.01]), (0.0, 0.02), arithmetic=arithmetic, h_max=0.01)
@@ -413,7 +414,6 @@ def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> fl
     graph). Returns the seconds spent (0 when this worker already had the problem)."""
     if problem.token in _PREPARED:
         return 0.0
-    from .solver import solve
     t = time.perf_counter()
     ode = _prepared(problem)
     kw = {k: v for k, v in kwargs.items() if k in ("order", "tol", "error_basis", "set_order", "set_step", "model_degree", "h_min",
@@ -428,7 +428,6 @@ def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> fl
 
 def _run_chunk(problem: _Problem, index: int, lo, hi, params, kwargs: dict, topic: str):
     """One chunk on a worker (a Dask task)."""
-    from .solver import solve
     t = time.perf_counter()
     ode = _prepared(problem)
     kw = dict(kwargs)
@@ -452,8 +451,6 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     chunks : None (default plan, :func:`plan_chunks`: no chunk below
         ``MIN_CHUNK_BOXES`` boxes) or the number of chunks, used as given
     """
-    from .solver import VerifiedODE, solve
-    from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 
     wall0 = time.perf_counter()
     t_wall0 = time.time()
@@ -704,7 +701,6 @@ def _chunk_tube_hulls(sol):
 def merge_solutions(results, ranges, initial, outs, t0, state_names, interrupted=False):
     """One :class:`~verified.solver.Solution` from the chunk Solutions (``None``: a
     chunk that did not run). See the module docstring for what each field means."""
-    from .solver import Solution
     n = initial.shape[-1]
     # status, reason, t_reached: the worst status; the reason of the earliest chunk of that status
     worst, t_reached, reason, reason_t = "completed", math.inf, "", math.inf
