@@ -55,6 +55,7 @@ __all__ = [
     "stack",
     "concatenate",
     "hull",
+    "stack_hulls",
     "intersect",
     "sqr",
     "ipow",
@@ -667,6 +668,12 @@ def hull(x, y=None, axis=None):
         return _as_interval(x).hull(y)
     x = _as_interval(x)
     return Interval._from_bounds(np.min(x.lo, axis=axis), np.max(x.hi, axis=axis))
+
+
+def stack_hulls(list_of_boxes) -> Interval:
+    """(k, n): the hull of each batch of boxes (B_j, n) in a list of k, stacked (the
+    ``hull`` and ``tube_hull`` of a solution)."""
+    return stack([hull(b, axis=0) for b in list_of_boxes], axis=0)
 
 
 def intersect(x, y):

@@ -1080,7 +1080,6 @@ class InvariantHook(Hook):
         solution.stats["invariant_attempts"] = self.attempts
         if self.result is None or solution.reason != self._reason:
             return
-        from .solver import _stack_hulls
         t1, res, dec = self.result
         n = self.n_state
 
@@ -1094,7 +1093,7 @@ class InvariantHook(Hook):
         solution.boxes = list(solution.boxes) + [at(t) for t in later]
         if solution.views:
             solution.views = list(solution.views) + [None] * len(later)  # (boxes, no sets)
-        solution.hull = _stack_hulls(solution.boxes)
+        solution.hull = iv.stack_hulls(solution.boxes)
         if self.t_end > t1:
             # tube pieces at the output times and on a grid of 100 (each the box at its
             # start: the bound of V~ only falls with time; the energy box holds throughout)
@@ -1104,7 +1103,7 @@ class InvariantHook(Hook):
                 solution.tube_views = list(solution.tube_views) + [None] * (edges.size - 1)  # (boxes)
             solution.tube = list(solution.tube) + [at(a) for a in edges[:-1]]
             solution.tube_t = np.concatenate([solution.tube_t, edges[1:]])
-            solution.tube_hull = _stack_hulls(solution.tube)
+            solution.tube_hull = iv.stack_hulls(solution.tube)
         solution.t_reached = max(self.t_end, t1)
         solution.status, solution.reason = "completed", ""
         solution.stats["invariant_from"] = t1

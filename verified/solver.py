@@ -37,7 +37,7 @@ import numpy as np
 from .exact import enclose_fraction
 from .graph import Graph
 from .hooks import ProgressHook, RunSetup, check_hooks
-from .interval import Interval, concatenate, hull, stack
+from .interval import Interval, concatenate, hull, stack_hulls
 from .linalg import SingularMatrixError
 from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
@@ -692,10 +692,10 @@ class _Run:
         return Solution(
             t=np.array(self.out_t[:k]),
             boxes=out_boxes,
-            hull=_stack_hulls(out_boxes),
+            hull=stack_hulls(out_boxes),
             tube_t=np.array(tube_t),
             tube=tube,
-            tube_hull=_stack_hulls(tube) if n_tube else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))),
+            tube_hull=stack_hulls(tube) if n_tube else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))),
             t_reached=tube_t[-1],
             status=status,
             reason=reason,
@@ -731,7 +731,3 @@ def _stepper(prob: VerifiedODE, order, params, error_basis, set_order=1, absorb=
                                 max_params=max_params)
     return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis, absorb=absorb,
                          max_params=max_params)
-
-
-def _stack_hulls(list_of_boxes):
-    return stack([hull(b, axis=0) for b in list_of_boxes], axis=0)
