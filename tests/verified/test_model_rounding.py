@@ -181,3 +181,28 @@ def test_garbage_in_reused_work_memory_changes_nothing(make):
         again = ev.coefficients(box, 6, params)
         np.testing.assert_array_equal(again.lo, fresh.lo)
         np.testing.assert_array_equal(again.hi, fresh.hi)
+
+
+# --------------------------------------------------------------------------- the affine kernel's product
+# verified.affine_taylor._acc_mul (whose bits the batched kernel reproduces, test_affine_taylor)
+# bounds its rounding from partial sums of magnitudes too. With y a constant form the product
+# is linear, so rounding is all its error radius has to cover.
+
+@settings(max_examples=150, deadline=None)
+@given(cx=finite, lin=st.lists(finite, min_size=7, max_size=7), cy=finite,
+       w=st.sampled_from([1.0, 2.0, -1.0, 3.0, 0.5]), jitter=st.floats(-1.0, 1.0), cancel=st.booleans())
+def test_affine_product_contains_the_exact_product(cx, lin, cy, w, jitter, cancel):
+    from verified import affine_taylor as at
+
+    m = len(lin)
+    x = np.array([cx] + lin + [0.0])
+    y = np.zeros(m + 2)
+    y[0] = cy
+    T0 = np.zeros(m + 2)
+    if cancel:
+        T0[: m + 1] = -(w * (cy * x[: m + 1])) * (1.0 + jitter * 1e-9)
+    exact = [Fraction(T0[i]) + Fraction(w) * Fraction(cy) * Fraction(x[i]) for i in range(m + 1)]
+    T = T0.copy()
+    at._acc_mul(T, x, y, m, w)
+    dev = sum(abs(Fraction(T[i]) - exact[i]) for i in range(m + 1))
+    assert dev <= Fraction(T[m + 1])
