@@ -1424,6 +1424,12 @@ class AffineTaylorODE:
                                                                                      X.shape[1]))
         return F
 
+    def __getstate__(self):
+        # the kernel's work memory is scratch (tens to hundreds of MB): not pickled
+        state = self.__dict__.copy()
+        state.pop("_work_buffer", None)
+        return state
+
     def _work(self, tape, order, m2, lanes, nb):
         """A flat work buffer for :func:`_affine_kernel_into`, kept between calls and
         grown as needed (safe to share: the kernel holds the GIL)."""

@@ -896,6 +896,12 @@ class TaylorModelODE:
                              np.ascontiguousarray(X), np.ascontiguousarray(P), int(order), PA, PB, PC,
                              4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0, F, REC)
 
+    def __getstate__(self):
+        # the kernel's work memory is scratch (tens to hundreds of MB): not pickled
+        state = self.__dict__.copy()
+        state.pop("_work_buffers", None)
+        return state
+
     def _work(self, slots: int, order: int, nb: int, L: int):
         """The kernel's work arrays, C-contiguous views of buffers kept between calls
         and grown as needed (the model length changes as a set gains parameters). Safe

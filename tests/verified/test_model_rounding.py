@@ -14,6 +14,7 @@ must change no result, on graphs with every operation the kernels have and the 3
 
 from __future__ import annotations
 
+import pickle
 from fractions import Fraction
 
 import numpy as np
@@ -181,6 +182,10 @@ def test_garbage_in_reused_work_memory_changes_nothing(make):
         again = ev.coefficients(box, 6, params)
         np.testing.assert_array_equal(again.lo, fresh.lo)
         np.testing.assert_array_equal(again.hi, fresh.hi)
+        # the work memory is scratch: not pickled (a pickled evaluator computes the same)
+        copy = pickle.loads(pickle.dumps(ev))
+        assert not hasattr(copy, "_work_buffers") and not hasattr(copy, "_work_buffer")
+        np.testing.assert_array_equal(copy.coefficients(box, 6, params).hi, fresh.hi)
 
 
 # --------------------------------------------------------------------------- the affine kernel's product
