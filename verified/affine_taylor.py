@@ -986,6 +986,14 @@ def _highest_nonzero(A):
 
 
 @njit(cache=True)
+def _affine_work_size(nslots, order, m2, n, CB):
+    """Floats of :func:`_affine_kernel_into`'s working forms (their layout is there):
+    per lane, ``order + 1`` forms per slot, a reciprocal per slot, two scratch forms
+    and ``order + 1`` coefficient forms per state, each of ``m2`` entries."""
+    return (nslots * (order + 2) + 2 + n * (order + 1)) * m2 * CB
+
+
+@njit(cache=True)
 def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
                    sel, sel_base):
     """:func:`_affine_kernel_into` with work memory of its own."""
@@ -1023,7 +1031,7 @@ def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, orde
     TB = RB + nslots * m2
     SB = TB + m2
     OB = SB + m2
-    size = (OB + n * KM) * CB
+    size = _affine_work_size(nslots, order, m2, n, CB)
     if work.size >= size:
         Af = work[:size]
         Af[:] = 0.0  # (the loops rely on exact zeros past each form's last symbol)
@@ -1433,7 +1441,7 @@ class AffineTaylorODE:
     def _work(self, tape, order, m2, lanes, nb):
         """A flat work buffer for :func:`_affine_kernel_into`, kept between calls and
         grown as needed (safe to share: the kernel holds the GIL)."""
-        size = (tape.op.size * (order + 2) + 2 + self.n * (order + 1)) * m2 * max(1, min(nb, lanes))
+        size = _affine_work_size(tape.op.size, order, m2, self.n, max(1, min(nb, lanes)))
         buf = getattr(self, "_work_buffer", None)
         if buf is None or buf.size < size:
             buf = np.empty(int(size * 1.25))

@@ -619,7 +619,7 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
     nslots = op.size
     n, nb, L = X.shape
     E = L - 1
-    # REC[s, b]: reciprocal of the order-0 divisor of slot s (written before it is read)
+    # (REC[s, b], the reciprocal of slot s's order-0 divisor, is written before it is read)
     for s in range(nslots):
         if cst[s]:  # a constant's coefficients >= 1 are read as exact zeros
             for k in range(1, order + 1):
