@@ -300,3 +300,66 @@ def test_arm_composition_past_the_old_break_down_with_fresh_symbols_and_star(arm
 
     sols = trajectories(f, np.unique(sample_initial_points(lo, hi, 12), axis=0), T)
     assert misses(sol, sols, per_step=2) == []
+
+
+def _random_tube(rng, n, nb, M, mq, centre, lin=1e-3, quad=3e-4, rem=2e-2):
+    """Random models (n, nb, L) over M symbols (mq quadratic) about ``centre``, with a
+    per-state remainder ``rem`` wider than their linear part (as an a-priori box is)."""
+    L = tm_flow.model_length(M, mq)
+    X = np.zeros((n, nb, L))
+    X[:, :, 0] = np.asarray(centre)[:, None]
+    X[:, :, 1: M + 1] = rng.uniform(-lin, lin, (n, nb, M))
+    X[:, :, M + 1: -1] = rng.uniform(-quad, quad, (n, nb, L - M - 2))
+    X[:, :, -1] = rem * rng.uniform(0.5, 1.0, (n, nb))
+    return X
+
+
+def _tube_check(order=6, seed=3, _forms=tm_flow.models_to_forms):
+    """tube_coefficients over random tubes about the paper's double pendulum's box,
+    checked against exact (arb) coefficients at points of the tube (remainder extremes
+    included: tests/oracles/arb_series.check_series_contains)."""
+    from oracles.arb_series import check_series_contains
+    from models import double_pendulum as dp
+    g = trace(dp.rhs, 4)
+    rng = np.random.default_rng(seed)
+    lo, hi = dp.initial_box()
+    M, mq = 5, 3
+    tube = _random_tube(rng, 4, 2, M, mq, 0.5 * (lo + hi))
+    forms = _forms(tube, M, mq)  # (the oracle's points: the real conversion, bound before any patch)
+    C = tm_flow.tube_coefficients(TaylorModelODE(g), tube, M, mq, order, quadratic_cap=4, cubic_cap=2)
+    assert np.isfinite(C.lo).all() and np.isfinite(C.hi).all()
+    check_series_contains(g, forms, C, order, n_random=6, seed=seed)
+    return C
+
+
+def test_tube_coefficients_contain_exact_coefficients_and_the_oracle_bites(monkeypatch):
+    """The a-priori test's x_[0..K] over a tube (verified.tm_flow.tube_coefficients, each
+    state's remainder on a symbol of its own) hold the exact coefficients at points of
+    the tube; dropping the remainder on its way to those symbols must be caught."""
+    _tube_check()
+    real = tm_flow.models_to_forms
+
+    def no_remainder(X, M, mq):
+        F = real(X, M, mq)
+        F[..., -1] = 0.0
+        return F
+
+    monkeypatch.setattr(tm_flow, "models_to_forms", no_remainder)
+    with pytest.raises(AssertionError, match="outside"):
+        _tube_check()
+
+
+def test_tube_coefficients_are_tighter_than_affine_over_a_tube():
+    """Over a tube whose remainder is wide, the remainder on symbols of its own keeps
+    x_[K] narrower than affine arithmetic over the same forms (the reason the a-priori
+    test uses them: Panda +- 1e-3, 140x at order 8)."""
+    from models import double_pendulum as dp
+    from verified.affine_taylor import AffineTaylorODE
+    g = trace(dp.rhs, 4)
+    rng = np.random.default_rng(3)
+    lo, hi = dp.initial_box()
+    M, mq, K = 5, 3, 6
+    tube = _random_tube(rng, 4, 2, M, mq, 0.5 * (lo + hi))
+    C = tm_flow.tube_coefficients(TaylorModelODE(g), tube, M, mq, K)
+    A = AffineTaylorODE(g).series(tm_flow.models_to_forms(tube, M, mq), K)
+    assert (C[:, K].width() < 0.5 * A[:, K].width()).all(), (C[:, K].width(), A[:, K].width())
