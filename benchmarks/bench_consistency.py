@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from mbs.simulate import simulate, width_deviations  # noqa: E402
+from mbs.simulate import simulate  # noqa: E402
 from models import double_pendulum as dp  # noqa: E402
 from models import pendulum as pd  # noqa: E402
 from verified.interval import Interval  # noqa: E402

@@ -18,7 +18,7 @@ Generalized forces: ``tau = tau_ext - D qdot`` with the diagonal viscous damping
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Mapping
 
@@ -248,7 +248,6 @@ class Chain:
 
     def subs(self, values: Mapping) -> "Chain":
         """A copy with sympy symbols (DH parameters, masses, ...) replaced by values."""
-        import sympy
         def s(x):
             if is_sympy(x):
                 y = x.subs(values)
@@ -375,8 +374,6 @@ def build_tree(root, link_inertias, raw_joints, *, gravity=(0.0, 0.0, -9.81), na
     where = {root: (-1, IDENTITY)}
     owner_inertia = {-1: link_inertias[root]}
     bodies_raw = []  # [name, joint]
-    stack = [root]
-    order = []
     # depth-first, children in given order
     def visit(link):
         for j in children.get(link, []):

@@ -116,7 +116,6 @@ def frame_graph(chain, frame: str, cparams=None):
             R, p = m.frame_placement(frame, x[:n])
         else:
             from . import spatial as sp3
-            from .numeric import _ff
             from .scalar import is_sympy
             def ev(v):
                 if isinstance(v, tuple):

@@ -39,7 +39,7 @@ import sys
 import numpy as np
 
 from .errors import ModelError, SingularMassMatrixError
-from .scalar import add, sub, mul, div, neg, dot, square, total, is_sympy, is_zero, is_const
+from .scalar import add, sub, mul, div, dot, square, total, is_sympy, is_zero, is_const
 from . import kinematics as kin
 from . import spatial as sp3
 

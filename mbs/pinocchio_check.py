@@ -52,7 +52,6 @@ def to_pinocchio(chain, from_source=True):
                 ids.append(jid)
             model = pin.buildReducedModel(model, ids, q0)
     else:
-        from .numeric import NumericModel
         num = chain.numeric()
         model = pin.Model()
         model.name = chain.name

@@ -35,7 +35,7 @@ import numpy as np
 import sympy
 
 from .errors import ModelError, SingularMassMatrixError
-from .scalar import add, sub, mul, dot, total
+from .scalar import add, mul, dot, total
 from . import kinematics as kin
 from . import spatial as sp3
 
@@ -398,7 +398,7 @@ def _sym_rhs_graph(self, tau_params=False):
 
 def _ldl_solve_named(self, M, rhs, x):
     """:func:`mbs.numeric.ldl_solve` whose SingularMassMatrixError names the joints."""
-    from .numeric import ldl_factor, ldl_substitute
+    from .numeric import ldl_factor
     try:
         U, D = ldl_factor(M)
     except SingularMassMatrixError as e:

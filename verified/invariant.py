@@ -268,7 +268,7 @@ class QuadraticLyapunov:
         (the sets' hulls)."""
         B, N = Y.shape
         c = np.broadcast_to(np.asarray(c, float), (B,)).copy()
-        iu, n = self.iu, self.n
+        iu = self.iu
         ulo, uhi = Y.lo[:, iu], Y.hi[:, iu]
         # a first guess from the quadratic part alone (W ignored), around the set's hull
         est = self._centre(Y)
@@ -394,7 +394,6 @@ class QuadraticLyapunov:
     def _rate_bound(self, s, Y: Interval):
         """``|z_i| <= sqrt(2 s max (A^-1)_ii)`` over ``Y`` (B, n); inf where ``A(Y)`` is not
         verified regular."""
-        n, B = self.n, Y.shape[0]
         A = self._mass_over(Y)
         with np.errstate(all="ignore"):
             d = linalg.inverse_diagonal((A + A.swapaxes(-1, -2)) * 0.5).hi

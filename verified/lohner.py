@@ -164,8 +164,6 @@ class LohnerStepper:
         Returns a :class:`~verified.stepper.StepResult` with the new sets and the width
         of the error the linearization injected (the driver stamps the times)."""
         K = self.order
-        n = self.n
-        nb = sets.n_sets
         # 3. centre polynomial plus remainder
         cP = self.coefficients(point(sets.c))
         y = horner(cP[:, :K], h) + cE[:, K] * (Interval(h) ** K)

@@ -87,10 +87,10 @@ def run_case(name, model, x0, t_end, *, samples=64, output_dt=None, note="", **k
             row["widths"] = np.asarray(sol.hull.width()[-1], float)
             row["t_last"] = float(sol.t[-1])
         if samples and len(sol.t) > 1:
-            system = reference_system(model)
+            system = reference_system(model, params=kw.get("params"))
             pv = None
             if system.rhs.n_params and kw.get("params"):
-                pv = np.array([0.5 * (lo + hi) if isinstance(v, tuple) else v for v in kw["params"].values()])
+                pv = np.array([0.5 * (v[0] + v[1]) if isinstance(v, tuple) else v for v in kw["params"].values()])
             traj = _sampled(system, x0, np.asarray(sol.t, float), samples, pv)
             bad = check_samples(sol, traj)
             row["escaped"], row["checked"] = len(bad), int(traj.shape[0])

@@ -41,3 +41,14 @@ def test_bench_writes_into_out_bench_of_the_working_directory(tmp_path, monkeypa
     assert bench.run(log=lambda *_: None) == 0
     assert (tmp_path / "out" / "bench" / "benchmarks.md").is_file()
     assert (tmp_path / "out" / "bench" / "bench_work_precision.png").is_file()
+
+
+def test_stress_case_with_an_uncertain_parameter_samples_at_its_midpoint():
+    """A case with a parameter given as (lo, hi) samples its trajectories at the midpoint
+    (the sampling read undefined names and every such row was a silent 'crash')."""
+    from models import pendulum as pd
+    from verified.interval import Interval
+    lo, hi = pd.initial_box()
+    row = bench.run_case("m", "pendulum_paper", Interval(lo, hi), 0.05, samples=4, params={"l": (0.95, 1.05)})
+    assert row["status"] == "completed", row["reason"]
+    assert row["checked"] >= 4 and row["escaped"] == 0
