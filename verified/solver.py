@@ -19,7 +19,7 @@ returned with ``status = "breakdown"`` and the reason; so is a stop asked for by
 
 :func:`solve` is the driver loop: per step it takes the hull of the sets, asks the
 step control (:mod:`verified.policies`) for a step size the stepper
-(:class:`verified.lohner.LohnerStepper`, a :class:`verified.stepper.Stepper`) can
+(a :class:`verified.stepper.Stepper` of the run's set kind, :mod:`verified.set_kinds`) can
 validate, advances the sets (:mod:`verified.sets`) to a
 :class:`~verified.stepper.StepResult`, records it, and calls the hooks
 (:mod:`verified.hooks`: progress, the consistency test, stop rules); adaptive splitting
@@ -43,11 +43,10 @@ from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
 from .policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
 from .sets import DoubletonSets, SetView, set_view
-from .quadratic import QuadraticSets, QuadraticStepper
+from .set_kinds import SetKind, set_kind
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from .taylor import TaylorODE
 from .taylor_model import TaylorModelODE
-from .tm_flow import TaylorModelFlowStepper
 from .variational import params_as_states, second_variational_graph, variational_graph
 
 __all__ = ["solve", "Solution", "VerifiedODE"]
@@ -443,7 +442,8 @@ def solve(
                          "states appended by a hook")
     hook_list = ([ProgressHook(progress, t1)] if progress is not None else []) \
         + check_hooks([] if consistency is None else [consistency]) + check_hooks(hooks)
-    setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, set_order)
+    kind = set_kind(set_order, set_step)
+    setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, kind.sets)
     for hook in hook_list:
         setup = hook.before_run(setup) or setup
     appended = setup.graph is not prob.graph
@@ -457,16 +457,15 @@ def solve(
     if absorb and appended:
         raise ValueError("absorb=True needs set_order=1, adaptive=False, no consistency test and no "
                          "states appended by a hook")
-    stepper = _stepper(prob, order, setup.params, error_basis, set_order, bool(absorb), params_per_state, set_step,
-                       model_degree)
+    stepper = _stepper(kind, prob, order, setup.params, error_basis, bool(absorb), params_per_state, model_degree)
     stepper.steer = setup.n_steer
     control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
     wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
     split = SplitPolicy(split_ratio, max_boxes, tol) if adaptive else None
     merge = MergePolicy(merge_slack) if adaptive and merge_slack is not None else None
     def make_stepper(graph):  # a stepper of this run's kind for another graph (backward tests)
-        return _stepper(VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis, set_order,
-                        set_step=set_step, model_degree=model_degree)
+        return _stepper(kind, VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis,
+                        model_degree=model_degree)
 
     run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper)
     steps = 0
@@ -528,10 +527,11 @@ def solve(
     return result
 
 
-def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, set_order=1):
+def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, sets_type=DoubletonSets):
     """The checked problem: ``(RunSetup, VerifiedODE, param_boxes, boxes)``. Uncertain
     parameters become constant states after the ODE's (``param_boxes`` (p,): their
-    hull over the initial boxes, else None); ``boxes`` (B, N) the initial boxes."""
+    hull over the initial boxes, else None); ``boxes`` (B, N) the initial boxes, the
+    initial sets ``sets_type.from_boxes`` (:mod:`verified.set_kinds`)."""
     graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
     n = graph.n_inputs
     boxes = initial_boxes(x0, n, subdivision)
@@ -553,7 +553,7 @@ def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, set_order=1):
         param_boxes = hull(p_boxes, axis=0)  # (p,): valid for every set, also after splits
         params = None
     setup = RunSetup(user_graph=graph, graph=prob.graph, n_state=n, n_steer=prob.n, params=params, t0=t0,
-                     sets=(QuadraticSets if set_order == 2 else DoubletonSets).from_boxes(boxes), h_max=h_max)
+                     sets=sets_type.from_boxes(boxes), h_max=h_max)
     return setup, prob, param_boxes, boxes
 
 
@@ -717,17 +717,8 @@ class _Run:
         )
 
 
-def _stepper(prob: VerifiedODE, order, params, error_basis, set_order=1, absorb=False,
-             params_per_state=None, set_step="mean_value", model_degree=None) -> LohnerStepper:
+def _stepper(kind: SetKind, prob: VerifiedODE, order, params, error_basis, absorb=False,
+             params_per_state=None, model_degree=None) -> LohnerStepper:
+    """The stepper of the run's set kind (:mod:`verified.set_kinds`) for ``prob``."""
     max_params = None if params_per_state is None else params_per_state * prob.n
-    if set_order == 2 and set_step == "composition":
-        return TaylorModelFlowStepper(prob.taylor, prob.set_models, order, params, error_basis,
-                                      max_params=max_params, degree=3 if model_degree is None else model_degree)
-    if set_order == 2:
-        return QuadraticStepper(prob.taylor, prob.variational, prob.second_variational, order, params, error_basis,
-                                second_over_set=prob.second_variational_over_set,
-                                second_directional=(None if prob.arithmetic == "interval"
-                                                    else prob.second_variational_along),
-                                max_params=max_params)
-    return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis, absorb=absorb,
-                         max_params=max_params)
+    return kind.stepper(prob, order, params, error_basis, max_params, absorb, model_degree)

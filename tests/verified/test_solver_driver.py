@@ -82,6 +82,37 @@ def test_sets_live_in_their_module_and_old_imports_keep_working():
     assert isinstance(StopAfterWall(1.0), SolverHook)
 
 
+@pytest.mark.parametrize("order,step", [(1, "mean_value"), (2, "mean_value"), (2, "composition")])
+def test_the_set_kind_comes_from_the_registry(ode, box, monkeypatch, order, step):
+    """solve() takes the sets type and the stepper from verified.set_kinds.SET_KINDS
+    (issue 15: a new representation is an entry there, not a branch in the solver): an
+    entry replaced by a recording one is what runs, and gives the same numbers."""
+    from verified import set_kinds
+    plain = solve(ode, box, (0.0, 0.2), t_eval=[0.2], set_order=order, set_step=step)
+    real = set_kinds.SET_KINDS[(order, step)]
+    made = []
+
+    class Recorded(real.sets):
+        pass
+
+    def stepper(*args):
+        made.append(real.stepper(*args))
+        return made[-1]
+
+    monkeypatch.setitem(set_kinds.SET_KINDS, (order, step), set_kinds.SetKind(Recorded, stepper))
+    seen = []
+    sol = solve(ode, box, (0.0, 0.2), t_eval=[0.2], set_order=order, set_step=step,
+                hooks=[type("H", (Hook,), {"before_run": lambda self, setup: seen.append(type(setup.sets))})()])
+    assert made and seen == [Recorded]
+    assert _same_bits(sol.boxes[-1], plain.boxes[-1])
+
+
+def test_an_unknown_set_kind_is_a_one_line_error():
+    from verified.set_kinds import set_kind
+    with pytest.raises(ValueError, match="no set kind for set_order=1, set_step='composition' .known: "):
+        set_kind(1, "composition")
+
+
 def test_the_stepper_returns_a_step_result(ode, box):
     st = lohner.LohnerStepper(ode.taylor, ode.variational, 12)
     s = DoubletonSets.from_boxes(box.reshape((1, 2)))

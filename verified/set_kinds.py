@@ -1,0 +1,75 @@
+"""The set representations the solver carries and the steppers that advance them.
+
+``solve(..., set_order=, set_step=)`` names a kind; this table says which
+:class:`~verified.sets.SetBatch` type the initial boxes become and which
+:class:`~verified.stepper.Stepper` advances it (as CAPD pairs a ``dynset`` with its
+``TimeMap``). A new representation is one more entry here (its sets type and a stepper
+factory): neither the driver loop nor the run set-up change.
+
+| ``(set_order, set_step)`` | sets | stepper |
+|---|---|---|
+| ``(1, "mean_value")`` | :class:`~verified.sets.DoubletonSets` (``c + C r0 + Q r``, CAPD's Rect2) | :class:`~verified.lohner.LohnerStepper` (QR-Lohner) |
+| ``(2, "mean_value")`` | :class:`~verified.quadratic.QuadraticSets` (``c + C u + q(u) + Q r``) | :class:`~verified.quadratic.QuadraticStepper` (second variational equations at the centre) |
+| ``(2, "composition")`` | :class:`~verified.quadratic.QuadraticSets` | :class:`~verified.tm_flow.TaylorModelFlowStepper` (the step composed with the set in Taylor models) |
+
+A stepper factory takes the problem (:class:`verified.solver.VerifiedODE`: its
+evaluators), the Taylor order, the parameter box (or None), the error basis, the cap on
+a set's parameters (None: the stepper's default), ``absorb`` and ``model_degree``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from .lohner import LohnerStepper
+from .quadratic import QuadraticSets, QuadraticStepper
+from .sets import DoubletonSets
+from .tm_flow import TaylorModelFlowStepper
+
+__all__ = ["SetKind", "SET_KINDS", "set_kind"]
+
+
+@dataclass(frozen=True)
+class SetKind:
+    """A set representation (``sets``: a SetBatch type with ``from_boxes``) and the
+    factory of the stepper that advances it (module docstring)."""
+
+    sets: type
+    stepper: Callable
+
+
+def _lohner(prob, order, params, error_basis, max_params, absorb, model_degree):
+    return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis, absorb=absorb,
+                         max_params=max_params)
+
+
+def _mean_value_second_order(prob, order, params, error_basis, max_params, absorb, model_degree):
+    return QuadraticStepper(prob.taylor, prob.variational, prob.second_variational, order, params, error_basis,
+                            second_over_set=prob.second_variational_over_set,
+                            second_directional=(None if prob.arithmetic == "interval"
+                                                else prob.second_variational_along),
+                            max_params=max_params)
+
+
+def _composition(prob, order, params, error_basis, max_params, absorb, model_degree):
+    return TaylorModelFlowStepper(prob.taylor, prob.set_models, order, params, error_basis,
+                                  max_params=max_params, degree=3 if model_degree is None else model_degree)
+
+
+SET_KINDS: dict[tuple[int, str], SetKind] = {
+    (1, "mean_value"): SetKind(DoubletonSets, _lohner),
+    (2, "mean_value"): SetKind(QuadraticSets, _mean_value_second_order),
+    (2, "composition"): SetKind(QuadraticSets, _composition),
+}
+
+
+def set_kind(set_order: int, set_step: str) -> SetKind:
+    """The entry of ``SET_KINDS`` for ``(set_order, set_step)``; a one-line ValueError
+    naming the known ones otherwise (:func:`verified.solver.solve` checks each argument
+    first, with messages of its own)."""
+    kind = SET_KINDS.get((set_order, set_step))
+    if kind is None:
+        known = ", ".join(f"set_order={o}, set_step={s!r}" for o, s in SET_KINDS)
+        raise ValueError(f"no set kind for set_order={set_order!r}, set_step={set_step!r} (known: {known})")
+    return kind
