@@ -130,7 +130,6 @@ def frame_graph(chain, frame: str, cparams=None):
                 R, p = TT
             else:
                 R, p = sp3.compose(m.forward_kinematics(x[:n])[bi], TT)
-            del _ff
         return list(p) + [R[i][j] for i in range(3) for j in range(3)]
     names = [f"q{i + 1}" for i in range(n)] + (list(cparams.names) if npar else [])
     return trace(fn, n + npar, 0, input_names=names,
