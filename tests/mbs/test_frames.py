@@ -15,6 +15,7 @@ from models.registry import get
 from verified.interval import Interval
 
 from oracles.closed_loop import Q0, box, closed_loop_trajectory, corners, ct_oracle, pin_model
+from oracles.sampling import trajectories
 
 SLACK = 1e-9
 
@@ -119,7 +120,6 @@ def test_ur5_tool0_over_the_sets_is_tighter_and_holds_pinocchio_frames():
     """Over the solver's sets (Solution.views) tool0's position is enclosed much
     tighter than over their hull boxes (measured at 0.5 s: z 0.0014 m against 0.0067),
     and Pinocchio's forward kinematics of DOP853 trajectories (aba) stays inside."""
-    from scipy.integrate import solve_ivp
     chain = get("ur5")
     q0 = np.array([0.0, -1.0, 1.0, -0.5, 0.5, 0.0])
     x0 = Interval(np.r_[q0 - 1e-3, np.zeros(6)], np.r_[q0 + 1e-3, np.zeros(6)])
@@ -132,9 +132,7 @@ def test_ur5_tool0_over_the_sets_is_tighter_and_holds_pinocchio_frames():
     assert w_set.max() < 0.5 * w_box.max()
     model, data, fk = _pin_fk(chain, "tool0")
     zero = np.zeros(6)
-    trajs = [solve_ivp(lambda t, x: np.r_[x[6:], pin.aba(model, data, x[:6], x[6:], zero)], (0, T), x,
-                       method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True).sol
-             for x in corners(x0.lo, x0.hi, 6)]
+    trajs = trajectories(lambda x: np.r_[x[6:], pin.aba(model, data, x[:6], x[6:], zero)], corners(x0.lo, x0.hi, 6), T)
     assert not frame_misses(sol.frame("tool0"), trajs, fk, per_step=2)
 
 

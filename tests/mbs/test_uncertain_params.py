@@ -7,9 +7,8 @@ import math
 import numpy as np
 import pinocchio as pin
 import pytest
-from scipy.integrate import solve_ivp
 
-from oracles.sampling import misses, pinocchio_with
+from oracles.sampling import misses, pinocchio_with, trajectories
 from mbs.app.scene import SceneError, loads_scene
 from mbs.simulate import simulate, system_for
 from mbs.uncertain import ChainParameters, ParameterError
@@ -26,11 +25,9 @@ def aba_trajectory(model, damping, x0, times):
     d = np.asarray(damping, float)
     q0 = pin.neutral(model)
 
-    def f(t, x):  # continuous joints have nq = 2 (cos, sin): q = integrate(neutral, angles)
+    def f(x):  # continuous joints have nq = 2 (cos, sin): q = integrate(neutral, angles)
         return np.r_[x[n:], pin.aba(model, data, pin.integrate(model, q0, x[:n]), x[n:], -d * x[n:])]
-    s = solve_ivp(f, (0.0, times[-1]), x0, method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True)
-    assert s.success
-    return s.sol
+    return trajectories(f, [x0], times[-1])[0]
 
 
 def corners_and_random(lo, hi, n_random, seed=0):
@@ -52,10 +49,7 @@ def test_paper_model_parameter_interval_from_python_runs_and_is_sound():
     assert sol.params == {"m1": (0.9, 1.1)}
     trajs = []
     for i, m1 in enumerate([0.9, 1.1, 1.0]):
-        for x0 in corners_and_random(lo, hi, 3, seed=i):
-            s = solve_ivp(lambda t, x: dp.rhs(x, m1=m1), (0, 0.2), x0, method="DOP853",
-                          rtol=1e-12, atol=1e-12, dense_output=True)
-            trajs.append(s.sol)
+        trajs += trajectories(lambda x: dp.rhs(x, m1=m1), corners_and_random(lo, hi, 3, seed=i), 0.2)
     assert not misses(sol, trajs, per_step=3)
     # the mass really is a parameter: the enclosure is wider than with m1 = 1 fixed
     fixed = simulate("double_pendulum_paper", Interval(lo, hi), 0.2, mode="i", output_dt=0.1)
@@ -67,9 +61,8 @@ def test_paper_model_parameter_interval_in_mode_iii():
     sol = simulate("double_pendulum_paper", Interval(lo, hi), 0.2, mode="iii", params={"m2": [0.95, 1.05]},
                    subdivision=[4, 1, 1, 1], test_interval=0.1)
     assert sol.status == "completed", sol.reason
-    trajs = [solve_ivp(lambda t, x, m2=m2: dp.rhs(x, m2=m2), (0, 0.2), x0, method="DOP853", rtol=1e-12,
-                       atol=1e-12, dense_output=True).sol
-             for m2 in (0.95, 1.05) for x0 in corners_and_random(lo, hi, 2)]
+    trajs = [s for m2 in (0.95, 1.05)
+             for s in trajectories(lambda x, m2=m2: dp.rhs(x, m2=m2), corners_and_random(lo, hi, 2), 0.2)]
     assert not misses(sol, trajs, per_step=3)
 
 
@@ -125,9 +118,8 @@ mode = "i"
     assert sol.status == "completed", sol.reason
     trajs = []
     for l1 in (0.99, 1.01):  # the oracle: the paper's hand-written eq. (22)
-        for x0 in corners_and_random([0.5, 0.2, 0, 0], [0.51, 0.2, 0, 0], 2):
-            trajs.append(solve_ivp(lambda t, x, l1=l1: dp.rhs(x, m1=1.5, l1=l1), (0, 0.2), x0, method="DOP853",
-                                   rtol=1e-12, atol=1e-12, dense_output=True).sol)
+        trajs += trajectories(lambda x, l1=l1: dp.rhs(x, m1=1.5, l1=l1),
+                              corners_and_random([0.5, 0.2, 0, 0], [0.51, 0.2, 0, 0], 2), 0.2)
     assert not misses(sol, trajs, per_step=3)
 
 
@@ -331,8 +323,8 @@ def test_system_parameters_by_name():
     sol = simulate(system, box, 0.3, mode="i", output_dt=0.1, params={"k": [9.0, 10.0]})
     assert sol.status == "completed", sol.reason
     assert sol.params == {"k": (9.0, 10.0)}
-    trajs = [solve_ivp(lambda t, x, k=k: [x[1], -k * np.sin(x[0])], (0, 0.3), x0, method="DOP853", rtol=1e-12,
-                       atol=1e-12, dense_output=True).sol for k in (9.0, 9.5, 10.0) for x0 in ([0.5, 0], [0.51, 0])]
+    trajs = [s for k in (9.0, 9.5, 10.0)
+             for s in trajectories(lambda x, k=k: [x[1], -k * np.sin(x[0])], ([0.5, 0], [0.51, 0]), 0.3)]
     assert not misses(sol, trajs, per_step=3)
     with pytest.raises(ValueError, match=r"unknown parameter\(s\) 'g' for 'pendulum_k'; its parameters: k"):
         simulate(system, box, 0.1, mode="i", params={"g": 9.81})

@@ -32,6 +32,21 @@ def trajectories(f, points, t_end, params=None):
     return sols
 
 
+def states_at(f, points, times, rtol=1e-12, atol=1e-12):
+    """States at ``times`` (from t = 0 to times[-1]) of DOP853 solutions for each initial
+    point; f(x) -> dx (numpy floats). Returns an array (S, len(times), n). ``rtol``,
+    ``atol``: the tolerances (default those of ``trajectories``); the states come from
+    solve_ivp's t_eval, i.e. its dense output in the step that holds each time."""
+    times = np.asarray(times, dtype=float)
+    out = []
+    for x0 in points:
+        s = solve_ivp(lambda t, x: np.asarray(f(x), dtype=float), (0.0, times[-1]), x0, method="DOP853",
+                      rtol=rtol, atol=atol, t_eval=times)
+        assert s.success
+        out.append(s.y.T)
+    return np.array(out)
+
+
 def in_union(x, boxes, slack=SLACK):
     """Is the point x inside the union of boxes (Interval (B, n)), up to slack?"""
     return bool(np.any(np.all((boxes.lo - slack <= x) & (x <= boxes.hi + slack), axis=-1)))
