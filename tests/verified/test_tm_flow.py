@@ -363,3 +363,23 @@ def test_tube_coefficients_are_tighter_than_affine_over_a_tube():
     C = tm_flow.tube_coefficients(TaylorModelODE(g), tube, M, mq, K)
     A = AffineTaylorODE(g).series(tm_flow.models_to_forms(tube, M, mq), K)
     assert (C[:, K].width() < 0.5 * A[:, K].width()).all(), (C[:, K].width(), A[:, K].width())
+
+
+def test_tube_coefficients_with_graph_parameters_contain_exact_coefficients():
+    """A graph with parameters (a damped pendulum x'' = -k sin x - d x' with k, d in
+    boxes): tube_coefficients takes the parameter box as intervals; the exact
+    coefficients at sampled points of the tube and of the parameter box are inside."""
+    from oracles.arb_series import check_series_contains
+
+    def damped(x, p):
+        return [x[1], -p[0] * np.sin(x[0]) - p[1] * x[1]]
+
+    g = trace(damped, 2, 2)
+    rng = np.random.default_rng(7)
+    M, mq, K = 4, 2, 6
+    tube = _random_tube(rng, 2, 2, M, mq, [0.8, -0.3], lin=2e-3, quad=5e-4, rem=1e-2)
+    plo, phi = np.array([9.5, 0.1]), np.array([10.0, 0.2])
+    C = tm_flow.tube_coefficients(TaylorModelODE(g), tube, M, mq, K, Interval(plo, phi)[None, :])
+    check_series_contains(g, tm_flow.models_to_forms(tube, M, mq), C, K, plo, phi, n_random=6, seed=7)
+    with pytest.raises(ValueError, match="parameters"):
+        tm_flow.tube_coefficients(TaylorModelODE(g), tube, M, mq, K, None)
