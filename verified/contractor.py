@@ -34,7 +34,10 @@ from typing import NamedTuple
 import numpy as np
 
 from . import interval as iv
+from . import linalg
+from .evaluate import IntervalDomain, eval_interval, jacobian_interval
 from .graph import Graph, GraphBuilder, Op
+from .graph_ops import embed
 from .interval import Interval
 
 __all__ = [
@@ -331,8 +334,6 @@ class HC4:
 
     def __init__(self, graph: Graph):
         self.graph = graph
-        from .evaluate import IntervalDomain
-
         self._domain = IntervalDomain()
         self.n_inputs = graph.n_inputs
         self.n_params = graph.n_params
@@ -604,9 +605,6 @@ def mean_value_row(graph: Graph, c, A, R, h=0.0, params=None, *, output: int = 0
 
     Returns: ``(a (B, m) float, g0 Interval (B,), rem Interval (B,))``.
     """
-    from . import linalg
-    from .evaluate import eval_interval, jacobian_interval
-
     R = R if isinstance(R, Interval) else Interval(R)
     B, m = R.shape
     Cc = c if isinstance(c, Interval) else Interval(np.asarray(c, float))
@@ -669,8 +667,6 @@ class EnergyShell:
                              f"V {V.n_inputs} -> {V.n_outputs}")
         if M.n_params != V.n_params:
             raise ValueError("M and V must take the same parameters")
-        from .graph_ops import embed
-
         self.nq = nq
         self.M_graph, self.V_graph = M, V
         b = GraphBuilder(2 * nq, M.n_params,
@@ -705,9 +701,6 @@ class EnergyShell:
         ``M`` over a wide ``Q`` (for the double pendulum over ``q2 in [-pi, pi]`` it
         cannot prove ``M(Q)`` regular), over small pieces it can.
         """
-        from . import linalg
-        from .evaluate import eval_interval
-
         nq = self.nq
         B = boxes.shape[0]
         k = max(1, int(np.floor(pieces ** (1.0 / nq) + 1e-9)))

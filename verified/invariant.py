@@ -57,10 +57,12 @@ import numpy as np
 from . import interval as iv
 from . import linalg
 from .evaluate import eval_float, eval_interval, jacobian_float, jacobian_interval
+from .contractor import mean_value_row
 from .graph import Graph, GraphBuilder
 from .graph_ops import embed, gradient_graph, params_to_inputs
 from .hooks import Hook
 from .interval import Interval, concatenate
+from .sets import DoubletonSets
 
 __all__ = ["QuadraticLyapunov", "InvariantBoxes", "InvariantHook"]
 
@@ -229,9 +231,6 @@ class QuadraticLyapunov:
         return self._grad_level
 
     def _upper_over(self, gy: Graph, grad: Graph, sets, params=None) -> np.ndarray:
-        from .contractor import mean_value_row
-        from .sets import DoubletonSets
-
         if type(sets) is DoubletonSets or isinstance(sets, _Projected):
             c, A = sets.c, np.concatenate([sets.C, sets.Q], axis=2)
             R = concatenate([sets.r0, sets.r], axis=1)
@@ -1043,7 +1042,6 @@ class InvariantHook(Hook):
     def _sets_y(self, sets):
         """The sets restricted to ``y`` (states and carried parameters; appended states of
         other hooks dropped)."""
-        from .sets import DoubletonSets
         k = self.n_y if self.params is None else self.lyap.n_x  # graph parameters are not in the sets
         if type(sets) is DoubletonSets and sets.c.shape[1] > k:
             return _Projected(sets, k)  # states other hooks appended (h) dropped
