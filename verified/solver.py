@@ -481,7 +481,8 @@ def solve(
             cX = stepper.coefficients(X)
             run.evaluations += 1
             if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
-                run.stop("Taylor coefficients are unbounded (division by an interval containing zero)", "breakdown")
+                run.stop("Taylor coefficients are unbounded (an operation left its domain over the sets, e.g. a "
+                         "division by an interval containing zero, or overflowed)", "breakdown")
                 break
             gap_lo, gap_hi = run.gap()
             found = control.validate(stepper, X, cX, control.propose(stepper, cX, wrap.h_limit, gap_lo, gap_hi))
