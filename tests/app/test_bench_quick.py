@@ -52,3 +52,16 @@ def test_stress_case_with_an_uncertain_parameter_samples_at_its_midpoint():
     row = bench.run_case("m", "pendulum_paper", Interval(lo, hi), 0.05, samples=4, params={"l": (0.95, 1.05)})
     assert row["status"] == "completed", row["reason"]
     assert row["checked"] >= 4 and row["escaped"] == 0
+
+
+def test_a_bug_in_the_bench_is_raised_not_reported_as_a_crash_row(monkeypatch):
+    """run_case reports what a case raises as a 'crash' row, but a NameError is a bug of
+    the bench itself (one hid a dead branch that way) and must surface."""
+    from verified.interval import Interval
+
+    def broken(*a, **k):
+        return undefined_name  # noqa: F821
+
+    monkeypatch.setattr(bench, "_simulate", lambda: broken)
+    with pytest.raises(NameError):
+        bench.run_case("bug", "pendulum_paper", Interval([0.0, 0.0], [0.1, 0.0]), 0.01, samples=0)
