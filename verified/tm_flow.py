@@ -106,7 +106,7 @@ STAR_CAP = 6
 #: (:func:`tube_coefficients`): the tube's widest symbols (the step's motion first) with
 #: quadratic monomials, the widest of them cubic ones. Measured on the Panda +- 1e-3
 #: (order 8): ``x_[K]`` over the tube 140x narrower than in affine arithmetic with 8 / 2,
-#: 20x with 4 / 0, 4x without the per-state remainder symbols; no narrower with 16 / 6.
+#: 20x with 4 / 0; without the per-state remainder symbols 4x, and 16 / 6 no better.
 TUBE_QUADRATIC_CAP = 8
 TUBE_CUBIC_CAP = 2
 
@@ -287,7 +287,7 @@ def tube_coefficients(models, tube: np.ndarray, M: int, mq: int, order: int, par
 
     Measured on the Panda +- 1e-3 (order 8, ``benchmarks/bench_robots.py`` case 8):
     ``x_[8]`` over the tube a median 140x narrower than in affine arithmetic with fresh
-    symbols per order, at about the same cost (0.019 s against 0.022 s per call); the
+    symbols per order, at about the same cost (0.020 s against 0.022 s per call); the
     steps to 0.35 s 1.6x longer (138 instead of 216)."""
     F = models_to_forms(tube, M, mq)  # (n, B, M + 2)
     n, nb, _ = F.shape
@@ -557,7 +557,7 @@ class TaylorModelFlowStepper(LohnerStepper):
     #: last one, the Lagrange term, is used):
     #:
     #: * ``"tube_models"`` (default): :func:`tube_coefficients`, Taylor models made for
-    #:   the tube. Panda +- 1e-3 to 0.35 s: 138 steps in 12.6 s against 216 in 22.9 s
+    #:   the tube. Panda +- 1e-3 to 0.35 s: 138 steps in 12.3 s against 216 in 22.9 s
     #:   with ``"affine"``, the same widths (the step suggestion's cut for x_[K] over the
     #:   tube, ``_widen``, is what the tighter bound lifts);
     #: * ``"affine"``: affine arithmetic with fresh symbols per order over the tube's
