@@ -919,25 +919,34 @@ class TaylorModelODE:
         return Interval._from_bounds(np.ascontiguousarray(lo.transpose(2, 1, 0)),
                                      np.ascontiguousarray(hi.transpose(2, 1, 0)))
 
-    def series(self, X, order, params=None) -> Interval:
+    def series(self, X, order, params=None, *, caps=None, fresh=False) -> Interval:
         """Interval enclosures of ``x_[0..order]`` from input affine forms ``X``
         (n, B, m + 2) over ``m`` symbols of the caller's choosing (a set's own
-        parameters first). Parameters are intervals without symbols. (B, order + 1, n)."""
+        parameters first). Parameters are intervals without symbols. (B, order + 1, n).
+
+        ``caps``: ``(mq, m3, m4, ms)`` for these forms instead of :meth:`symbol_caps`
+        (each at most ``m``). ``fresh``: the recursion with fresh symbols per
+        coefficient (:meth:`_run`), appended after the ``m`` symbols."""
         n, nb, m2 = X.shape
         if n != self.n:
             raise ValueError(f"forms must have shape ({self.n}, B, m + 2), got {X.shape}")
+        if self.n_params and params is None:
+            raise ValueError(f"the graph has {self.n_params} parameters: series needs their box")
         m = m2 - 2
-        mq, m3, m4, ms = self.symbol_caps(m)
+        mq, m3, m4, ms = self.symbol_caps(m) if caps is None else (min(int(k), m) for k in caps)
         # the widest symbols (over the batch) first: they get the quadratic monomials
         widths = np.abs(X[:, :, 1: m + 1]).sum(axis=0).max(axis=0)
         perm = np.argsort(-widths, kind="stable")
-        X = np.concatenate([X[:, :, :1], X[:, :, 1: m + 1][:, :, perm], X[:, :, m + 1:]], axis=2)
+        extra = self.n * int(order) if fresh else 0  # the fresh symbols, zero in the inputs
+        X = np.concatenate([X[:, :, :1], X[:, :, 1: m + 1][:, :, perm], np.zeros((n, nb, extra)), X[:, :, m + 1:]],
+                           axis=2)
+        m += extra
         Xm = forms_to_models(X, mq, m3, m4, ms)
         P = np.zeros((self.n_params, nb, model_length(m, mq, m3, m4, ms)))
         if self.n_params:
             p = _as_interval(params).broadcast_to((nb, self.n_params))
             P = forms_to_models(box_forms(p.lo, p.hi, np.full(self.n_params, -1), m), mq, m3, m4, ms)
-        return self._interval(self._run(Xm, P, int(order), m, mq, m3, m4, ms), m, mq)
+        return self._interval(self._run(Xm, P, int(order), m, mq, m3, m4, ms, fresh=bool(extra)), m, mq)
 
     def coefficients(self, x, order, params=None) -> Interval:
         """Interval enclosures of ``x_[0..order]`` over boxes ``x`` (B, n) (one symbol

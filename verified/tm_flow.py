@@ -278,7 +278,7 @@ def tube_coefficients(models, tube: np.ndarray, M: int, mq: int, order: int, par
     symbol of its own, the symbols are sorted by width (the widest ``quadratic_cap``
     get quadratic monomials, the widest ``cubic_cap`` cubic ones: the motion's curvature
     is carried, not bounded per operation) and the recursion runs with fresh symbols
-    per coefficient (:meth:`~verified.taylor_model.TaylorModelODE._run`). A remainder
+    per coefficient (:meth:`~verified.taylor_model.TaylorModelODE.series`). A remainder
     on a symbol of its own is carried linearly through the graph, with its
     cancellations, where a model's remainder is multiplied by every operation. Sound:
     the tube's points are ``p(e) + r`` with ``r`` in the per-state remainder box, each
@@ -293,27 +293,10 @@ def tube_coefficients(models, tube: np.ndarray, M: int, mq: int, order: int, par
     n, nb, _ = F.shape
     rem = np.zeros((n, nb, n))
     rem[np.arange(n), :, np.arange(n)] = F[:, :, -1]
-    lin = np.concatenate([F[:, :, 1: M + 1], rem], axis=2)  # (n, B, M + n)
-    m = M + n
-    perm = np.argsort(-np.abs(lin).sum(axis=0).max(axis=0), kind="stable")
-    K = int(order)
-    m_all = m + n * K  # fresh symbols last
-    q = min(int(quadratic_cap), m)
-    c = min(int(cubic_cap), q)
-    X = np.zeros((n, nb, model_length(m_all, q, c)))
-    X[:, :, 0] = F[:, :, 0]
-    X[:, :, 1: m + 1] = lin[:, :, perm]
-    np_ = models.n_params
-    if np_:
-        if params is None:
-            raise ValueError(f"the graph has {np_} parameters: tube_coefficients needs their box")
-        p = params.broadcast_to((nb, np_))
-        P = forms_to_models(box_forms(p.lo, p.hi, np.full(np_, -1), m_all), q, c)
-    else:
-        P = np.zeros((0, nb, X.shape[-1]))
+    forms = np.concatenate([F[:, :, : M + 1], rem, np.zeros((n, nb, 1))], axis=2)  # (n, B, M + n + 2)
+    q = min(int(quadratic_cap), M + n)
     with np.errstate(over="ignore", invalid="ignore"):
-        out = models._run(X, P, K, m_all, q, c, fresh=True)
-    return models._interval(out, m_all, q)
+        return models.series(forms, order, params, caps=(q, min(int(cubic_cap), q), 0, 0), fresh=True)
 
 
 def more_symbols(X: np.ndarray, M: int, extra: int) -> np.ndarray:
