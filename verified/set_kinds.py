@@ -27,7 +27,7 @@ from .quadratic import QuadraticSets, QuadraticStepper
 from .sets import DoubletonSets
 from .tm_flow import TaylorModelFlowStepper
 
-__all__ = ["SetKind", "SET_KINDS", "set_kind"]
+__all__ = ["SetKind", "SET_KINDS", "set_kind", "set_kind_names"]
 
 
 @dataclass(frozen=True)
@@ -73,3 +73,9 @@ def set_kind(set_order: int, set_step: str) -> SetKind:
         known = ", ".join(f"set_order={o}, set_step={s!r}" for o, s in SET_KINDS)
         raise ValueError(f"no set kind for set_order={set_order!r}, set_step={set_step!r} (known: {known})")
     return kind
+
+
+def set_kind_names() -> tuple[tuple, tuple]:
+    """The ``set_order`` values and the ``set_step`` names of ``SET_KINDS``, each once, in
+    the table's order (what :func:`verified.solver.solve` accepts)."""
+    return tuple(dict.fromkeys(o for o, _ in SET_KINDS)), tuple(dict.fromkeys(s for _, s in SET_KINDS))

@@ -43,7 +43,7 @@ from .lohner import LohnerStepper
 from .affine_taylor import AffineTaylorODE
 from .policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
 from .sets import DoubletonSets, SetView, set_view
-from .set_kinds import SetKind, set_kind
+from .set_kinds import SetKind, set_kind, set_kind_names
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from .taylor import TaylorODE
 from .taylor_model import TaylorModelODE
@@ -417,10 +417,11 @@ def solve(
         t_span=t_span, t_eval=t_eval, order=order, tol=tol, h_max=h_max, h_min=h_min, max_steps=max_steps,
         max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
         wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, progress=progress)
-    if set_order not in (1, 2) or isinstance(set_order, bool):
-        raise ValueError(f"set_order must be 1 or 2, got {set_order!r}")
-    if set_step not in ("mean_value", "composition"):
-        raise ValueError(f"set_step must be 'mean_value' or 'composition', got {set_step!r}")
+    orders, steps = set_kind_names()
+    if set_order not in orders or isinstance(set_order, bool):
+        raise ValueError(f"set_order must be {' or '.join(map(str, orders))}, got {set_order!r}")
+    if set_step not in steps:
+        raise ValueError(f"set_step must be {' or '.join(map(repr, steps))}, got {set_step!r}")
     if set_step == "composition" and set_order != 2:
         raise ValueError("set_step='composition' advances second-order sets: it needs set_order=2")
     if model_degree is not None:
