@@ -21,30 +21,22 @@ def sample_initial_points(lo, hi, n_random, seed=0):
     return np.vstack([corners, rand, (lo + hi) / 2])
 
 
-def trajectories(f, points, t_end, params=None):
+def trajectories(f, points, t_end, params=None, rtol=1e-12, atol=1e-12):
     """Dense DOP853 solutions for each initial point; f(x) -> dx (numpy floats)."""
     sols = []
     for x0 in points:
         s = solve_ivp(lambda t, x: np.asarray(f(x), dtype=float), (0.0, t_end), x0, method="DOP853",
-                      rtol=1e-12, atol=1e-12, dense_output=True)
+                      rtol=rtol, atol=atol, dense_output=True)
         assert s.success
         sols.append(s.sol)
     return sols
 
 
 def states_at(f, points, times, rtol=1e-12, atol=1e-12):
-    """States at ``times`` (from t = 0 to times[-1]) of DOP853 solutions for each initial
-    point; f(x) -> dx (numpy floats). Returns an array (S, len(times), n). ``rtol``,
-    ``atol``: the tolerances (default those of ``trajectories``); the states come from
-    solve_ivp's t_eval, i.e. its dense output in the step that holds each time."""
+    """States at ``times`` (from t = 0 to times[-1]) of the :func:`trajectories` from each
+    initial point, an array (S, len(times), n)."""
     times = np.asarray(times, dtype=float)
-    out = []
-    for x0 in points:
-        s = solve_ivp(lambda t, x: np.asarray(f(x), dtype=float), (0.0, times[-1]), x0, method="DOP853",
-                      rtol=rtol, atol=atol, t_eval=times)
-        assert s.success
-        out.append(s.y.T)
-    return np.array(out)
+    return np.array([sol(times).T for sol in trajectories(f, points, times[-1], rtol=rtol, atol=atol)])
 
 
 def in_union(x, boxes, slack=SLACK):
