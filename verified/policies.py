@@ -44,6 +44,24 @@ def orthonormal_basis(A: np.ndarray, widths: np.ndarray) -> np.ndarray:
     return Q
 
 
+
+def scaled_basis(A: np.ndarray, widths: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """``D Q'`` with ``D = diag(scale)`` (B, n) and ``Q'`` the sorted QR basis
+    (:func:`orthonormal_basis`) of ``D^-1 A``: a basis that is orthonormal in the state
+    space measured in units of ``scale`` (the set's extent per state), not in raw units.
+
+    Why: a robot's set is 5-30x wider in qd (rad/s) than in q (rad); an orthonormal
+    basis of raw columns mixes a qd-sized range into q when a zonotope is wrapped into
+    a parallelepiped. Measured on the 3-link arm +- 0.01 at 0.5 s, merging 63 of 69
+    parameters into 6: q3's width x3.36 with the raw basis, x1.20 with this one.
+    Any invertible basis is sound here: the callers enclose ``B^-1`` rigorously."""
+    scale = np.asarray(scale, dtype=float)
+    scale = np.where(np.isfinite(scale), scale, 0.0)
+    top = np.max(scale, axis=1, keepdims=True)
+    d = np.maximum(scale, np.maximum(top * 1e-12, 1e-300))  # (a state without extent)
+    Qs = orthonormal_basis(A / d[:, :, None], widths)
+    return Qs * d[:, :, None]
+
 class QRBasis:
     """Lohner's QR method: the error part ``Q r`` is carried in the orthonormal basis
     ``Q'`` of ``mid(J Q)`` (columns sorted by the error each carries), so errors are

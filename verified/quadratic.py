@@ -54,7 +54,7 @@ import numpy as np
 from . import linalg
 from .interval import Interval, concatenate, point, sqr
 from .lohner import LohnerStepper, horner
-from .policies import orthonormal_basis
+from .policies import orthonormal_basis, scaled_basis
 from .sets import DoubletonSets, parameter_cuts
 from .stepper import StepResult
 from .variational import pair_index
@@ -235,6 +235,10 @@ class QuadraticSets:
             return self
         return QuadraticSets(c=c_new, C=C_new, r0=delta, S=self.S, Q=self.Q, r=r)
 
+    #: merge into a basis orthonormal in units of the set's extent per state
+    #: (:func:`verified.policies.scaled_basis`); False: in raw units
+    SCALED_MERGE = True
+
     def merge_params(self, count: int, keep_first: int, steer: int | None = None) -> "QuadraticSets":
         """The same sets with their ``count`` least wide parameters past the first
         ``keep_first`` replaced by ``n`` covering ones, as
@@ -259,7 +263,9 @@ class QuadraticSets:
         sel = np.sort(np.argsort(w.max(axis=0), kind="stable")[:count])
         rest = np.setdiff1d(np.arange(m), sel)
         CS = self.C[:, :, sel]
-        Bq = orthonormal_basis(CS, self.r0.width()[:, sel])  # (B, n, n): Lohner's sorted QR
+        # (B, n, n): Lohner's sorted QR, orthonormal in units of the set's extent per state
+        Bq = scaled_basis(CS, self.r0.width()[:, sel], self.hull().width()) if self.SCALED_MERGE \
+            else orthonormal_basis(CS, self.r0.width()[:, sel])
         # every quadratic term with a merged parameter in it: S with the kept block zeroed
         S_cross = self.S.copy()
         S_cross[np.ix_(np.arange(nb), np.arange(n), rest, rest)] = 0.0

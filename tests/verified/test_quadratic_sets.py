@@ -350,3 +350,102 @@ def test_adaptive_second_order_sets_split_and_contain_trajectories(set_step):
     assert (sol.hull.width()[-1] < plain.hull.width()[-1]).all()
     sols = trajectories(lambda x: pd.rhs(x), sample_initial_points(lo, hi, 30), T)
     assert misses(sol, sols) == []
+
+
+# --------------------------------------------------------------------------- merging at the cap
+def _solve_exact(A, v):
+    """A^-1 v in exact rationals (Gauss-Jordan), A (n, n) and v (n,) of Fractions."""
+    n = len(v)
+    M = [list(A[i]) + [v[i]] for i in range(n)]
+    for col in range(n):
+        piv = max(range(col, n), key=lambda r: abs(M[r][col]))
+        M[col], M[piv] = M[piv], M[col]
+        for r in range(n):
+            if r != col and M[r][col] != 0:
+                f = M[r][col] / M[col][col]
+                M[r] = [a - f * b for a, b in zip(M[r], M[col])]
+    return [M[i][n] / M[i][i] for i in range(n)]
+
+
+def _disparate_sets(seed, nb=2, n=3, m=9):
+    """Sets whose states differ in scale by 1000x (as a robot's q and qd), with quadratic terms."""
+    rng = np.random.default_rng(seed)
+    scale = np.array([1e-2, 1.0, 10.0])[:n]
+    C = rng.normal(size=(nb, n, m)) * scale[None, :, None]
+    S = rng.normal(size=(nb, n, m, m)) * 0.05 * scale[None, :, None, None]
+    S = 0.5 * (S + S.transpose(0, 1, 3, 2))
+    w = rng.uniform(0.05, 1.0, m)
+    return quadratic.QuadraticSets(c=rng.normal(size=(nb, n)), C=C, r0=Interval(-w * np.ones((nb, m)), w * np.ones((nb, m))),
+                                   S=S, Q=np.broadcast_to(np.eye(n), (nb, n, n)).copy(),
+                                   r=Interval(np.zeros((nb, n)), np.zeros((nb, n))))
+
+
+def _merged_part_is_covered(s, merged, count, keep_first, rng, points=60):
+    """Every point's merged part, C_S u_S plus each quadratic term with a merged parameter
+    in it (exact rationals), is B beta with beta in the new parameters' box."""
+    F = Fraction
+    nb, n = s.c.shape
+    m = s.C.shape[2]
+    w = np.abs(s.C).sum(axis=1) * s.r0.width() + np.einsum("bijk,bk->bj", np.abs(s.S), s.r0.mag()) * s.r0.mag()
+    w[:, :keep_first] = np.inf
+    sel = set(np.sort(np.argsort(w.max(axis=0), kind="stable")[:count]).tolist())
+    Bq, b = merged.C[:, :, -n:], merged.r0[:, -n:]
+    for k in range(points):
+        bb = int(rng.integers(nb))
+        u = s.r0.lo[bb] + rng.uniform(0, 1, m) * s.r0.width()[bb]
+        if k % 3 == 0:  # a vertex
+            u = np.where(rng.uniform(size=m) < 0.5, s.r0.lo[bb], s.r0.hi[bb])
+        uf = [F(float(x)) for x in u]
+        v = []
+        for i in range(n):
+            t = sum(F(float(s.C[bb, i, j])) * uf[j] for j in sel)
+            t += sum(F(float(s.S[bb, i, j, l])) * uf[j] * uf[l] for j in range(m) for l in range(m)
+                     if j in sel or l in sel)
+            v.append(t)
+        beta = _solve_exact([[F(float(x)) for x in row] for row in Bq[bb]], v)
+        for i in range(n):
+            if not F(float(b.lo[bb, i])) <= beta[i] <= F(float(b.hi[bb, i])):
+                return False
+    return True
+
+
+@pytest.mark.parametrize("scaled", [True, False])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_merging_covers_the_merged_parameters_and_their_quadratic_terms(monkeypatch, seed, scaled):
+    """QuadraticSets.merge_params: the merged part (linear and every quadratic term with a
+    merged parameter) lies in the new parameters' box, in the scaled basis as in the raw
+    one; kept parameters, their quadratic block and the count are as documented."""
+    monkeypatch.setattr(quadratic.QuadraticSets, "SCALED_MERGE", scaled)
+    s = _disparate_sets(seed)
+    merged = s.merge_params(5, keep_first=3)
+    assert merged.C.shape == (2, 3, 9 - 5 + 3)
+    np.testing.assert_array_equal(merged.C[:, :, :3], s.C[:, :, :3])
+    assert _merged_part_is_covered(s, merged, 5, 3, np.random.default_rng(seed))
+
+
+def test_merging_oracle_bites_when_the_quadratic_terms_are_dropped(monkeypatch):
+    """The same check fails when merge_params leaves out the merged quadratic terms."""
+    s = _disparate_sets(5)
+    real = quadratic.quadratic_range
+
+    def dropped(S, u):
+        return real(np.zeros_like(S), u)
+
+    monkeypatch.setattr(quadratic, "quadratic_range", dropped)
+    merged = s.merge_params(5, keep_first=3)
+    assert not _merged_part_is_covered(s, merged, 5, 3, np.random.default_rng(5), points=200)
+
+
+def test_scaled_merge_does_not_smear_the_wide_states_into_the_narrow_one(monkeypatch):
+    """Merged in a basis orthonormal in units of each state's extent, the narrow state
+    (1000x narrower than the widest) keeps its width; the raw orthonormal basis mixes the
+    wide states' range into it (3-link arm +- 0.01: q3 x3.4 against x1.2)."""
+    s = _disparate_sets(2, nb=1)
+    before = s.hull().width()[0]
+    widths = {}
+    for scaled in (True, False):
+        monkeypatch.setattr(quadratic.QuadraticSets, "SCALED_MERGE", scaled)
+        widths[scaled] = s.merge_params(5, keep_first=3).hull().width()[0]
+    assert widths[True][0] < 0.5 * widths[False][0]  # (0.119 against 0.285)
+    # the worst widening relative to each state's width is smaller too (1.5 against 3.3)
+    assert (widths[True] / before).max() < (widths[False] / before).max()
