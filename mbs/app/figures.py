@@ -156,11 +156,15 @@ def inconsistent_cells(candidates, energy, h_v, pair, grid=160, params=None):
     return ei, ej, outside
 
 
-def fig_consistency_plane(sol, energy, path, test_index=0, pair=None, grid=160, params=None,
+def fig_consistency_plane(sol, energy, path, test_index=None, pair=None, grid=160, params=None,
                           title=None):
     """The (q, qd) plane at the test time t* (paper Fig. 3).
 
-    ``energy``: the Graph x -> [H] (H_H). ``pair``: the two state indices to plot
+    ``test_index``: which of ``sol.consistency.tests`` to draw; None (default): the
+    one that pruned the most sub-boxes, the earliest of those (the paper's figure shows
+    a test that cut something; the first test of a run usually cuts nothing: the
+    pendulum scene's first test, at 0.1 s, keeps all 224 sub-boxes; the one at 1 s
+    prunes 186 of 1764). ``energy``: the Graph x -> [H] (H_H). ``pair``: the two state indices to plot
     (default: the first position and its rate, (0, n/2)). Shaded: cells of a
     ``grid`` x ``grid`` partition of the tested box where the interval enclosure of
     H over the cell (all other states ranging over the tested box) misses [H_V(t*)]:
@@ -168,7 +172,11 @@ def fig_consistency_plane(sol, energy, path, test_index=0, pair=None, grid=160, 
     kept ones outlined in green, pruned ones grey and crossed.
     """
     plt = _plt()
-    rec = sol.consistency.tests[test_index]
+    tests = sol.consistency.tests
+    if test_index is None:
+        pruned = [int((~np.asarray(t.kept, bool)).sum()) for t in tests]
+        test_index = int(np.argmax(pruned))  # (the first of the largest; 0 when none pruned)
+    rec = tests[test_index]
     cand = rec.candidates
     n = cand.shape[-1]
     i, j = pair if pair is not None else (0, n // 2)

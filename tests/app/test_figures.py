@@ -64,3 +64,30 @@ def test_paper_figures(tmp_path):
             dict(mode="ii", order=12, pieces=64, wall_s=2.0, worst_ratio=1.1),
             dict(mode="ii", order=12, pieces=1, wall_s=0.1, worst_ratio=None)]
     assert figures.fig_work_precision(rows, tmp_path / "wp.png").stat().st_size > 5000
+
+
+def test_fig3_defaults_to_the_test_that_pruned_the_most(tmp_path, monkeypatch):
+    """Without test_index, Fig. 3 draws the earliest of the tests that pruned the most
+    sub-boxes (the first test of a run usually prunes nothing); an explicit index wins."""
+    from types import SimpleNamespace
+    cand = Interval([2.9, 0.6], [3.2, 1.5]).subdivide([2, 2]).reshape(-1, 2)
+
+    def rec(t, pruned):
+        kept = np.ones(4, bool)
+        kept[:pruned] = False
+        return SimpleNamespace(t=t, candidates=cand, kept=kept, h_v=Interval(19.5, 20.5))
+
+    sol = SimpleNamespace(consistency=SimpleNamespace(tests=[rec(0.1, 0), rec(0.2, 3), rec(0.3, 1), rec(0.4, 3)]),
+                          state_names=["q", "qd"])
+    titles = []
+    real_save = figures._save
+
+    def save(fig, path):
+        titles.append(fig.axes[0].get_title())
+        return real_save(fig, path)
+
+    monkeypatch.setattr(figures, "_save", save)
+    figures.fig_consistency_plane(sol, H, tmp_path / "a.png", grid=10)
+    figures.fig_consistency_plane(sol, H, tmp_path / "b.png", grid=10, test_index=0)
+    assert titles[0].startswith("Energy consistency test at t* = 0.2 s")
+    assert titles[1].startswith("Energy consistency test at t* = 0.1 s")
