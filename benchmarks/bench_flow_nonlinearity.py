@@ -3,6 +3,7 @@ initial box, for the robot targets of issue 17 (no verified arithmetic involved)
 
 Run:  python benchmarks/bench_flow_nonlinearity.py           # arm3, UR5, Panda (~6 min)
       python benchmarks/bench_flow_nonlinearity.py --quick   # arm3 only, fewer points (~1 min)
+      python benchmarks/bench_flow_nonlinearity.py --cases chain4,chain5,chain6,chain7  # planar chains
 
 A verified set that is a polynomial of degree d in the initial parameters (d = 1: the
 parallelepiped ``c + C r0`` of a first-order Lohner set; d = 2: ``verified.quadratic``'s
@@ -45,6 +46,10 @@ def _case(name):
     if name == "arm3":
         from models.planar import planar_chain
         return planar_chain(3), br.Q0_ARM3, 0.01, (0.25, 0.5, 0.75, 1.0, 1.5, 2.0), (1, 2, 3, 4)
+    if name.startswith("chain"):
+        from models.planar import planar_chain
+        k = int(name[5:])
+        return planar_chain(k), br.chain_q0(k), 1e-3, (0.25, 0.5, 0.75, 1.0), (1, 2, 3)
     if name == "ur5":
         from models.robots import ur5
         return ur5(), br.Q0_UR5, 1e-3, (0.1, 0.25, 0.5, 0.75, 1.0), (1, 2, 3)
@@ -117,8 +122,15 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="arm3 only, 150 points")
     ap.add_argument("--points", type=int, default=None, help="random training points per case")
+    ap.add_argument("--cases", default=None,
+                    help="comma-separated: arm3, ur5, panda, chain2 .. chain7 (default: arm3, ur5, panda)")
     args = ap.parse_args(argv)
     cases = ("arm3",) if args.quick else ("arm3", "ur5", "panda")
+    if args.cases:
+        cases = tuple(c.strip() for c in args.cases.split(","))
+        bad = [c for c in cases if c not in ("arm3", "ur5", "panda") and not (c.startswith("chain") and c[5:].isdigit())]
+        if bad:
+            ap.error(f"unknown case(s) {', '.join(bad)}: arm3, ur5, panda or chainN")
     for name in cases:
         n_points = args.points or (150 if args.quick else (300 if name == "arm3" else 500))
         title, head, rows = run_case(name, n_points, log=lambda s: print(s, file=sys.stderr, flush=True))

@@ -52,8 +52,9 @@ def scaled_basis(A: np.ndarray, widths: np.ndarray, scale: np.ndarray) -> np.nda
 
     Why: a robot's set is 5-30x wider in qd (rad/s) than in q (rad); an orthonormal
     basis of raw columns mixes a qd-sized range into q when a zonotope is wrapped into
-    a parallelepiped. Measured on the 3-link arm +- 0.01 at 0.5 s, merging 63 of 69
-    parameters into 6: q3's width x3.36 with the raw basis, x1.20 with this one.
+    a parallelepiped. Measured on the 3-link arm +- 0.01 at 0.5 s, merging all but the
+    6 widest of 72 parameter columns into 6: q3's width x3.0 with the raw basis, x1.20
+    with this one.
     Any invertible basis is sound here: the callers enclose ``B^-1`` rigorously."""
     scale = np.asarray(scale, dtype=float)
     scale = np.where(np.isfinite(scale), scale, 0.0)
