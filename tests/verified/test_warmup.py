@@ -1,0 +1,25 @@
+"""verified.warmup: the kernel warm-up runs, and its background process is handled."""
+import subprocess
+import sys
+
+from verified import warmup
+
+
+def test_compile_kernels_runs_every_arithmetic():
+    lines = []
+    assert warmup.compile_kernels(log=lines.append) >= 0
+    assert len(lines) == 7 and "affine" in lines[1] and "'model_degree': 4" in lines[-2]
+
+
+def test_background_warmup_can_be_turned_off(monkeypatch):
+    monkeypatch.setenv("MBS_NO_WARMUP", "1")
+    assert warmup.start_in_background() is None
+    assert warmup.finish_background(None) == ""
+
+
+def test_background_failures_and_overruns_are_reported_not_raised():
+    bad = subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
+    assert "exited with code 3" in warmup.finish_background(bad)
+    slow = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    msg = warmup.finish_background(slow, timeout=0.2)
+    assert "stopped after" in msg and slow.poll() is not None

@@ -1,0 +1,113 @@
+"""Compile the numba kernels once, ahead of use: ``python -m verified.warmup``.
+
+The kernels are compiled on first use and cached on disk (``cache=True``), which costs
+seconds to a minute per family the first time: on the 2-core CI machine about 45 s for
+the affine Taylor kernel, 40 s for the Taylor-model kernels and 20 s for the affine
+reference kernel and the interval loops, none of which the demo's double pendulum uses.
+This module runs tiny verified integrations that go through every family (interval,
+affine with fresh symbols, Taylor models of degree 2, 3 and 4 with the composition
+step, interval parameters, the rigorous linear solve), so that later runs start warm.
+``python -m mbs demo`` starts it in a background process on the machine's other core.
+
+Nothing here is needed for correctness: a kernel that is not warm compiles when it is
+first called.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["compile_kernels", "start_in_background", "finish_background"]
+
+
+def _rhs(x, p):
+    """A small ODE whose graph has every operation the Taylor kernels implement."""
+    q, v = x
+    s = (q * q + 1.0).sqrt()
+    return [v, -p[0] * q.sin() + 0.1 * q.cos() * v / s + 0.01 * (q.exp() + (s + 1.0).log() + (0.1 * q).tan()
+                                                                  + q.arctan() + v ** 2 * v.mid())]
+
+
+def compile_kernels(log=None) -> float:
+    """Run the tiny integrations (about 2 minutes cold on 2 shared cores, a second warm);
+    returns the wall time in s."""
+    from . import interval as iv, linalg
+    from .affine_taylor import affine_range
+    from .interval import Interval, point
+    from .solver import solve
+    from .tracer import trace
+
+    t0 = time.perf_counter()
+    graph = trace(_rhs, 2, n_params=1)
+    x0 = Interval(np.array([0.4, -0.1]), np.array([0.41, -0.09]))
+    p = Interval(np.array([9.8]), np.array([9.82]))
+    runs = [dict(),
+            dict(arithmetic="affine", error_basis="auto"),
+            dict(arithmetic="taylor_model", set_order=2, error_basis="auto"),
+            dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=2),
+            dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=3, error_basis="auto"),
+            dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=4)]
+    for opts in runs:
+        solve(graph, x0, (0.0, 0.05), params=p, order=6, tol=1e-9, **opts)
+        if log is not None:
+            log(f"warm: {opts or 'interval'} ({time.perf_counter() - t0:.0f} s)")
+    # the same without graph parameters, over a batch of boxes (other array shapes), the
+    # graph's interval and affine evaluation over boxes, interval operations and solves
+    free = trace(lambda x, _: _rhs(x, [9.81]), 2)
+    boxes = x0.subdivide([2, 2]).reshape(-1, 2)
+    solve(free, boxes, (0.0, 0.05), order=6, tol=1e-9)
+    solve(free, boxes, (0.0, 0.05), order=6, tol=1e-9, arithmetic="affine")
+    graph.eval_interval(boxes, p.broadcast_to((boxes.shape[0], 1)))
+    affine_range(graph, boxes, p.broadcast_to((boxes.shape[0], 1)))
+    for op in (iv.sin, iv.cos, iv.tan, iv.exp, iv.log, iv.sqrt, iv.atan, iv.sqr):
+        op(boxes)
+    (boxes * boxes - boxes / (boxes + 2.0)) ** 3
+    linalg.solve(point(np.array([[[2.0, 0.1], [0.1, 1.0]]])), boxes[:1])
+    if log is not None:
+        log(f"warm: batches, graph evaluation, interval operations ({time.perf_counter() - t0:.0f} s)")
+    return time.perf_counter() - t0
+
+
+def start_in_background():
+    """``python -m verified.warmup`` in a child process (the same ``verified`` package as
+    this one, so the kernels land in the same cache), or None on a machine with one core
+    (it would slow the caller down) or when ``MBS_NO_WARMUP`` is set."""
+    if (os.cpu_count() or 1) < 2 or os.environ.get("MBS_NO_WARMUP"):
+        return None
+    root = str(Path(__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+    try:
+        return subprocess.Popen([sys.executable, "-m", "verified.warmup"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, env=env)
+    except OSError:
+        return None
+
+
+def finish_background(proc, timeout: float = 300.0) -> str:
+    """Wait for :func:`start_in_background`'s child (at most ``timeout`` s, then stop it);
+    a one-line report."""
+    if proc is None:
+        return ""
+    t0 = time.perf_counter()
+    try:
+        rc = proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+        return f"kernel warm-up stopped after {timeout:.0f} s (the kernels compile on first use instead)"
+    waited = time.perf_counter() - t0
+    if rc != 0:
+        return f"kernel warm-up exited with code {rc} (the kernels compile on first use instead)"
+    return (f"the other arithmetics' kernels were compiled in the background for later runs"
+            f"{f' (waited {waited:.0f} s for them)' if waited >= 1 else ''}")
+
+
+if __name__ == "__main__":
+    wall = compile_kernels(log=lambda s: print(s, file=sys.stderr, flush=True))
+    print(f"numba kernels warm ({wall:.1f} s)")
