@@ -559,7 +559,7 @@ def _bounds(x):
 def _flat(arr, shape):
     if arr.shape != shape:
         arr = np.broadcast_to(arr, shape)
-    return np.ascontiguousarray(arr).reshape(-1)
+    return _k.kernel_array(arr).reshape(-1)
 
 
 def _binary(loop, x, y):
@@ -787,8 +787,8 @@ _UFUNCS = {
 # (here, not in verified.linalg: the @ operator needs them, and linalg builds on Interval)
 def _flatten(x, batch_shape, core_shape):
     full = batch_shape + core_shape
-    lo = np.ascontiguousarray(np.broadcast_to(x.lo, full)).reshape((-1,) + core_shape)
-    hi = np.ascontiguousarray(np.broadcast_to(x.hi, full)).reshape((-1,) + core_shape)
+    lo = _k.kernel_array(np.broadcast_to(x.lo, full)).reshape((-1,) + core_shape)
+    hi = _k.kernel_array(np.broadcast_to(x.hi, full)).reshape((-1,) + core_shape)
     return lo, hi
 
 

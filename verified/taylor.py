@@ -380,10 +380,10 @@ class TaylorODE:
         else:
             p = Interval._from_bounds(np.zeros(batch + (0,)), np.zeros(batch + (0,)))
         nb = int(np.prod(batch, dtype=int))
-        xlo = np.ascontiguousarray(x.lo.reshape(nb, self.n).T)
-        xhi = np.ascontiguousarray(x.hi.reshape(nb, self.n).T)
-        plo = np.ascontiguousarray(p.lo.reshape(nb, self.n_params).T)
-        phi = np.ascontiguousarray(p.hi.reshape(nb, self.n_params).T)
+        xlo = _k.kernel_array(x.lo.reshape(nb, self.n).T)
+        xhi = _k.kernel_array(x.hi.reshape(nb, self.n).T)
+        plo = _k.kernel_array(p.lo.reshape(nb, self.n_params).T)
+        phi = _k.kernel_array(p.hi.reshape(nb, self.n_params).T)
         t = self._tape
         lo, hi = _taylor_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, xlo, xhi, plo, phi, order)
         # (n, order+1, B) -> (..., order+1, n)
