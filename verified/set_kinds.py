@@ -14,7 +14,8 @@ factory): neither the driver loop nor the run set-up change.
 
 A stepper factory takes the problem (:class:`verified.solver.VerifiedODE`: its
 evaluators), the Taylor order, the parameter box (or None), the error basis, the cap on
-a set's parameters (None: the stepper's default), ``absorb`` and ``model_degree``.
+a set's parameters (None: the stepper's default), ``absorb``, ``model_degree`` and
+``model_caps`` (the composition's monomial caps, a dict; None: the defaults).
 """
 
 from __future__ import annotations
@@ -39,12 +40,12 @@ class SetKind:
     stepper: Callable
 
 
-def _lohner(prob, order, params, error_basis, max_params, absorb, model_degree):
+def _lohner(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None):
     return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis, absorb=absorb,
                          max_params=max_params)
 
 
-def _mean_value_second_order(prob, order, params, error_basis, max_params, absorb, model_degree):
+def _mean_value_second_order(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None):
     return QuadraticStepper(prob.taylor, prob.variational, prob.second_variational, order, params, error_basis,
                             second_over_set=prob.second_variational_over_set,
                             second_directional=(None if prob.arithmetic == "interval"
@@ -52,9 +53,10 @@ def _mean_value_second_order(prob, order, params, error_basis, max_params, absor
                             max_params=max_params)
 
 
-def _composition(prob, order, params, error_basis, max_params, absorb, model_degree):
+def _composition(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None):
+    caps = {f"{k}_cap": int(v) for k, v in (model_caps or {}).items()}
     return TaylorModelFlowStepper(prob.taylor, prob.set_models, order, params, error_basis,
-                                  max_params=max_params, degree=3 if model_degree is None else model_degree)
+                                  max_params=max_params, degree=3 if model_degree is None else model_degree, **caps)
 
 
 SET_KINDS: dict[tuple[int, str], SetKind] = {

@@ -237,6 +237,7 @@ def solve(
     set_order: int = 1,
     set_step: str = "mean_value",
     model_degree: int | None = None,
+    model_caps: dict | None = None,
     absorb: bool = False,
     params_per_state: int | None = None,
     consistency=None,
@@ -340,6 +341,17 @@ def solve(
         the UR5 to T = 1 at ratio 1.21 in 51 s (855 steps against 1065), the 3-link arm
         +- 1e-3 to 1.30 s (ratio 1.25 at 1.2 s, against 1.27 s and 1.33), the double
         pendulum from one box to 1.54 s (against 1.46 s) at 1.3x the wall time.
+    model_caps : dict or None (only with ``set_step="composition"``): how many of a set's
+        widest symbols get quadratic, cubic, quartic and star monomials in the
+        composition's Taylor models, e.g. ``{"quadratic": 32, "cubic": 16}``; keys among
+        :data:`MODEL_CAPS`, each an int >= 0, missing ones at the defaults
+        (``verified.tm_flow``: 16, 6, 4, 6). More monomials mean fewer terms bounded at
+        every operation at a higher cost per step. Measured (q0 +- 1e-3, degree 3):
+        ``{"quadratic": 32, "cubic": 16}`` takes the planar 4-link chain to T = 1 at ratio
+        1.29 in 20 s (default caps: break-down at 0.95 s), the 5-, 6-, 7-link chains to
+        0.78 / 0.65 / 0.49 s (0.71 / 0.59 / 0.37 s) at 2-4x the time, the 3-link arm to
+        T = 2 at ratio 1.21 (1.35) in 2.5x the time; the UR5 to T = 1 at the same ratio
+        (1.13) in 3.7x the time, so the defaults stay.
     absorb : False (default) or True. With
         ``set_order=1``, turn the error part ``Q r`` into new parameters of the set once
         it is 10 % of the exactly carried part (:meth:`verified.sets.DoubletonSets.absorb_error`;
@@ -430,6 +442,7 @@ def solve(
         if set_step != "composition":
             raise ValueError("model_degree is the degree of set_step='composition''s Taylor models: "
                              "it needs set_order=2, set_step='composition'")
+    model_caps = _check_model_caps(model_caps, set_step)
     if not isinstance(absorb, (bool, np.bool_)):
         raise ValueError(f"absorb must be True or False, got {absorb!r}")
     if params_per_state is not None and (isinstance(params_per_state, (bool, np.bool_))
@@ -458,7 +471,8 @@ def solve(
     if absorb and appended:
         raise ValueError("absorb=True needs set_order=1, adaptive=False, no consistency test and no "
                          "states appended by a hook")
-    stepper = _stepper(kind, prob, order, setup.params, error_basis, bool(absorb), params_per_state, model_degree)
+    stepper = _stepper(kind, prob, order, setup.params, error_basis, bool(absorb), params_per_state, model_degree,
+                       model_caps)
     stepper.steer = setup.n_steer
     control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
     wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
@@ -466,7 +480,7 @@ def solve(
     merge = MergePolicy(merge_slack) if adaptive and merge_slack is not None else None
     def make_stepper(graph):  # a stepper of this run's kind for another graph (backward tests)
         return _stepper(kind, VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis,
-                        model_degree=model_degree)
+                        model_degree=model_degree, model_caps=model_caps)
 
     run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper)
     steps = 0
@@ -720,7 +734,28 @@ class _Run:
 
 
 def _stepper(kind: SetKind, prob: VerifiedODE, order, params, error_basis, absorb=False,
-             params_per_state=None, model_degree=None) -> LohnerStepper:
+             params_per_state=None, model_degree=None, model_caps=None) -> LohnerStepper:
     """The stepper of the run's set kind (:mod:`verified.set_kinds`) for ``prob``."""
     max_params = None if params_per_state is None else params_per_state * prob.n
-    return kind.stepper(prob, order, params, error_basis, max_params, absorb, model_degree)
+    return kind.stepper(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps)
+
+
+#: the keys of ``solve(model_caps=...)``: the symbols with quadratic, cubic, quartic and
+#: star monomials in the composition's Taylor models (verified.tm_flow.TaylorModelFlowStepper)
+MODEL_CAPS = ("quadratic", "cubic", "quartic", "star")
+
+
+def _check_model_caps(model_caps, set_step):
+    if model_caps is None:
+        return None
+    if set_step != "composition":
+        raise ValueError("model_caps are the caps of set_step='composition''s Taylor models: "
+                         "it needs set_order=2, set_step='composition'")
+    if not isinstance(model_caps, dict):
+        raise ValueError(f"model_caps must be a dict with keys among {', '.join(MODEL_CAPS)}, got {model_caps!r}")
+    for k, v in model_caps.items():
+        if k not in MODEL_CAPS:
+            raise ValueError(f"model_caps: unknown key {k!r} (known: {', '.join(MODEL_CAPS)})")
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ValueError(f"model_caps[{k!r}] must be an int >= 0, got {v!r}")
+    return dict(model_caps)

@@ -100,6 +100,11 @@ SETTINGS = [
     ("merge_slack", dict(merge_slack=NAN)),
     ("adaptive", dict(adaptive="yes")),
     ("progress", dict(progress=3)),
+    ("model_caps", dict(model_caps={"cubic": 8})),  # needs set_step="composition"
+    ("model_caps", dict(model_caps={"quad": 8}, set_order=2, set_step="composition")),
+    ("model_caps", dict(model_caps={"cubic": -1}, set_order=2, set_step="composition")),
+    ("model_caps", dict(model_caps={"star": True}, set_order=2, set_step="composition")),
+    ("model_caps", dict(model_caps=[32, 16], set_order=2, set_step="composition")),
 ]
 
 
@@ -194,3 +199,20 @@ def test_good_arguments_still_accepted():
                 order=np.int64(8), tol=np.float64(1e-8), h_max=INF, subdivision=np.array([2, 1]),
                 max_steps=np.int64(1000))
     assert sol.success and list(sol.t) == [0.0, 0.25, 0.5] and sol.stats["boxes"] == 2
+
+
+def test_model_caps_reach_the_composition_stepper(monkeypatch):
+    """solve(model_caps=...) sets the stepper's monomial caps; keys left out keep the defaults."""
+    from verified import tm_flow
+    seen = {}
+    real = tm_flow.TaylorModelFlowStepper.__init__
+
+    def record(self, *a, **k):
+        real(self, *a, **k)
+        seen.update(quadratic=self.quadratic_cap, cubic=self.cubic_cap, star=self.star_cap)
+
+    monkeypatch.setattr(tm_flow.TaylorModelFlowStepper, "__init__", record)
+    sol = solve(_oscillator(), BOX2, (0.0, 0.1), set_order=2, set_step="composition", arithmetic="taylor_model",
+                model_caps={"quadratic": 5, "cubic": 3})
+    assert sol.status == "completed"
+    assert seen == dict(quadratic=5, cubic=3, star=tm_flow.STAR_CAP)

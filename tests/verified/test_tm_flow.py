@@ -383,3 +383,34 @@ def test_tube_coefficients_with_graph_parameters_contain_exact_coefficients():
     check_series_contains(g, tm_flow.models_to_forms(tube, M, mq), C, K, plo, phi, n_random=6, seed=7)
     with pytest.raises(ValueError, match="parameters"):
         tm_flow.tube_coefficients(TaylorModelODE(g), tube, M, mq, K, None)
+
+
+@pytest.mark.slow
+def test_four_link_chain_to_one_second_with_more_monomials():
+    """The planar 4-link chain, q0 +- 1e-3, to T = 1 with solve(model_caps={"quadratic": 32,
+    "cubic": 16}) (the default caps break down at 0.95 s): completed, and every trajectory
+    sampled with Pinocchio's aba (DOP853) is inside at every output time and in the tube."""
+    import pinocchio as pin
+
+    from mbs.pinocchio_check import _QMap
+    from mbs.simulate import system_for
+    from models.planar import planar_chain
+
+    chain = planar_chain(4)
+    q0 = np.array([0.5, -0.3, 0.2, -0.3])
+    lo = np.r_[q0 - 1e-3, np.zeros(4)]
+    hi = np.r_[q0 + 1e-3, np.zeros(4)]
+    sol = solve(system_for(chain, "i").rhs, Interval(lo, hi), (0.0, 1.0), t_eval=np.linspace(0, 1, 21), order=8,
+                tol=1e-10, error_basis="auto", set_order=2, set_step="composition", arithmetic="taylor_model",
+                params_per_state=12, model_caps={"quadratic": 32, "cubic": 16})
+    assert sol.status == "completed", sol.reason
+    model = chain.to_pinocchio()
+    data = model.createData()
+    qm = _QMap(chain, model)
+
+    def f(x):
+        q, qd = x[:4], x[4:]
+        return np.r_[qd, qm.back(pin.aba(model, data, qm.q(q), qm.v(qd), qm.v(np.zeros(4))))]
+
+    sols = trajectories(f, sample_initial_points(lo, hi, 12), 1.0)
+    assert misses(sol, sols) == []
