@@ -345,13 +345,14 @@ def solve(
         widest symbols get quadratic, cubic, quartic and star monomials in the
         composition's Taylor models, e.g. ``{"quadratic": 32, "cubic": 16}``; keys among
         :data:`MODEL_CAPS`, each an int >= 0, missing ones at the defaults
-        (``verified.tm_flow``: 16, 6, 4, 6). More monomials mean fewer terms bounded at
-        every operation at a higher cost per step. Measured (q0 +- 1e-3, degree 3):
-        ``{"quadratic": 32, "cubic": 16}`` takes the planar 4-link chain to T = 1 at ratio
-        1.29 in 20 s (default caps: break-down at 0.95 s), the 5-, 6-, 7-link chains to
-        0.78 / 0.65 / 0.49 s (0.71 / 0.59 / 0.37 s) at 2-4x the time, the 3-link arm to
-        T = 2 at ratio 1.21 (1.35) in 2.5x the time; the UR5 to T = 1 at the same ratio
-        (1.13) in 3.7x the time, so the defaults stay.
+        (``verified.tm_flow``: quadratic 32 and cubic 16 for up to 9 states, else 16 and 6;
+        quartic 4, star 6). More monomials mean fewer terms bounded at every operation at
+        a higher cost per step. Measured (q0 +- 1e-3, degree 3), 32 / 16 against 16 / 6:
+        the planar 4-link chain to T = 1 at ratio 1.29 in 20 s (break-down at 0.95 s), the
+        3-link arm to T = 2 at ratio 1.21 (1.35) in 2.5x the time, the double pendulum
+        from one box to 1.70 s (1.54 s): hence the default for small systems; the 5-, 6-,
+        7-link chains to 0.78 / 0.65 / 0.49 s (0.71 / 0.59 / 0.37 s) at 3-4x the time and
+        the UR5 to T = 1 at the same ratio (1.13) in 3.7x the time.
     absorb : False (default) or True. With
         ``set_order=1``, turn the error part ``Q r`` into new parameters of the set once
         it is 10 % of the exactly carried part (:meth:`verified.sets.DoubletonSets.absorb_error`;
