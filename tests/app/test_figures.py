@@ -1,9 +1,6 @@
 """Figures (mbs.app.figures): Figs. 2, 3, 5 are written; Fig. 3's shaded cells are truly
 inconsistent; sampled trajectories agree with an independent integration."""
-import sys
-
 import numpy as np
-import pytest
 
 from models import pendulum
 from mbs.app import figures
