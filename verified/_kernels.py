@@ -53,14 +53,16 @@ def rd(x):
     return x - (abs(x) * EPS + ETA)
 
 
-
-def kernel_array(a, dtype=np.float64):
-    """``a`` as a C-contiguous, writable array of ``dtype`` for a compiled kernel (a copy
-    only when it is not one already). numba compiles a separate specialization for a
+def kernel_array(a):
+    """``a`` as a C-contiguous, writable float64 array for a compiled kernel (a copy only
+    when it is not one already). numba compiles a separate specialization for a
     read-only argument (``np.broadcast_to`` views, and ``np.ascontiguousarray`` keeps them
     read-only): a full test run compiled four versions of ``mul_loop`` and two of the
-    Taylor kernel, each once more on a cold cache."""
-    return np.require(a, dtype=dtype, requirements=("C", "W"))
+    Taylor kernel, each once more on a cold cache. (Not ``np.require``: it costs 2 us per
+    call, and the interval operations call this on every operand.)"""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
+
 
 @njit(cache=_CACHE)
 def ru(x):

@@ -787,8 +787,9 @@ _UFUNCS = {
 # (here, not in verified.linalg: the @ operator needs them, and linalg builds on Interval)
 def _flatten(x, batch_shape, core_shape):
     full = batch_shape + core_shape
-    lo = _k.kernel_array(np.broadcast_to(x.lo, full)).reshape((-1,) + core_shape)
-    hi = _k.kernel_array(np.broadcast_to(x.hi, full)).reshape((-1,) + core_shape)
+    # (broadcast only where the shape differs: a broadcast view is read-only, and copied)
+    lo = _k.kernel_array(x.lo if x.lo.shape == full else np.broadcast_to(x.lo, full)).reshape((-1,) + core_shape)
+    hi = _k.kernel_array(x.hi if x.hi.shape == full else np.broadcast_to(x.hi, full)).reshape((-1,) + core_shape)
     return lo, hi
 
 

@@ -44,7 +44,6 @@ def orthonormal_basis(A: np.ndarray, widths: np.ndarray) -> np.ndarray:
     return Q
 
 
-
 def scaled_basis(A: np.ndarray, widths: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """``D Q'`` with ``D = diag(scale)`` (B, n) and ``Q'`` the sorted QR basis
     (:func:`orthonormal_basis`) of ``D^-1 A``: a basis that is orthonormal in the state
@@ -62,6 +61,7 @@ def scaled_basis(A: np.ndarray, widths: np.ndarray, scale: np.ndarray) -> np.nda
     d = np.maximum(scale, np.maximum(top * 1e-12, 1e-300))  # (a state without extent)
     Qs = orthonormal_basis(A / d[:, :, None], widths)
     return Qs * d[:, :, None]
+
 
 class QRBasis:
     """Lohner's QR method: the error part ``Q r`` is carried in the orthonormal basis

@@ -65,8 +65,9 @@ def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int
     try:
         rc = _run(out, t_end, pieces, samples, log)
     except BaseException:
-        if warm is not None:
+        if warm is not None:  # (Ctrl-C or an error: the warm-up is not waited for)
             warm.kill()
+            warm.wait()
         raise
     note = finish_background(warm)
     if note:
