@@ -31,7 +31,10 @@ from fractions import Fraction
 
 import numpy as np
 
+from mbs import Chain
+from mbs.scalar import cos, sin, square
 from verified.exact import enclose_fraction, enclose_pi_multiple
+from verified.graph import trace
 
 M1 = M2 = 1.0
 L1 = L2 = 1.0
@@ -40,17 +43,14 @@ PARAMS = dict(m1=M1, m2=M2, l1=L1, l2=L2, g=G)
 
 
 def _sin(x):
-    from mbs.scalar import sin
     return sin(x)
 
 
 def _cos(x):
-    from mbs.scalar import cos
     return cos(x)
 
 
 def _sq(x):
-    from mbs.scalar import square
     return square(x)
 
 
@@ -100,7 +100,7 @@ def mass_matrix_eq23(x, m1=M1, m2=M2, l1=L1, l2=L2):
 
 def sympy_model(**params):
     """(x symbols, [4 rhs expressions of eq. (22)], H of eq. (24)) as sympy."""
-    import sympy
+    import sympy  # (sympy only for the symbolic model: 0.4 s the numeric modes never need)
     xs = list(sympy.symbols("x1:5", real=True))
     kw = {k: sympy.Float(v) if isinstance(v, float) and not float(v).is_integer() else
           sympy.Integer(int(v)) if float(v).is_integer() else v
@@ -128,7 +128,6 @@ def initial_point():
 def dh_chain(m1=M1, m2=M2, l1=L1, l2=L2, g=G):
     """Standard-DH chain: a_i = l_i, point masses at the link ends, gravity (g, 0, 0)
     (base x axis pointing down), q = (x1, x2)."""
-    from mbs import Chain
     return Chain.from_dh([dict(joint="R", a=l1, mass=m1), dict(joint="R", a=l2, mass=m2)],
                          gravity=(g, 0.0, 0.0), name="double_pendulum_dh")
 
@@ -163,19 +162,16 @@ def urdf_xml(m1=M1, m2=M2, l1=L1, l2=L2):
 
 def urdf_chain(m1=M1, m2=M2, l1=L1, l2=L2, g=G):
     """The double pendulum from a small URDF (joints about -y, masses along -z)."""
-    from mbs import Chain
     return Chain.from_urdf(urdf_xml(m1, m2, l1, l2), gravity=(0.0, 0.0, -g))
 
 
 def rhs_graph():
     """eq. (22) traced into a ``verified.graph.Graph`` (x -> x')."""
-    from verified.graph import trace
     return trace(rhs, 4, input_names=["x1", "x2", "x3", "x4"],
                  output_names=["dx1", "dx2", "dx3", "dx4"])
 
 
 def energy_graph():
     """eq. (24) traced: x -> [H] (dH/dt = 0 for this undamped model)."""
-    from verified.graph import trace
     return trace(lambda x, p: [hamiltonian(x)], 4, input_names=["x1", "x2", "x3", "x4"],
                  output_names=["H"])

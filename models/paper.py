@@ -85,7 +85,7 @@ class PaperModel:
     def _system_with_params(self, energy_rate: str, cparams) -> System:
         """Mode iii with some of the paper's parameters uncertain: the hand-written
         equations traced with those parameters as PARAMs."""
-        import sympy
+        import sympy  # (see chain)
         mod, name = self.module, self.name
         pnames = list(cparams.names)
         extra = [k for k in pnames if k not in self.param_names]
@@ -116,7 +116,7 @@ class PaperModel:
         """dH/dt = grad H . f simplifies to 0 with every parameter a free symbol, so it is
         0 for the float parameter values too (simplifying with the float values leaves
         rounding residues such as 7e-15 x3 sin x1)."""
-        import sympy
+        import sympy  # (see chain)
         mod = self.module
         xs = list(sympy.symbols(f"x1:{n + 1}", real=True))
         ps = {k: sympy.Symbol(k, positive=True) for k in self.param_names}  # m, l, g, ...

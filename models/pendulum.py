@@ -15,7 +15,10 @@ from fractions import Fraction
 
 import numpy as np
 
+from mbs import Chain
 from verified.exact import enclose_fraction
+
+from .double_pendulum import _cos, _sin, _sq
 
 M, L, G = 1.0, 1.0, 9.81
 #: initial box of sec. 5.1 (these bounds are doubles exactly as printed... see below)
@@ -31,14 +34,12 @@ def initial_box():
 
 def rhs(x, p=None, m=M, l=L, g=G):
     """eq. (18) over the generic scalar: x = (q, qd) -> (qd, -(g/l) sin q)."""
-    from .double_pendulum import _sin
     q, qd = x[0], x[1]
     return [qd, -(g / l) * _sin(q)]
 
 
 def hamiltonian(x, p=None, m=M, l=L, g=G):
     """eq. (19), written as in the paper (not simplified)."""
-    from .double_pendulum import _cos, _sin, _sq
     q, qd = x[0], x[1]
     return 0.5 * m * (_sq(l * _sin(q) * qd) + _sq(l * _cos(q) * qd)) \
         + m * g * (l - l * _cos(q))
@@ -46,7 +47,7 @@ def hamiltonian(x, p=None, m=M, l=L, g=G):
 
 def sympy_model(m=M, l=L, g=G):
     """(x symbols, [rhs exprs], H expr) of eqs. (18)-(19)."""
-    import sympy
+    import sympy  # (sympy only for the symbolic model: 0.4 s the numeric modes never need)
     q, qd = sympy.symbols("q qd", real=True)
     f = [qd, -sympy.Float(g) / sympy.Float(l) * sympy.sin(q)]
     H = sympy.Rational(1, 2) * m * ((l * sympy.sin(q) * qd) ** 2 + (l * sympy.cos(q) * qd) ** 2) \
@@ -57,6 +58,5 @@ def sympy_model(m=M, l=L, g=G):
 def chain(m=M, l=L, g=G):
     """The pendulum as a one-link DH chain: a = l, point mass at the tip, gravity along
     +x of the base frame (so q is the angle from the downward vertical)."""
-    from mbs import Chain
     return Chain.from_dh([dict(joint="R", a=l, mass=m)], gravity=(g, 0.0, 0.0),
                          name="pendulum")

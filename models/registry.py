@@ -10,6 +10,8 @@
 """
 from __future__ import annotations
 
+from mbs import ModelError
+
 from . import double_pendulum, paper, pendulum, planar, puma560, robots
 
 FACTORIES = {
@@ -36,7 +38,6 @@ SYSTEMS = {m.name: m for m in (paper.PENDULUM, paper.DOUBLE_PENDULUM)}
 
 def get(name: str):
     """The chain of a ready model (see :data:`NAMES`)."""
-    from mbs import ModelError
     try:
         return FACTORIES[name]()
     except KeyError:
