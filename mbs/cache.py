@@ -14,6 +14,7 @@ Corrupt or unreadable entries are ignored (recomputed and overwritten).
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import os
 import tempfile
@@ -70,10 +71,9 @@ CODE_MODULES = ("mbs.scalar", "mbs.spatial", "mbs.chain", "mbs.symbolic", "mbs.n
 def code_fingerprint() -> str:
     """sha256 of the source of :data:`CODE_MODULES` and the sympy version, so that a
     change of the derivation or of the graph builder never reuses stale entries."""
-    import importlib.util
     h = hashlib.sha256()
     try:
-        import sympy
+        import sympy  # (import here: sympy is not an import-time dependency of mbs)
         h.update(sympy.__version__.encode())
     except ImportError:  # pragma: no cover
         pass

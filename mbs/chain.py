@@ -27,6 +27,7 @@ import numpy as np
 from .errors import ModelError
 from .inertia import RigidInertia
 from .kinematics import joint_motion
+from . import pinocchio_check
 from .scalar import is_sympy
 from . import spatial as sp3
 
@@ -209,13 +210,13 @@ class Chain:
     @classmethod
     def from_dh(cls, rows, convention="standard", **kwargs) -> "Chain":
         """Chain from a Denavit-Hartenberg table; see :func:`mbs.dh.chain_from_dh`."""
-        from .dh import chain_from_dh
+        from .dh import chain_from_dh  # (import here: mbs.dh imports this module)
         return chain_from_dh(rows, convention=convention, **kwargs)
 
     @classmethod
     def from_urdf(cls, path_or_xml, **kwargs) -> "Chain":
         """Chain from a URDF file path or XML string; see :func:`mbs.urdf.chain_from_urdf`."""
-        from .urdf import chain_from_urdf
+        from .urdf import chain_from_urdf  # (import here: mbs.urdf imports this module)
         return chain_from_urdf(path_or_xml, **kwargs)
 
     # ------------------------------------------------------------------ identity
@@ -328,21 +329,20 @@ class Chain:
     def symbolic(self):
         """The sympy model (:class:`mbs.symbolic.SymbolicModel`), built lazily and cached."""
         if getattr(self, "_symbolic", None) is None:
-            from .symbolic import SymbolicModel
+            from .symbolic import SymbolicModel  # (import here: sympy only for the symbolic model)
             self._symbolic = SymbolicModel(self)
         return self._symbolic
 
     def numeric(self):
         """The generic-scalar numeric model (:class:`mbs.numeric.NumericModel`)."""
         if getattr(self, "_numeric", None) is None:
-            from .numeric import NumericModel
+            from .numeric import NumericModel  # (import here: keeps verified and numba out of import mbs)
             self._numeric = NumericModel(self)
         return self._numeric
 
     def to_pinocchio(self, **kwargs):
         """The Pinocchio model of this chain (see :func:`mbs.pinocchio_check.to_pinocchio`)."""
-        from .pinocchio_check import to_pinocchio
-        return to_pinocchio(self, **kwargs)
+        return pinocchio_check.to_pinocchio(self, **kwargs)
 
 
 def build_tree(root, link_inertias, raw_joints, *, gravity=(0.0, 0.0, -9.81), name="chain",

@@ -54,7 +54,7 @@ _KEYS = ("joint", "theta", "d", "a", "alpha", "mass", "com", "inertia", "damping
 def exact_cos_sin(angle):
     """(cos, sin) of a constant angle; exact for (near) multiples of pi/2 and sympy."""
     if is_sympy(angle):
-        import sympy
+        import sympy  # (sympy only for symbolic angles: models.puma560 imports this module)
         if angle.is_number:
             c, s = sympy.cos(angle), sympy.sin(angle)
             if c.is_Number and s.is_Number:

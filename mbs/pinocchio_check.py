@@ -21,7 +21,7 @@ from .errors import ModelError
 
 def _pin():
     try:
-        import pinocchio as pin
+        import pinocchio as pin  # (pinocchio only for the comparison, not at import mbs)
     except ImportError as e:  # pragma: no cover
         raise ModelError("Pinocchio is not installed (pip install pin)") from e
     return pin

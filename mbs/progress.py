@@ -58,7 +58,7 @@ class Progress:
         if self.bar is None:
             if time.perf_counter() - self._t0 < self.delay:
                 return
-            from tqdm.auto import tqdm
+            from tqdm.auto import tqdm  # (tqdm only once a bar is shown: runs over ~2 s on a terminal)
             total = float(t_end) if t_end is not None else self.t_end
             self.bar = tqdm(total=total, desc=self.desc, unit="s", file=self.file, leave=False,
                             bar_format="{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:g} s "

@@ -10,6 +10,7 @@ import importlib.metadata as md
 from functools import lru_cache
 from pathlib import Path
 
+from .chain import Chain
 from .errors import ModelError
 
 _PREFIX = "cmeel.prefix/share/example-robot-data/robots/"
@@ -71,7 +72,6 @@ def urdf_path(name: str) -> Path:
 def load(name: str, **kwargs):
     """``Chain.from_urdf(urdf_path(name))``; for "panda" the fingers are locked at 0
     unless ``lock`` is given."""
-    from .chain import Chain
     if name == "panda" and "lock" not in kwargs:
         kwargs["lock"] = {j: 0.0 for j in PANDA_FINGERS}
     return Chain.from_urdf(urdf_path(name), **kwargs)
@@ -98,14 +98,14 @@ def system_entry(name):
     ``param_names``."""
     if not isinstance(name, str):
         return None
-    from models.registry import SYSTEMS
+    from models.registry import SYSTEMS  # (import here: models imports mbs)
     return SYSTEMS.get(name)
 
 
 def model_names() -> list:
     """Every model name :func:`load_model` accepts besides paths and
     ``example-robot-data:NAME``: the registry's names and the aliases."""
-    from models.registry import NAMES
+    from models.registry import NAMES  # (import here: models imports mbs)
     return list(NAMES) + sorted(set(ALIASES) - set(NAMES))
 
 
@@ -119,8 +119,7 @@ def load_model(spec: str):
     - a path to a URDF file.
 
     Raises :class:`ModelError` (one line) naming what was tried."""
-    from models.registry import NAMES, get
-    from .chain import Chain
+    from models.registry import NAMES, get  # (import here: models imports mbs)
     if not isinstance(spec, str) or not spec:
         raise ModelError(f"expected a model name, example-robot-data:NAME or a URDF path, got {spec!r}")
     if spec in NAMES:

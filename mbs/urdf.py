@@ -19,10 +19,13 @@ constant to the potential energy (see :mod:`mbs.symbolic`).
 from __future__ import annotations
 
 import io
+import logging
 import os
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+import yourdfpy
 
 from . import spatial as sp3
 from .chain import IDENTITY, RawJoint, build_tree
@@ -69,7 +72,6 @@ def _is_xml(s: str) -> bool:
 
 def _prevalidate(xml: str) -> None:
     """Strict XML parse and structural checks, so errors name the element."""
-    import xml.etree.ElementTree as ET
     try:
         root = ET.fromstring(xml)
     except ET.ParseError as e:
@@ -94,7 +96,6 @@ def _prevalidate(xml: str) -> None:
 def load_urdf(path_or_xml):
     """Parse with yourdfpy (no meshes, no scene graph, no collision meshes).
     Returns (yourdfpy.URDF, xml_text)."""
-    import yourdfpy
     if isinstance(path_or_xml, (str, os.PathLike)) and not (
             isinstance(path_or_xml, str) and _is_xml(path_or_xml)):
         p = Path(path_or_xml)
@@ -106,7 +107,6 @@ def load_urdf(path_or_xml):
     else:
         xml = str(path_or_xml)
     _prevalidate(xml)
-    import logging
     log = logging.getLogger("yourdfpy")
     old = log.level
     log.setLevel(logging.CRITICAL)
