@@ -38,8 +38,13 @@ from numbers import Real
 
 import numpy as np
 
+from verified.graph import Op, trace
+
+from .chain import Chain
 from .errors import ModelError
+from .robots import load_model
 from .scalar import add, mul, sub, total
+from .uncertain import ChainParameters, ParameterError, parse_value
 
 __all__ = ["ControlError", "Reference", "Constant", "Quintic", "Controller", "PD", "ComputedTorque",
            "Disturbance", "FunctionController", "ClosedLoop", "parse_control", "closed_loop"]
@@ -64,9 +69,7 @@ class _Context:
     def nominal(self, spec, where):
         if spec is None:
             return self._nominal_default
-        from .chain import Chain
         if isinstance(spec, dict):
-            from .uncertain import ChainParameters, ParameterError
             try:
                 cp = ChainParameters(self.chain, spec, model_name=self.model_name)
             except ParameterError as e:
@@ -76,7 +79,6 @@ class _Context:
                                    f"({', '.join(k for k, a, b in zip(cp.names, cp.lo, cp.hi) if a != b)})")
             return cp.float_model()
         if isinstance(spec, str):
-            from .robots import load_model
             spec = load_model(spec)
         if isinstance(spec, Chain):
             if spec.n != self.n:
@@ -392,7 +394,6 @@ class Disturbance(Controller):
         self.torques = torques
 
     def resolve(self, ctx):
-        from .uncertain import ParameterError, parse_value
         where = "control disturbance"
         spec = self.torques
         if isinstance(spec, dict):
@@ -440,7 +441,6 @@ class FunctionController(Controller):
         self.fn, self.params, self.uses_time_spec = fn, params or {}, uses_time
 
     def resolve(self, ctx):
-        from .uncertain import ParameterError, parse_value
         where = "control function"
         if not callable(self.fn):
             raise ControlError(f"{where}: expected a callable tau(t, q, qd, p), got {self.fn!r}")
@@ -456,7 +456,6 @@ class FunctionController(Controller):
                 raise ControlError(str(e)) from None
             r.bounds.append((f"fn.{k}", lo, hi))
         # check the output shape (and whether t is used) by tracing once
-        from verified.graph import Op, trace
         n = ctx.n
         try:
             g = trace(lambda x, p: r._call(x[2 * n], x[:n], x[n:2 * n], dict(zip([b[0] for b in r.bounds], p))),
@@ -654,7 +653,6 @@ class ClosedLoop:
 
     # -- graphs
     def _trace(self, fn, outs):
-        from verified.graph import trace
         return trace(fn, len(self.state_names), len(self.param_names), input_names=self.state_names,
                      param_names=self.param_names, output_names=outs)
 

@@ -33,12 +33,19 @@ in as well.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
+from verified import linalg
+from verified.affine_taylor import affine_range
+from verified.graph import trace
 from verified.interval import Interval, concatenate
 from verified.sets import SetView
 
+from . import spatial as sp3
 from .errors import ModelError
+from .scalar import is_sympy
 
 __all__ = ["FrameEnclosure", "Frames", "frame_enclosure", "frame_graph", "attach_frames", "default_frame",
            "evaluate_frame", "METHODS"]
@@ -101,7 +108,6 @@ class FrameEnclosure:
 def frame_graph(chain, frame: str, cparams=None):
     """Graph ``(q, plant parameters) -> (x, y, z, R11, ..., R33)`` of ``frame``'s world
     placement (the parameters as inputs after q)."""
-    from verified.graph import trace
     if frame not in chain.frames:
         raise ModelError(f"unknown frame {frame!r}; frames of {chain.name!r}: {', '.join(sorted(chain.frames))}")
     n = chain.n
@@ -115,13 +121,11 @@ def frame_graph(chain, frame: str, cparams=None):
         if cparams is None:
             R, p = m.frame_placement(frame, x[:n])
         else:
-            from . import spatial as sp3
-            from .scalar import is_sympy
             def ev(v):
                 if isinstance(v, tuple):
                     return tuple(ev(y) for y in v)
                 if is_sympy(v) and v.free_symbols:
-                    from .sympy_eval import compile_generic
+                    from .sympy_eval import compile_generic  # (import here: sympy only for symbolic chains)
                     syms = list(cparams._symbols)
                     return compile_generic([v], syms, cse=False)(*[x[n + cparams._symbols[s]] for s in syms])[0]
                 return float(v) if is_sympy(v) else v
@@ -165,7 +169,6 @@ def _over_set(graph, view, X: Interval, n: int, pbox) -> Interval:
     Jacobian over the box ``X`` (B, n + parameters) widened to hold ``c``: every segment
     from ``(c, mid p)`` into the set lies in it, so the mean value theorem applies
     with ``x_q - c = A' p``, ``A'`` a point matrix of ``A``."""
-    from verified import linalg
     cq = view.c[:, :n]
     if pbox is not None:
         pm = 0.5 * (np.asarray(pbox[0], float) + np.asarray(pbox[1], float))
@@ -200,7 +203,6 @@ def evaluate_frame(graph, X: Interval, method: str = "both", view=None, n: int |
         return graph.eval_interval(X)
     if method == "mean-value":
         return _mean_value(graph, X)
-    from verified.affine_taylor import affine_range
     A = affine_range(graph, X)
     if method == "affine":
         return A
@@ -282,7 +284,6 @@ class Frames:
     :class:`FrameEnclosure`; ``sol.frame.names`` lists the chain's frames."""
 
     def __init__(self, sol, chain, cparams=None):
-        import weakref
         self._sol = weakref.ref(sol)
         self.chain, self.cparams = chain, cparams
         self._cache = {}

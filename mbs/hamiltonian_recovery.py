@@ -75,7 +75,11 @@ import sympy
 from sympy.polys.matrices import DomainMatrix
 from sympy.printing.pycode import PythonCodePrinter
 
+from verified.graph import from_sympy
+from verified.interval import Interval
+
 from .errors import ModelError
+from .system import System
 
 __all__ = ["NoHamiltonianError", "RecoveredHamiltonian", "recover_hamiltonian"]
 
@@ -322,9 +326,6 @@ class RecoveredHamiltonian:
         exact for the ODE as given even when floats were rationalized) or, with
         ``simplified=True``, ``dHdt_simplified`` (``qd^T tau``, eq. (7)).  Free parameters
         need ``param_values`` (dict name or symbol -> number)."""
-        from verified.graph import from_sympy
-        from .system import System
-
         x = [*self.q, *self.qd]
         names = [str(v) for v in x]
         rate = self.dHdt_simplified if simplified else self.dHdt
@@ -1133,9 +1134,6 @@ def _fit_polynomial(G, V, gens, degree, par_vals, params, rng):
 def _check_pd(Mq, V, trig_idx, poly_idx, params, par_vals, pd_params, q_box, max_boxes):
     """Symmetry (exact) and Sylvester's criterion: leading minors > 0, first tried
     symbolically, then by interval branch and bound over ``q_box``."""
-    from verified.graph import from_sympy
-    from verified.interval import Interval
-
     s = Mq.shape[0]
     if (Mq - Mq.T).applyfunc(sympy.expand) != sympy.zeros(s, s):
         raise NoHamiltonianError("recover_hamiltonian: assembled M is not symmetric")

@@ -26,8 +26,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from verified.evaluate import eval_float, jacobian_float
+from verified.graph import GraphBuilder
+from verified.graph_ops import embed, gradient_graph
+from verified.invariant import QuadraticLyapunov
+
+from . import spatial as sp3
 from .control import PD, ClosedLoop, ControlError
-from .scalar import add, mul, neg, sub, total
+from .scalar import add, dot, mul, neg, sub, total
 
 __all__ = ["pd_hold_lyapunov"]
 
@@ -101,9 +107,6 @@ def _potential_difference(loop, nom):
     (``V`` is linear in the masses and first moments): the two gravity models then cancel
     term by term instead of being enclosed separately and subtracted (over a box of 0.1 rad
     that subtraction left an interval Hessian some 10x wider than the payload's own)."""
-    from . import spatial as sp3
-    from .scalar import dot
-
     if nom is not None and not _same_kinematics(loop, nom):
         return lambda q, p: sub(loop._plant(p).potential_energy(q), nom.potential_energy(q))
     mn, hn = _inertial_data(nom) if nom is not None else (None, None)
@@ -124,9 +127,6 @@ def _potential_difference(loop, nom):
 def _compose(T_g, dV_g, G_g, K, centre, qref):
     """Graphs of ``L``, ``e*(p)`` and ``rho(p)`` (module docstring) from ``T``, ``dV``,
     ``G = grad_q dV`` and ``centre(b, p) -> e*`` node ids, all over the loop's ``(x, p)``."""
-    from verified.graph import GraphBuilder
-    from verified.graph_ops import embed
-
     n = qref.size
     nx, npar = T_g.n_inputs, T_g.n_params
     graphs = []
@@ -174,8 +174,6 @@ def _equilibrium_fit(G_g, K, qref, lo, hi):
     function of ``p`` is a valid centre (``L`` stays non-increasing); a close one makes
     ``b(p) = K e* + G(q_ref + e*, p)`` small, and that is the floor the decay certificate
     leaves. Returns ``centre(builder, param_nodes) -> n node ids``."""
-    from verified.evaluate import eval_float, jacobian_float
-
     n, npar = qref.size, len(lo)
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     mid, rad = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -237,10 +235,6 @@ def pd_hold_lyapunov(loop: ClosedLoop, samples=None, rhs=None):
     rounding); by default points about ``q_ref`` and the parameter box. ``rhs``: the
     loop's :meth:`~mbs.control.ClosedLoop.rhs_graph`, if the caller has it (traced once).
     """
-    from verified.evaluate import eval_float, jacobian_float
-    from verified.graph_ops import gradient_graph
-    from verified.invariant import QuadraticLyapunov
-
     pd, K, Kd = _check_loop(loop)
     n = loop.n
     qref = np.asarray(pd.ref.q, float)

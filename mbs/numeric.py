@@ -38,6 +38,9 @@ import sys
 
 import numpy as np
 
+from verified.graph import trace
+from verified.preconditioned import congruence_pivots, solve as preconditioned_solve
+
 from .errors import ModelError, SingularMassMatrixError
 from .scalar import add, sub, mul, div, dot, square, total, is_sympy, is_zero, is_const
 from . import kinematics as kin
@@ -337,8 +340,6 @@ class NumericModel:
         :class:`~mbs.errors.SingularMassMatrixError` when a pivot of M is the constant 0
         (M singular for every q)."""
         if getattr(self, "_pivot_graph", None) is None:
-            from verified.graph import trace
-            from verified.preconditioned import congruence_pivots
             def fn(x, p):
                 x = list(x)
                 M = self._crba(self.joint_transforms(x))
@@ -409,7 +410,6 @@ class NumericModel:
     # ------------------------------------------------------------------ graphs
     def rhs_graph(self):
         """Expression graph x = (q, qd) -> (qd, qdd) (``verified.graph.trace``)."""
-        from verified.graph import trace
         n = self.n
         def fn(x, p):
             return self.rhs(list(x))
@@ -423,7 +423,6 @@ class NumericModel:
     def energy_graph(self):
         """Expression graph (q, qd) -> [H] (H = K + P from getKineticEnergy /
         getPotentialEnergy), for the constraint H_H."""
-        from verified.graph import trace
         n = self.n
         def fn(x, p):
             x = list(x)
@@ -432,7 +431,6 @@ class NumericModel:
 
     def mass_matrix_graph(self):
         """Expression graph q -> the n * n entries of M(q) (row-major; kg m^2, crba)."""
-        from verified.graph import trace
         n = self.n
         def fn(q, p):
             M = self.mass_matrix(list(q))
@@ -442,7 +440,6 @@ class NumericModel:
 
     def potential_graph(self):
         """Expression graph q -> [P(q)] (J, ``potential_energy``)."""
-        from verified.graph import trace
         n = self.n
         def fn(q, p):
             return [self.potential_energy(list(q))]
@@ -452,7 +449,6 @@ class NumericModel:
         """Expression graph (q, qd) -> [dH/dt] = qd^T (-D qd) (eq. (7), tau_ext = 0).
         (The paper's mode (ii) differentiates H along the ODE by automatic
         differentiation instead; that is the verified side's job: it has both graphs.)"""
-        from verified.graph import trace
         n = self.n
         def fn(x, p):
             x = list(x)
@@ -575,8 +571,7 @@ def solve_mass_matrix(M, U, D, rhs, method="preconditioned"):
     and it would bury a symbolic qdd under a symbolic inverse."""
     if method == "preconditioned" and len(rhs) > 1 and not _all_float(M, rhs) \
             and not any(is_sympy(v) for row in M for v in row):
-        from verified.preconditioned import solve
-        return solve(M, rhs)
+        return preconditioned_solve(M, rhs)
     return ldl_substitute(U, D, rhs)
 
 

@@ -27,21 +27,38 @@ model: it asks :func:`mbs.robots.system_entry` and :func:`mbs.robots.load_model`
 """
 from __future__ import annotations
 
+import difflib
+import inspect
+import itertools
+import signal
+import sys
+import threading
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+import verified.solver
 from verified.affine_taylor import affine_range
 from verified.consistency import STRATEGIES, EnergyTest
+from verified.contractor import EnergyShell
 from verified.energy_rate import MODEL_RATES, check_energy_rate
+from verified.energy_shell import EnergyShellHook, max_energy
+from verified.hooks import StopAfterWall
 from verified.interval import Interval, _as_interval
+from verified.invariant import InvariantHook
 from verified.solver import Solution, solve
 
+from . import progress as _progress
+from .chain import Chain
+from .control import closed_loop
 from .errors import ModelError
+from .frames import attach_frames
+from .lyapunov import pd_hold_lyapunov
 from .modes import ALL_MODES, MODES, Mode, get_mode
 from .numeric import PIVOT_TOL
 from .robots import PAPER_MODELS, load_model, system_entry
 from .system import System
+from .uncertain import ChainParameters, parse_value
 
 __all__ = ["MODES", "Mode", "PAPER_MODELS", "simulate", "Simulation", "compare_modes", "system_for",
            "width_deviations", "WidthDeviations", "output_times"]
@@ -134,8 +151,6 @@ def system_for(model, mode: str | Mode = "ii", *, energy_rate: str = "unsimplifi
 
 def _model_chain(model, params):
     """(chain, ChainParameters or None, name) of a chain model (for controllers)."""
-    from .chain import Chain
-    from .uncertain import ChainParameters
     if isinstance(model, System):
         raise ModelError(f"{model.name}: controllers need a chain model (a model name, URDF or mbs.Chain), "
                          "not a bare System; write the torque into the System's rhs instead")
@@ -157,7 +172,6 @@ def _model_chain(model, params):
 
 def _controlled_system(model, mode, params, control, q_init):
     """(System, _MassMatrix, ClosedLoop) of ``model`` under ``control`` (modes i, ii)."""
-    from .control import closed_loop
     mode = get_mode(mode)
     if mode.symbolic:
         raise ValueError("controllers are supported in modes i and ii (the numeric model); "
@@ -187,8 +201,6 @@ def _system_and_chain(model, mode: str | Mode, energy_rate: str, params=None):
         elif not model.has_energy:
             raise ModelError(f"{model.name}: mode {mode} needs an energy graph (System.energy)")
         return model, None
-    from .chain import Chain
-    from .uncertain import ChainParameters
     if isinstance(model, str):
         entry = system_entry(model)
         if entry is not None:
@@ -234,7 +246,6 @@ def _require_dict(params, name, chain=None, names=()):
 def _system_params(system: System, params):
     """The ODE parameters for solve: ``params`` (a dict by name, or a sequence in the
     order of ``system.rhs.param_names``), default ``system.params``."""
-    from .uncertain import parse_value
     names = system.rhs.param_names
     if params is None:
         if not names:
@@ -448,7 +459,6 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [
             _invariant_hook(loop, invariant_after, t0, t_end, t_eval, system.rhs)]
     if max_wall is not None:
-        from verified.hooks import StopAfterWall
         if isinstance(max_wall, bool) or not isinstance(max_wall, (int, float)) or not max_wall > 0 \
                 or not np.isfinite(max_wall):
             raise ValueError(f"max_wall must be a positive number of seconds, got {max_wall!r}")
@@ -457,8 +467,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [ctrl_c]
     bar = None
     if progress is None or isinstance(progress, bool):
-        from .progress import Progress
-        bar = Progress(t_end, f"mode {mode}", enabled=None if progress is None else progress)
+        bar = _progress.Progress(t_end, f"mode {mode}", enabled=None if progress is None else progress)
         progress = bar if bar.enabled else None
     try:
         with ctrl_c:
@@ -473,7 +482,6 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     sol = Simulation.of(sol, mode=mode.name, params=_params_record(system, ode_params), control=loop)
     sol.state_names = system.state_names
     if masses is not None:
-        from .frames import attach_frames
         attach_frames(sol, masses.chain, loop.cparams if loop is not None else getattr(masses, "cparams", None))
     return sol
 
@@ -481,8 +489,6 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
 def _invariant_hook(loop, t_switch, t0: float, t_end: float, t_eval, rhs=None):
     """The InvariantHook of a PD loop holding a pose (:mod:`mbs.lyapunov`): from
     ``t_switch`` on, the run ends as soon as every set lies in a verified invariant box."""
-    from verified.invariant import InvariantHook
-    from .lyapunov import pd_hold_lyapunov
     if isinstance(t_switch, bool) or not isinstance(t_switch, (int, float, np.integer, np.floating)) \
             or not np.isfinite(t_switch) or not t0 <= t_switch <= t_end:
         raise ValueError(f"invariant_after must be a time in [t0, t_end] = [{t0:g}, {t_end:g}], got {t_switch!r}")
@@ -496,8 +502,6 @@ def _energy_shell_hook(masses, loop, box: Interval):
     """The EnergyShellHook of a passive chain: M(q) and P(q) of its numeric model,
     ``hmax`` = the interval bound of ``H = K + P`` over the initial box (sound because
     ``dH/dt = -qd^T D qd <= 0`` without inputs, eq. (7))."""
-    from verified.contractor import EnergyShell
-    from verified.energy_shell import EnergyShellHook, max_energy
     if loop is not None:
         raise ValueError("energy_shell=True needs a system without control inputs (a controller can add energy)")
     if masses is None:
@@ -525,8 +529,6 @@ class _CtrlC:
         self._previous = None
 
     def __enter__(self):
-        import signal
-        import threading
         if threading.current_thread() is threading.main_thread() \
                 and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             self._previous = signal.signal(signal.SIGINT, self._handle)
@@ -534,7 +536,6 @@ class _CtrlC:
 
     def __exit__(self, *exc):
         if self._previous is not None:
-            import signal
             signal.signal(signal.SIGINT, self._previous)
             self._previous = None
         return False
@@ -543,7 +544,6 @@ class _CtrlC:
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
-        import sys
         print("\nCtrl-C: stopping after the current step (press again to abort at once)", file=sys.stderr)
 
     # the hook protocol of verified.hooks
@@ -561,7 +561,6 @@ class _CtrlC:
 
 def _split_params(box, ode_params, system, pieces: dict, subdivision):
     """(boxes (K, n), params (K, p)): the parameter box cut into a grid of ``pieces``."""
-    import itertools
     names = list(system.rhs.param_names)
     if not isinstance(pieces, dict):
         raise ValueError(f"param_subdivision must be a dict {{parameter name: pieces}}, got {pieces!r}")
@@ -608,8 +607,6 @@ def _params_record(system: System, ode_params) -> dict:
 
 def _check_solver_kwargs(kwargs: dict):
     """Unknown keyword arguments name :func:`simulate` (not the solver it calls)."""
-    import inspect
-    import verified.solver
     ours = set(inspect.signature(simulate).parameters) - {"solver_kwargs"}
     sig = inspect.signature(verified.solver.solve)  # (mbs.simulate.solve may be a test's wrapper)
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values()):
@@ -620,7 +617,6 @@ def _check_solver_kwargs(kwargs: dict):
     known = {"t_eval": "output_dt", "rtol": "tol", "atol": "tol", "method": "set_step", "t_span": "t_end"}
     for k in kwargs:
         if k not in theirs:
-            import difflib
             close = [known[k]] if k in known else difflib.get_close_matches(k, sorted(ours | theirs), n=1)
             raise TypeError(f"simulate() got an unexpected keyword argument {k!r}"
                             + (f" (did you mean {close[0]!r}?)" if close else "")

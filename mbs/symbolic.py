@@ -34,8 +34,13 @@ from functools import cached_property
 import numpy as np
 import sympy
 
+from verified.graph import Graph, from_sympy, trace
+
+from . import cache
 from .errors import ModelError, SingularMassMatrixError
+from .numeric import float_pivots, ldl_factor, singular_mass_matrix_message, solve_mass_matrix
 from .scalar import add, mul, dot, total
+from .sympy_eval import compile_generic
 from . import kinematics as kin
 from . import spatial as sp3
 
@@ -296,8 +301,6 @@ class SymbolicModel:
     # ------------------------------------------------------------------ evaluation
     def lambdified(self):
         """Float evaluator (q, qd, tau) -> dict fk, M, K, P, g, c, qdd (numpy, cse'd)."""
-        import numpy as np
-        from .numeric import float_pivots, singular_mass_matrix_message
         n = self.n
         fk = self.world_transforms
         flat_fk = [sympy.sympify(x) for R, p in fk for row in R for x in row] + \
@@ -333,7 +336,6 @@ class SymbolicModel:
     def generic_functions(self):
         """(mass_and_bias, energy): generic-scalar callables of (q..., qd...) from the
         cse'd symbolic expressions (for intervals, batches and tracing)."""
-        from .sympy_eval import compile_generic
         args = list(self.q) + list(self.qd)
         mb = compile_generic(list(self.M) + list(self.bias), args)
         en = compile_generic([self.H], args)
@@ -341,18 +343,8 @@ class SymbolicModel:
 
 
 # ---------------------------------------------------------------------- graphs
-def _graph_cls():
-    try:
-        from verified.graph import Graph
-    except ImportError as e:  # pragma: no cover
-        raise ModelError("expression graphs need the 'verified' package") from e
-    return Graph
-
-
 def _cached_graph(chain, kind, build):
     """Load the graph ``kind`` of ``chain`` from the disk cache or build and store it."""
-    from . import cache
-    Graph = _graph_cls()
     k = cache.key(chain.fingerprint(), kind)
     d = cache.get_json(k)
     if d is not None:
@@ -370,7 +362,6 @@ def _sym_rhs_graph(self, tau_params=False):
     bias c + g are the cse'd sympy expressions, qdd = LDL^T solve of
     M qdd = tau - D qd - c - g (tau = 0 unless ``tau_params``: then tau are the graph's
     parameters).  Cached on disk (see :mod:`mbs.cache`)."""
-    from verified.graph import trace
     n = self.n
     def build():
         mb = self.generic_functions()[0]
@@ -398,7 +389,6 @@ def _sym_rhs_graph(self, tau_params=False):
 
 def _ldl_solve_named(self, M, rhs, x):
     """:func:`mbs.numeric.ldl_solve` whose SingularMassMatrixError names the joints."""
-    from .numeric import ldl_factor
     try:
         U, D = ldl_factor(M)
     except SingularMassMatrixError as e:
@@ -409,14 +399,12 @@ def _ldl_solve_named(self, M, rhs, x):
             raise SingularMassMatrixError(f"{e} (joint {self.chain.joint_names[k]!r})",
                                           joints=[self.chain.joint_names[k]], indices=[k], kind=e.kind) from None
         raise num._singular_error(e, x[:self.n]) from None
-    from .numeric import solve_mass_matrix
     return solve_mass_matrix(M, U, D, rhs, getattr(self, "linear_solve", "preconditioned"))
 
 
 def _sym_energy_graph(self):
     """Expression graph (q, qd) -> [H], H = K + P (eq. (4)), for the constraint H_H.
     Cached on disk."""
-    from verified.graph import from_sympy
     def build():
         inputs = list(self.q) + list(self.qd)
         return from_sympy([self.H], inputs, output_names=["H"])
@@ -432,8 +420,6 @@ def _sym_energy_rate_graph(self, simplified=False):
       equal to eq. (7) in exact arithmetic, but not symbolically simplified, so its
       interval enclosure is not a point.
     Cached on disk."""
-    from verified.graph import from_sympy, trace
-    from .sympy_eval import compile_generic
     n = self.n
     inputs = list(self.q) + list(self.qd)
     d = [float(v) for v in self.D.diagonal()] if n else []

@@ -12,6 +12,9 @@ from fractions import Fraction
 import numpy as np
 import sympy
 
+from verified.graph import from_sympy
+from verified.interval import Interval
+
 from . import scalar as S
 from .errors import ModelError
 
@@ -52,8 +55,6 @@ def _number(x, exact=False):
 
 def _enclosure(x):
     """0-d Interval enclosing the exact value of a constant sympy expression."""
-    from verified.graph import from_sympy
-    from verified.interval import Interval
     # interval evaluation of the expression tree (sqrt(3) is sqrt of [3, 3], ...)
     y = from_sympy([x], inputs=[]).eval_interval(Interval([]))
     return Interval(float(y.lo[0]), float(y.hi[0]))

@@ -49,7 +49,12 @@ from numbers import Real
 
 import numpy as np
 
+from verified.graph import trace
+from verified.interval import Interval
+from verified.preconditioned import congruence_pivots
+
 from .errors import ModelError
+from .inertia import RigidInertia, as_inertia_matrix
 from .numeric import NumericModel, _seq
 from .scalar import add, div, dot, is_sympy, mul, neg, square, total
 from . import spatial as sp3
@@ -70,7 +75,6 @@ def parse_value(v, where: str, *, lower: float | None = None, strict: bool = Fal
     """``(lo, hi)`` floats of a parameter value: a real number (a point), ``[lo, hi]`` /
     ``(lo, hi)``, or a 0-d :class:`verified.interval.Interval`.  ``lower``: the
     smallest allowed value (``strict``: values must exceed it)."""
-    from verified.interval import Interval
     if isinstance(v, Interval):
         if v.shape != ():
             raise ParameterError(f"{where}: expected one interval, got an Interval of shape {v.shape}")
@@ -298,7 +302,6 @@ class ChainParameters:
         inertia = item.get("inertia")
         I = ((0, 0, 0), (0, 0, 0), (0, 0, 0))
         if inertia is not None:
-            from .inertia import RigidInertia, as_inertia_matrix
             try:
                 I = as_inertia_matrix(inertia, f"{where} inertia")
                 arr = np.array(I, dtype=float)
@@ -320,7 +323,6 @@ class ChainParameters:
 
     def interval(self):
         """The parameters as an Interval (p,)."""
-        from verified.interval import Interval
         return Interval(self.lo, self.hi)
 
     def mid(self) -> np.ndarray:
@@ -355,7 +357,7 @@ class ChainParameters:
         chain = self.chain
         n = chain.n
         if self._symbols:
-            from .sympy_eval import compile_generic
+            from .sympy_eval import compile_generic  # (import here: sympy only for symbolic chains)
             syms = list(self._symbols)
             vals = [p[self._symbols[s]] for s in syms]
             cache = {}
@@ -427,14 +429,12 @@ class ChainParameters:
 
     def rhs_graph(self):
         """x = (q, qd), p -> (qd, qdd): the forward dynamics with the parameters as PARAMs."""
-        from verified.graph import trace
         names = self._state_names()
         return trace(lambda x, p: self.bind(p).rhs(list(x)), len(names), self.n, input_names=names,
                      param_names=self.names, output_names=[f"d{s}" for s in names])
 
     def energy_graph(self):
         """(q, qd), p -> [H] (H = K + P, J)."""
-        from verified.graph import trace
         names = self._state_names()
         n = self.chain.n
         return trace(lambda x, p: [self.bind(p).hamiltonian(list(x)[:n], list(x)[n:])], len(names), self.n,
@@ -444,7 +444,6 @@ class ChainParameters:
         """(q, p) -> (D_1, ..., D_n), pivots whose positivity proves M(q; p) positive
         definite (as :meth:`NumericModel.pivot_graph`), with the parameters as *inputs*
         after q (for proving M positive definite over q-boxes x the parameter box)."""
-        from verified.graph import trace
         n = self.chain.n
         qn = self._state_names()[:n]
         def fn(x, _):
@@ -453,7 +452,6 @@ class ChainParameters:
             if getattr(m, "linear_solve", None) == "preconditioned":
                 # as NumericModel.pivot_graph: the pivots of K M K^T, K = L^-1 of mid(M)
                 # frozen (same inertia, tight over boxes)
-                from verified.preconditioned import congruence_pivots
                 return congruence_pivots(m._crba(m.joint_transforms(x[:n])))
             return m.mass_matrix_pivots(x[:n])
         return trace(fn, n + self.n, 0, input_names=list(qn) + list(self.names),
