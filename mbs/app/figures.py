@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from verified.interval import Interval, hull
+
 from ..modes import MODE_I, MODE_II, MODE_III
 
 __all__ = ["fig_reduction_area", "fig_consistency_plane", "fig_enclosures", "fig_work_precision",
@@ -29,7 +31,7 @@ MODE_STYLE = {MODE_I.name: dict(color="black", ls="-", lw=1.2, label=MODE_I.labe
 
 
 def _plt():
-    import matplotlib
+    import matplotlib  # (matplotlib only when plotting, here and below)
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
     return plt
@@ -69,7 +71,7 @@ def sample_trajectories(f, points, times, params=None):
     an expression Graph (evaluated with ``eval_float``). Returns (S, len(times), n);
     trajectories that fail are NaN from the failure on.
     """
-    from scipy.integrate import solve_ivp
+    from scipy.integrate import solve_ivp  # (scipy.integrate, ~0.5 s, only when trajectories are sampled)
 
     pts = np.asarray(points, float)
     S, n = pts.shape
@@ -135,8 +137,6 @@ def inconsistent_cells(candidates, energy, h_v, pair, grid=160, params=None):
     the states ``pair = (i, j)`` where the interval enclosure of H (the other states
     over their whole range) lies outside ``h_v = (lo, hi)``: certainly inconsistent.
     Returns (edges_i (grid+1,), edges_j (grid+1,), outside (grid, grid) bool)."""
-    from verified.interval import Interval, hull
-
     n = candidates.shape[-1]
     i, j = pair
     box = hull(candidates, axis=0)
@@ -187,10 +187,10 @@ def fig_consistency_plane(sol, energy, path, test_index=None, pair=None, grid=16
     lo, hi = (ei[0], ej[0]), (ei[-1], ej[-1])
 
     fig, ax = plt.subplots(figsize=(6.5, 5.5))
-    from matplotlib.colors import ListedColormap
+    from matplotlib.colors import ListedColormap  # (matplotlib only when plotting)
     ax.pcolormesh(ei, ej, outside.T.astype(float), cmap=ListedColormap(["white", "#f4b6b6"]),
                   vmin=0, vmax=1, shading="flat", rasterized=True)
-    from matplotlib.patches import Rectangle
+    from matplotlib.patches import Rectangle  # (matplotlib only when plotting)
     kept = np.asarray(rec.kept, bool)
     clo, chi = np.asarray(cand.lo, float), np.asarray(cand.hi, float)
     for k in range(clo.shape[0]):
@@ -206,7 +206,7 @@ def fig_consistency_plane(sol, energy, path, test_index=None, pair=None, grid=16
     ax.set_ylim(lo[1], hi[1])
     ax.set_xlabel(names[i])
     ax.set_ylabel(names[j])
-    from matplotlib.patches import Patch
+    from matplotlib.patches import Patch  # (matplotlib only when plotting)
     ax.legend(handles=[Patch(fc="#f4b6b6", label="H certainly outside $[H_V(t^*)]$"),
                        Patch(fc="none", ec="tab:green", label=f"kept sub-boxes ({int(kept.sum())})"),
                        Patch(fc="0.85", ec="0.5", label=f"pruned sub-boxes ({int((~kept).sum())})")],
@@ -324,7 +324,7 @@ def fig_work_precision(rows, path, title=None):
         color = cmap(orders.index(r["order"]) / max(1, len(orders) - 1))
         ax.scatter(r["wall_s"], r["worst_ratio"] - 1.0, marker=markers.get(r["mode"], "o"), color=color,
                    s=20 + 6 * np.log2(max(1, r["pieces"])) ** 2, alpha=0.8, edgecolor="black", lw=0.4)
-    from matplotlib.lines import Line2D
+    from matplotlib.lines import Line2D  # (matplotlib only when plotting)
     handles = [Line2D([], [], marker=markers[m], ls="", color="0.4", label=f"mode {m}") for m in markers
                if any(r["mode"] == m for r in rows)]
     handles += [Line2D([], [], marker="o", ls="", color=cmap(k / max(1, len(orders) - 1)), label=f"order {o}")

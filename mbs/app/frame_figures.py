@@ -21,7 +21,7 @@ _AX = "xyz"
 def fig_frame_region(enc, path, *, title: str | None = None, samples=None, max_tube: int = 4000):
     """Write the figure of ``enc`` (:class:`mbs.frames.FrameEnclosure`) to ``path``.
     ``samples``: positions (S, k, 3) or (N, 3) of sampled trajectories (m)."""
-    import matplotlib
+    import matplotlib  # (matplotlib only when plotting)
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.collections import PatchCollection

@@ -40,6 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
+from verified.interval import Interval
+
 __all__ = ["ResultError", "solution_to_dict", "write_result", "read_result", "bound_to_json",
            "bound_from_json", "result_boxes", "frame_to_json"]
 
@@ -177,6 +179,5 @@ def read_result(path) -> dict:
 
 def result_boxes(data: dict, k: int):
     """Output ``k``'s boxes as an Interval (B, n)."""
-    from verified.interval import Interval
     arr = np.array(data["outputs"][k]["boxes"], dtype=float)  # (B, n, 2)
     return Interval(arr[..., 0], arr[..., 1], allow_unbounded=True)

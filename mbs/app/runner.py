@@ -2,14 +2,33 @@
 the figures (the body of ``python -m mbs simulate``)."""
 from __future__ import annotations
 
+import json
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 import numpy as np
 
+from verified.interval import Interval
+from verified.parallel import (SchedulerError, connect, dask_available, default_workers, interrupt_runs,
+                               local_client)
+
+from ..control import ControlError
 from ..errors import ModelError
-from .scene import Scene, SceneError, output_times
+from ..frames import default_frame
+from ..modes import get_mode
+from ..progress import Progress
+from ..simulate import simulate, system_for
+from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
+from .frame_figures import fig_frame_region
+from .results import write_result
+from .scene import Scene, SceneError, output_times, parse_scene, scene_dir
 from ..uncertain import ParameterError
 
 __all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "sample_states", "final_widths"]
@@ -23,8 +42,6 @@ def reference_system(model, mode="ii", energy_rate="unsimplified", params=None, 
     under ``control`` the closed loop, with the state ``t`` for time-dependent
     references). Uses :func:`mbs.simulate.system_for` (the system the simulation
     integrates)."""
-    from ..modes import get_mode
-    from ..simulate import system_for
     return system_for(model, get_mode(mode).with_energy_test, energy_rate=energy_rate, params=params,
                       control=control, q_init=q_init)
 
@@ -62,7 +79,6 @@ def sample_states(system, x0_lo, x0_hi, count: int, times, params=None, seed: in
     ``system.rhs`` (rtol = atol = 1e-12) from ``count`` points of the initial box times
     the parameter box ``params`` ({name: (lo, hi)}, the graph's parameters; each
     sample has its own parameter values, held constant)."""
-    from .figures import sample_trajectories
     g = system.rhs
     n, p = g.n_inputs, g.n_params
     lo, hi = np.asarray(x0_lo, float), np.asarray(x0_hi, float)
@@ -130,11 +146,6 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     Ctrl-C during the integration ends it with status "interrupted"; during the
     sampling it skips the rest of the sampling and the figures. Either way
     result.json is written with everything verified so far."""
-    from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
-    from ..progress import Progress
-    from .results import write_result
-    from ..simulate import simulate
-
     log = log or (lambda *a, **k: None)
     out = Path(out)
     mode = mode or scene.mode
@@ -157,7 +168,6 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     x0 = scene.initial_box(names)
     kw = scene.simulate_kwargs(names)
     if scene.control is not None:
-        from ..control import ControlError
         try:
             system = reference_system(model, mode, params=kw.get("params"), control=scene.control,
                                       q_init=np.asarray(x0.mid(), float)[:len(names) // 2])
@@ -168,7 +178,6 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
         except ParameterError as e:
             raise SceneError(f"{scene.source}: [parameters] {e}") from None
         if system.n > x0.shape[-1]:   # the time as a state: a point at t0 = 0
-            from verified.interval import Interval
             x0 = Interval(np.r_[np.asarray(x0.lo, float), 0.0], np.r_[np.asarray(x0.hi, float), 0.0])
     x_user = x0 if scene.control is None else None
     kw["mode"] = mode
@@ -218,7 +227,6 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
              "samples_escaped": report["escaped"], "output_times_requested": len(want) + 1}
     frames = []
     if getattr(sol, "frame", None) is not None and len(sol.t):
-        from ..frames import default_frame
         frames = list(scene.frames) if scene.frames else [default_frame(sol.frame.chain)]
         bad = [f for f in frames if f not in sol.frame.chain.frames]
         if bad:
@@ -236,7 +244,6 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     report["frames"] = frames
     report["paths"]["result"] = path
     if figures and not interrupted and frames:
-        from .frame_figures import fig_frame_region
         report["paths"]["frame_region"] = fig_frame_region(
             sol.frame(frames[0]), out / "frame_region.png", title=f"{scene.name}: frame {frames[0]!r}",
             samples=_frame_samples(sol, frames[0], traj, names))
@@ -250,7 +257,6 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
         if cons is not None and getattr(cons, "tests", None) and system.energy is not None:
             pbox = None
             if system.energy.n_params:  # H over every cell and every parameter value
-                from verified.interval import Interval
                 pn = system.energy.param_names
                 pbox = Interval(np.array([system.params[k][0] for k in pn], float),
                                 np.array([system.params[k][1] for k in pn], float))
@@ -303,7 +309,6 @@ def parallel_kwargs(workers=None, client=None) -> dict:
 def scheduler_client(address):
     """A ``distributed.Client`` for ``--scheduler ADDR``; a SceneError (one line, naming
     the address) when it cannot be reached within verified.parallel.CONNECT_TIMEOUT s."""
-    from verified.parallel import SchedulerError, connect
     try:
         return connect(address)
     except (SchedulerError, ValueError) as e:
@@ -325,11 +330,6 @@ def scenario_batch(path):
         name = "payload 0.5-1 kg"
         parameters.payload = { link = "link2", mass = [0.5, 1.0] }
     """
-    from .scene import parse_scene, scene_dir
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-        import tomli as tomllib
     p = Path(path)
     if not p.exists() and not p.suffix and (scene_dir() / f"{p.name}.toml").is_file():
         p = scene_dir() / f"{p.name}.toml"
@@ -377,19 +377,15 @@ def run_scenarios(scenes, out, *, log=None, workers=None, client=None, **run_kw)
     status = the worst, t_reached = the smallest, and per scenario its status,
     t_reached, final widths, parameters, samples). Returns ``{"scenarios": [...],
     "status": ..., "solution": None, ...}``."""
-    import json
-    from concurrent.futures import ThreadPoolExecutor
     log = log or (lambda *a, **k: None)
     out = Path(out)
     t0 = time.perf_counter()
     if client is None and workers not in (None, 1):
-        from verified.parallel import dask_available, default_workers, local_client
         n = default_workers() if workers == "auto" else int(workers)
         if dask_available() and n > 1:
             client = local_client(n)  # one cluster for every scenario's chunks
     lines = {}
     # one bar over the batch: the simulated seconds of every scenario summed (interactive only)
-    from ..progress import Progress
     horizon = {name: float(run_kw.get("t_end") or scene.t_end) for name, scene in scenes}
     bar = Progress(sum(horizon.values()), f"{len(scenes)} scenarios", enabled=run_kw.pop("progress", None))
     done, lock = dict.fromkeys(horizon, 0.0), threading.Lock()
@@ -411,7 +407,6 @@ def run_scenarios(scenes, out, *, log=None, workers=None, client=None, **run_kw)
 
     try:
         if client is not None:
-            from verified.parallel import interrupt_runs
             with ThreadPoolExecutor(max_workers=len(scenes)) as ex:
                 futures = [ex.submit(one, x) for x in scenes]
                 try:

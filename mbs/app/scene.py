@@ -112,12 +112,19 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 import numpy as np
 
+import models
+from models.registry import NAMES, SYSTEMS
 from verified.energy_rate import MODEL_RATES
 from verified.exact import enclose_fraction, enclose_pi_multiple
+from verified.interval import Interval
 
+from ..chain import Chain
+from ..control import ControlError, parse_control
 from ..errors import ModelError
 from ..modes import MODES, get_mode
-from ..robots import ERD_PREFIX, PAPER_MODELS
+from ..robots import ALIASES, ERD_PREFIX, PAPER_MODELS, urdf_path
+from ..simulate import output_times as _times
+from ..uncertain import PHYSICAL_KEYS, _PAYLOAD_KEYS
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "enclose_number", "PAPER_MODELS",
            "MODES", "scene_dir"]
@@ -145,7 +152,6 @@ class SceneError(ValueError):
 
 def scene_dir() -> Path:
     """The directory of the scenes shipped with the package (models/scenes)."""
-    import models
     return Path(models.__file__).parent / "scenes"
 
 
@@ -300,7 +306,6 @@ class Scene:
     # ---------------------------------------------------------------- initial box
     def initial_box(self, state_names):
         """The initial box as an Interval (n,) in the order of ``state_names``."""
-        from verified.interval import Interval
         names = tuple(state_names)
         where = f"{self.source}: [initial]"
         if isinstance(self.initial, list):
@@ -379,16 +384,14 @@ def output_times(t_end: float, output_dt: float | None) -> list:
     """The output times of a run: ``k * output_dt`` (one float product each, never
     accumulated) for k = 1, 2, ... up to t_end, plus t_end (see
     :func:`mbs.simulate.output_times`)."""
-    from ..simulate import output_times as _times
     return [float(t) for t in _times(0.0, float(t_end), output_dt)]
 
 
 def _resolve_urdf(spec: str, base: Path | None, where: str) -> str:
     if spec.startswith(ERD_PREFIX):
-        from .. import robots
         name = spec[len(ERD_PREFIX):]
         try:
-            return str(robots.urdf_path(name))
+            return str(urdf_path(name))
         except ModelError as e:
             raise SceneError(f"{where}: {e}") from None
     p = Path(spec)
@@ -409,13 +412,12 @@ def _build_model(scene: Scene):
     where = f"{scene.source}: [model]"
     if "name" in spec:
         return spec["name"]
-    from ..chain import Chain
     try:
         if "urdf" in spec:
             chain = Chain.from_urdf(spec["urdf"], lock=spec.get("lock"),
                                     **({"gravity": spec["gravity"]} if "gravity" in spec else {}))
             return chain
-        import sympy
+        import sympy  # (import here: sympy only for DH-table models)
         rows = []
         symbols = {}
         for i, row in enumerate(spec["dh"]):
@@ -467,8 +469,6 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
                          f"{', '.join(kinds) or 'none'})")
     spec = dict(model)
     if "name" in model:
-        from models.registry import NAMES
-        from ..robots import ALIASES
         known = tuple(NAMES) + PAPER_MODELS + tuple(sorted(set(ALIASES) - set(NAMES)))
         if model["name"] not in known:
             nm = model["name"]
@@ -584,7 +584,6 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     # [control]
     control = data.get("control")
     if control is not None:
-        from ..control import ControlError, parse_control
         try:
             parse_control(control)   # structure now; joints and gains against the model when it runs
         except ControlError as e:
@@ -609,7 +608,6 @@ def _table_of_intervals(value, where: str, what: str) -> dict:
 
 
 def _payload(item, where: str) -> dict:
-    from ..uncertain import _PAYLOAD_KEYS
     if not isinstance(item, dict):
         raise SceneError(f"{where}: expected a table with link, mass and com, got {item!r}")
     allowed = tuple(k for k in _PAYLOAD_KEYS if k != "inertia")
@@ -633,7 +631,6 @@ def _payload(item, where: str) -> dict:
 def _parameters(table: dict, spec: dict, where: str):
     """[parameters]: (named parameters {name: (lo, hi)}, physical parameters in the
     form of :mod:`mbs.uncertain`, every number enclosed)."""
-    from ..uncertain import PHYSICAL_KEYS
     params, physical = {}, {}
     for k, v in table.items():
         w = f"{where} {k}"
@@ -664,7 +661,6 @@ def _parameters(table: dict, spec: dict, where: str):
         if "urdf" in spec:
             allowed = ()
         elif spec.get("name") in PAPER_MODELS:
-            from models.registry import SYSTEMS
             allowed = tuple(SYSTEMS[spec["name"]].param_names)
         elif "name" in spec:
             allowed = ()
