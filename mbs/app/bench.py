@@ -33,9 +33,16 @@ from pathlib import Path
 
 import numpy as np
 
+from models import double_pendulum as dp
+from models.registry import get as get_model
 from verified.interval import Interval
 
 from ..modes import MODES, get_mode
+from ..simulate import simulate
+from . import figures
+from .figures import sample_initial_points, sample_trajectories
+from .runner import check_samples, reference_system
+from .scene import scene_dir
 
 __all__ = ["run", "work_precision", "stress_cases", "startup", "run_case"]
 
@@ -47,12 +54,10 @@ DEFAULT_OUT = Path("out") / "bench"
 
 
 def _simulate():
-    from ..simulate import simulate
     return simulate
 
 
 def _paper_box():
-    from models import double_pendulum as dp
     lo, hi = dp.initial_box()
     return Interval(lo, hi)
 
@@ -60,7 +65,6 @@ def _paper_box():
 def _sampled(system, x0, times, n_samples, params=None, seed=0):
     """(S, k, n) DOP853 states at ``times`` from sampled initial points: a dense line
     when one component is uncertain, else corners + random points."""
-    from .figures import sample_initial_points, sample_trajectories
     lo, hi = np.asarray(x0.lo, float), np.asarray(x0.hi, float)
     free = np.flatnonzero(hi > lo)
     if free.size == 1:
@@ -75,7 +79,6 @@ def run_case(name, model, x0, t_end, *, samples=64, output_dt=None, note="", **k
     """One verified run, checked against sampled trajectories. A failure of the case
     (bad input, a model error, anything the run raises) is a 'crash' row, not an
     exception; only a NameError (a bug here, not a result) is raised."""
-    from .runner import check_samples, reference_system
     row = dict(case=name, note=note, t_end=t_end, status="crash", t_reached=0.0, reason="", wall_s=0.0,
                widths=None, worst_ratio=None, escaped=0, checked=0, nan=False, max_boxes=None)
     t0 = time.perf_counter()
@@ -142,7 +145,6 @@ def work_precision(t_end=0.5, modes=MODES, orders=(8, 12, 16), pieces=(4, 16, 64
 
 # --------------------------------------------------------------------------- 2.
 def stress_cases(quick=False, log=print):
-    from models import double_pendulum as dp
     box = _paper_box()
     rows = []
 
@@ -188,8 +190,7 @@ def stress_cases(quick=False, log=print):
             mode="ii", output_dt=0.05, subdivision=[8, 1, 1, 1], samples=16 if quick else 64,
             max_boxes=STRESS_MAX_BOXES)
     # 6-DOF URDF arm, uncertain shoulder and elbow angles
-    from models.registry import get
-    ur5 = get("ur5")
+    ur5 = get_model("ur5")
     q = np.array([0.0, -1.2, 1.0, -0.5, 0.3, 0.0])
     for hw in ((1e-3,) if quick else (1e-4, 1e-3, 1e-2)):
         lo = np.concatenate([q, np.zeros(6)])
@@ -205,7 +206,6 @@ def stress_cases(quick=False, log=print):
 def startup(scenes=None, t_end=0.01, cold=True, log=print):
     """Wall time of ``python -m mbs simulate SCENE --t-end t_end`` in a subprocess:
     cold (fresh numba cache and model cache) then warm (the same caches again)."""
-    from .scene import scene_dir
     scenes = scenes or sorted(scene_dir().glob("*.toml"))
     rows = []
     for scene in scenes:
@@ -320,7 +320,6 @@ def run(quick=False, out=None, log=print) -> int:
     out: :data:`DEFAULT_OUT`, ``out/bench`` in the current working directory, for the
     full run, a temporary directory for --quick). Returns 1 if a case crashed, produced
     a NaN or missed a sampled trajectory."""
-    from .figures import fig_work_precision
     t0 = time.perf_counter()
     out = Path(out) if out else (DEFAULT_OUT if not quick else Path(tempfile.mkdtemp(prefix="mbs-bench-")))
     t_end = 0.3 if quick else 0.5
@@ -334,13 +333,12 @@ def run(quick=False, out=None, log=print) -> int:
     log("start-up (cold, warm)")
     scenes = None
     if quick:
-        from .scene import scene_dir
-        scenes = [scene_dir() / "pendulum_paper.toml"]
+            scenes = [scene_dir() / "pendulum_paper.toml"]
     start = startup(scenes, cold=not quick, log=log)
     wall = time.perf_counter() - t0
     command = "python -m mbs bench" + (" --quick" if quick else "")
     out.mkdir(parents=True, exist_ok=True)
-    fig_work_precision(wp, out / "bench_work_precision.png",
+    figures.fig_work_precision(wp, out / "bench_work_precision.png",
                        title=f"Double pendulum, T = {t_end:g}: worst width ratio vs wall time")
     (out / "benchmarks.md").write_text(report_markdown(wp, stress, start, command, wall, t_end))
     log(f"wrote {out / 'benchmarks.md'} and {out / 'bench_work_precision.png'} ({wall:.0f} s)")

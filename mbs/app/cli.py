@@ -30,6 +30,10 @@ import sys
 import time
 from pathlib import Path
 
+from .. import ModelError
+from ..check import compare_with_pinocchio, format_report, max_error
+from ..robots import load_model
+
 
 #: exit codes of ``simulate`` (see the module docstring)
 EXIT_ESCAPED, EXIT_BAD_INPUT, EXIT_BREAKDOWN, EXIT_STOPPED, EXIT_INTERRUPTED = 1, 2, 3, 4, 130
@@ -46,6 +50,7 @@ def _fail(msg: str, code: int = 2) -> int:
 
 
 def cmd_simulate(args) -> int:
+    # (import here: scene and runner load verified and numba, ~0.4 s that --help does not need)
     from .scene import SceneError, load_scene, MODES
     from . import runner
 
@@ -90,7 +95,7 @@ def cmd_simulate(args) -> int:
 
 def _parallel_flags(args, runner):
     """(workers, client) from --workers / --scheduler (issue 16, verified/parallel.py)."""
-    from .scene import SceneError
+    from .scene import SceneError  # (import here: see cmd_simulate)
     workers = args.workers
     if workers != "auto":
         try:
@@ -104,10 +109,6 @@ def _parallel_flags(args, runner):
 
 
 def cmd_check(args) -> int:
-    from .. import ModelError
-    from ..check import compare_with_pinocchio, format_report, max_error
-    from ..robots import load_model
-
     try:
         chain = load_model(args.model)
     except ModelError as e:
@@ -172,10 +173,10 @@ def main(argv=None):
     if args.command == "check":
         return cmd_check(args)
     if args.command == "bench":
-        from .bench import run as bench_run
+        from .bench import run as bench_run  # (import here: see cmd_simulate)
         return bench_run(quick=args.quick, out=args.out)
     if args.command == "demo":
-        from .demo import run
+        from .demo import run  # (import here: see cmd_simulate)
         return run(out=args.out)
     return 2
 

@@ -23,6 +23,12 @@ import numpy as np
 
 from verified.warmup import finish_background, start_in_background
 
+from ..modes import ALL_MODES, MODE_I, MODE_II, MODES
+from ..simulate import simulate, system_for
+from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
+from .runner import check_samples
+from .scene import load_scene
+
 #: demo settings. 256 pieces with the scene's error_basis="auto": every mode reaches
 #: T = 1 (16 pieces broke down at 0.53 s in modes i/ii, 64 pieces at 0.63 s; with the
 #: "qr" basis even 256 pieces break down at 0.97 s in mode i); the three modes together
@@ -35,9 +41,6 @@ def settings(pieces=None):
     consistency settings (without ``mode``), x1(0) split into ``pieces`` (default
     ``DEMO["pieces"]``); ``simulate("double_pendulum_paper", x0, T, mode=m,
     output_dt=DEMO["output_dt"], **kwargs)`` is what the demo runs for mode ``m``."""
-    from .scene import load_scene
-    from ..simulate import system_for
-
     scene = load_scene("double_pendulum_paper")
     names = system_for("double_pendulum_paper", "ii").state_names
     x0 = scene.initial_box(names)
@@ -76,11 +79,6 @@ def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int
 
 
 def _run(out, t_end, pieces, samples, log) -> int:
-    from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
-    from .runner import check_samples
-    from ..modes import ALL_MODES, MODE_I, MODE_II, MODES
-    from ..simulate import simulate, system_for
-
     t_all = time.perf_counter()
     t_end = DEMO["t_end"] if t_end is None else t_end
     pieces = DEMO["pieces"] if pieces is None else pieces
