@@ -1,8 +1,10 @@
 """Oracles and helpers shared by the tests (imported as ``oracles.<module>``; tests/ is put
 on sys.path by tests/conftest.py). None of them shares code with what it judges.
 
-* ``sampling``: dense DOP853 sampling of reachable sets and the containment checks;
-  Pinocchio models with scaled masses and payloads.
+* ``sampling``: dense DOP853 sampling of reachable sets (box points, one integration
+  per point or all points as one system, the sampled hull) and the containment checks;
+  Pinocchio models with scaled masses and payloads. Also the benchmarks' oracle
+  (benchmarks/ put tests/ on sys.path).
 * ``arb_oracle``: python-flint ``arb`` (256 bits) as the referee of interval operations.
 * ``arb_graph``: exact (arb) evaluation of expression graphs, box sampling, random
   straight-line programs.

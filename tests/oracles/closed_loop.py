@@ -3,9 +3,8 @@ as the plant, the control law written again in numpy floats, DOP853 at rtol = at
 1e-12; the 2-link arm's set point and initial boxes."""
 import numpy as np
 import pinocchio as pin
-from scipy.integrate import solve_ivp
 
-from oracles.sampling import pinocchio_with
+from oracles.sampling import dop853, pinocchio_with
 from verified.interval import Interval
 
 Q0 = np.array([0.5, -0.3])
@@ -29,9 +28,7 @@ def closed_loop_trajectory(plant, law, x0, t_end):
     def f(t, x):
         q, qd = x[:n], x[n:]
         return np.r_[qd, pin.aba(plant, data, q, qd, law(t, q, qd))]
-    s = solve_ivp(f, (0.0, t_end), x0, method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True)
-    assert s.success
-    return s.sol
+    return dop853(f, x0, t_end).sol
 
 
 def corners(lo, hi, k, seed=0):

@@ -1,12 +1,27 @@
 """Dense-sampling oracle for reachable sets: scipy's DOP853 at tight tolerances.
 
-``check_solution`` integrates many initial points of the initial box (all corners
-plus random points) and asserts that every sampled state lies in the union of the
-solver's boxes at each output time and in the union of the tube boxes at several
-times inside every step.
+The one home of the sampling oracle of the tests and of the benchmarks (which put
+tests/ on sys.path and import ``oracles.sampling``). It shares no code with verified/
+or mbs/: the right-hand side is passed in (a closed-form numpy rhs, Pinocchio's
+``aba``, ...) and enclosures are read through their ``lo``/``hi`` arrays only.
+
+* points of a box: :func:`sample_initial_points` (its corners, random points, the
+  centre; points along its edges);
+* one integration per start point: :func:`dop853` (the one ``solve_ivp`` call),
+  :func:`trajectories` (dense solutions), :func:`states_at` (states at given times),
+  :func:`end_states` (the integrator's own states at the end);
+* all start points integrated together as one system: :class:`Ensemble`;
+* the sampled hull: :func:`hull_widths`;
+* containment, up to a stated slack (absolute, or relative to max(1, |x|)):
+  :func:`inside_union` (points against a union of boxes), :func:`in_union` (one point),
+  :func:`misses` (a solution's output and tube boxes against dense trajectories, every
+  step) and :func:`count_outside` (against an :class:`Ensemble`, up to a number of
+  steps);
+* :func:`pinocchio_with`: Pinocchio's model of a chain with scaled inertias and payloads.
 """
 
 import itertools
+import time
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -14,22 +29,51 @@ from scipy.integrate import solve_ivp
 SLACK = 1e-9  # DOP853 at rtol = atol = 1e-12 is accurate to well below this
 
 
-def sample_initial_points(lo, hi, n_random, seed=0):
+def sample_initial_points(lo, hi, n_random, seed=0, edge_points=0):
+    """Points (S, n) of the box [lo, hi]: every corner over its wide components (hi > lo;
+    the first such component varies slowest, lo before hi), ``n_random`` uniform random
+    points (``np.random.default_rng(seed)``), the centre; with ``edge_points``, then that
+    many points along every edge (each wide component swept, the others at each of their
+    corners; for 2-D boxes the whole boundary)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    wide = np.flatnonzero(hi > lo)
+    corners = []
+    for c in itertools.product(*[(0, 1)] * wide.size):
+        x = lo.copy()
+        x[wide] = np.where(np.array(c, bool), hi[wide], lo[wide])
+        corners.append(x)
     rng = np.random.default_rng(seed)
-    corners = np.array(list(itertools.product(*zip(lo, hi))), dtype=float)
-    rand = lo + rng.uniform(0, 1, (n_random, lo.size)) * (hi - lo)
-    return np.vstack([corners, rand, (lo + hi) / 2])
+    pts = [np.array(corners), lo + rng.uniform(0, 1, (n_random, lo.size)) * (hi - lo), (lo + hi)[None] / 2]
+    if edge_points and wide.size:
+        s = np.linspace(0, 1, edge_points)
+        for i in wide:  # edges along component i, at every corner of the others
+            for c in itertools.product(*[(0, 1)] * (wide.size - 1)):
+                base = lo.copy()
+                others = [j for j in wide if j != i]
+                base[others] = np.where(np.array(c, bool), hi[others], lo[others])
+                e = np.repeat(base[None], edge_points, axis=0)
+                e[:, i] = lo[i] + s * (hi[i] - lo[i])
+                pts.append(e)
+    return np.vstack(pts)
+
+
+def dop853(rhs, x0, t_end, rtol=1e-12, atol=1e-12, dense=True):
+    """scipy's DOP853 of x' = rhs(t, x) from x(0) = x0 to ``t_end``: the ``solve_ivp``
+    result (``.sol`` the dense solution when ``dense``; ``.y[:, -1]`` the integrator's
+    last state). RuntimeError when the integration fails."""
+    s = solve_ivp(rhs, (0.0, t_end), x0, method="DOP853", rtol=rtol, atol=atol, dense_output=dense)
+    if not s.success:
+        raise RuntimeError(f"oracle: DOP853 failed: {s.message}")
+    return s
+
+
+def _autonomous(f):
+    return lambda t, x: np.asarray(f(x), dtype=float)
 
 
 def trajectories(f, points, t_end, params=None, rtol=1e-12, atol=1e-12):
     """Dense DOP853 solutions for each initial point; f(x) -> dx (numpy floats)."""
-    sols = []
-    for x0 in points:
-        s = solve_ivp(lambda t, x: np.asarray(f(x), dtype=float), (0.0, t_end), x0, method="DOP853",
-                      rtol=rtol, atol=atol, dense_output=True)
-        assert s.success
-        sols.append(s.sol)
-    return sols
+    return [dop853(_autonomous(f), x0, t_end, rtol, atol).sol for x0 in points]
 
 
 def states_at(f, points, times, rtol=1e-12, atol=1e-12):
@@ -39,9 +83,81 @@ def states_at(f, points, times, rtol=1e-12, atol=1e-12):
     return np.array([sol(times).T for sol in trajectories(f, points, times[-1], rtol=rtol, atol=atol)])
 
 
+def end_states(f, points, t_end, rtol=1e-12, atol=1e-12):
+    """The integrator's own last states (S, n) at ``t_end`` (no dense output), one
+    integration per initial point; f(x) -> dx."""
+    return np.array([dop853(_autonomous(f), x0, t_end, rtol, atol, dense=False).y[:, -1] for x0 in points])
+
+
+class Ensemble:
+    """DOP853 from every sample point together, as one system (its error control over all
+    of them), dense by default. ``f(X) -> X'`` on columns ``X`` (n, S).
+
+    ``states(t)``: the sampled states (S, n) at t, or (len(t), S, n) (at t = 0 the points
+    themselves); ``hull_width(t)``: the sampled hull's widths; ``final`` (S, n): the
+    integrator's own states at ``t_end`` (also with ``dense=False``, where ``states`` is
+    not available); ``wall``: seconds the integration took."""
+
+    def __init__(self, f, points, t_end, names=None, rtol=1e-12, atol=1e-12, dense=True):
+        self.points = np.asarray(points, float)
+        S, n = self.points.shape
+        self.n, self.S, self.t_end = n, S, float(t_end)
+        self.names = names or [f"x{i + 1}" for i in range(n)]
+        t0 = time.perf_counter()
+
+        def rhs(t, y):
+            return np.asarray(f(y.reshape(n, S)), dtype=float).reshape(-1)
+
+        sol = dop853(rhs, self.points.T.reshape(-1), self.t_end, rtol, atol, dense=dense)
+        self._sol = sol.sol
+        self.final = sol.y[:, -1].reshape(n, S).T
+        self.wall = time.perf_counter() - t0
+
+    def states(self, t):
+        """Sampled states at time(s) t: (S, n), or (len(t), S, n)."""
+        t = np.asarray(t, float)
+        if self._sol is None and np.any(t != 0):
+            raise ValueError("Ensemble(dense=False): only the states at t = 0 and `final`")
+        if t.ndim == 0:
+            return self.points.copy() if t == 0 else self._sol(float(t)).reshape(self.n, self.S).T
+        y = self._sol(t).reshape(self.n, self.S, t.size)
+        y[..., t == 0] = self.points.T[..., None]
+        return y.transpose(2, 1, 0)
+
+    def hull_width(self, t):
+        return hull_widths(self.states(t))
+
+
+def hull_widths(states):
+    """Widths of the sampled hull: max - min over the samples (axis 0 of ``states``,
+    (S, ..., n) -> (..., n))."""
+    states = np.asarray(states, float)
+    return states.max(axis=0) - states.min(axis=0)
+
+
+def inside_union(x, lo, hi, slack=SLACK, relative=False):
+    """Is each point of ``x`` (S, n) inside the union of the boxes [lo, hi] (arrays
+    (..., n), read as (B, n)) up to ``slack`` (``relative``: slack * max(1, |x|) per
+    component)? (S,) bools; for one point x (n,), one bool."""
+    x = np.asarray(x, dtype=float)
+    one = x.ndim == 1
+    X = x[None] if one else x
+    n = X.shape[-1]
+    lo, hi = np.asarray(lo, float).reshape(-1, n), np.asarray(hi, float).reshape(-1, n)
+    s = slack * np.maximum(1.0, np.abs(X)) if relative else np.full(X.shape, float(slack))
+    ok = np.zeros(X.shape[0], dtype=bool)
+    for b in range(0, lo.shape[0], 256):  # 256 boxes at a time (memory)
+        l, h = lo[b:b + 256], hi[b:b + 256]
+        ok |= np.any(np.all((l[None] - s[:, None] <= X[:, None]) & (X[:, None] <= h[None] + s[:, None]),
+                            axis=-1), axis=1)
+        if ok.all():
+            break
+    return bool(ok[0]) if one else ok
+
+
 def in_union(x, boxes, slack=SLACK):
     """Is the point x inside the union of boxes (Interval (B, n)), up to slack?"""
-    return bool(np.any(np.all((boxes.lo - slack <= x) & (x <= boxes.hi + slack), axis=-1)))
+    return inside_union(np.asarray(x, float).reshape(-1), boxes.lo, boxes.hi, slack)
 
 
 def _first(boxes, states):
@@ -72,6 +188,30 @@ def misses(solution, sols, per_step=4, states=None):
                 if not in_union(x, tube_boxes):
                     bad.append((t, x))
     return bad
+
+
+def count_outside(solution, ensemble, tube_checks, slack=SLACK, relative=False):
+    """(outside, checked): sampled states of an :class:`Ensemble` (their first n
+    components, n the solution's) outside the union of a solution's boxes at every output
+    time and at the midpoints of up to ``tube_checks`` steps (evenly spread; their tube
+    boxes), up to the ensemble's ``t_end``."""
+    n = np.shape(solution.hull.lo)[-1]
+    outside = checked = 0
+    for t, boxes in zip(solution.t, solution.boxes):
+        if t > ensemble.t_end:
+            continue
+        ok = inside_union(ensemble.states(float(t))[:, :n], boxes.lo, boxes.hi, slack, relative)
+        outside += int((~ok).sum())
+        checked += ok.size
+    steps = len(solution.tube)
+    for j in np.unique(np.linspace(0, steps - 1, min(steps, tube_checks)).astype(int)) if steps else ():
+        tm = 0.5 * (solution.tube_t[j] + solution.tube_t[j + 1])
+        if tm > ensemble.t_end:
+            continue
+        ok = inside_union(ensemble.states(tm)[:, :n], solution.tube[j].lo, solution.tube[j].hi, slack, relative)
+        outside += int((~ok).sum())
+        checked += ok.size
+    return outside, checked
 
 
 def pinocchio_with(chain, payloads=(), scale=1.0):

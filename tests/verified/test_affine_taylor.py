@@ -405,7 +405,7 @@ def test_three_link_arm_qdd_affine_much_narrower_and_contains_pinocchio(arm_pin)
     Ca = AffineTaylorODE(g).coefficients(box, 1)[0, 1, 3:]
     Ci = TaylorODE(g).coefficients(box, 1)[0, 1, 3:]
     assert (5 * Ca.width() <= Ci.width()).all(), (Ca.width(), Ci.width())
-    pts = sample_initial_points(x0 - r, x0 + r, 40, seed=2)  # 64 corners (qd ones coincide), random, centre
+    pts = sample_initial_points(x0 - r, x0 + r, 40, seed=2)  # 8 corners (over q; qd = 0), random, centre
     acc = np.array([qdd(x[:3], x[3:]) for x in pts])
     assert_pin_inside(Ca, acc)
 
