@@ -47,7 +47,9 @@ Cases (issue 17's targets table):
 
 Oracle: trajectories from all corners of the box (over its wide components), random
 points and the centre (the pendulum: also 250 points per edge), integrated together as
-one system by scipy's DOP853 (rtol = atol = 1e-12, dense output). The right-hand side
+one system by scipy's DOP853 (rtol = atol = 1e-12, dense output): the tests' sampling
+oracle, ``tests/oracles/sampling.py`` (``Ensemble``, ``sample_initial_points``,
+``count_outside``), shared with the other benchmarks. The right-hand side
 is Pinocchio's ``aba`` (with ``tau = -D qd`` for URDF damping) on a ``pin.Model``
 (URDF robots: Pinocchio's own parser; DH chains: joint by joint,
 ``mbs.pinocchio_check.to_pinocchio``), so it shares no evaluation code with the project.
@@ -84,7 +86,6 @@ Columns:
 from __future__ import annotations
 
 import argparse
-import itertools
 import math
 import sys
 import time
@@ -92,14 +93,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # tests/oracles: the sampling oracle
 
 import bench_solver  # noqa: E402  (true_hull_widths of the double pendulum)
 from mbs.simulate import simulate  # noqa: E402
 from models import double_pendulum as dp  # noqa: E402
 from models import pendulum as pd  # noqa: E402
+# the oracle (also for bench_absorb, bench_energy_shell, bench_taylor_model: br.Oracle, br.sample_points)
+from oracles.sampling import Ensemble as Oracle  # noqa: E402
+from oracles.sampling import count_outside, inside_union  # noqa: E402
+from oracles.sampling import sample_initial_points as sample_points  # noqa: E402
 from verified.graph import trace  # noqa: E402
 from verified.hooks import Hook  # noqa: E402
 from verified.interval import Interval  # noqa: E402
@@ -184,99 +189,15 @@ def closed_form_rhs(mod):
     return lambda X: np.array(mod.rhs(X), dtype=float)
 
 
-def sample_points(lo, hi, n_random=100, seed=0, edge_points=0):
-    """All corners over the wide components, ``n_random`` random points, the centre;
-    with ``edge_points``, that many points on every edge (2-D boxes: the boundary)."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    wide = np.flatnonzero(hi > lo)
-    corners = []
-    for c in itertools.product(*[(0, 1)] * wide.size):
-        x = lo.copy()
-        x[wide] = np.where(np.array(c, bool), hi[wide], lo[wide])
-        corners.append(x)
-    rng = np.random.default_rng(seed)
-    pts = [np.array(corners), lo + rng.uniform(0, 1, (n_random, lo.size)) * (hi - lo), (lo + hi)[None] / 2]
-    if edge_points and wide.size:
-        s = np.linspace(0, 1, edge_points)
-        for i in wide:  # edges along component i, at every corner of the others
-            for c in itertools.product(*[(0, 1)] * (wide.size - 1)):
-                base = lo.copy()
-                others = [j for j in wide if j != i]
-                base[others] = np.where(np.array(c, bool), hi[others], lo[others])
-                e = np.repeat(base[None], edge_points, axis=0)
-                e[:, i] = lo[i] + s * (hi[i] - lo[i])
-                pts.append(e)
-    return np.vstack(pts)
-
-
-class Oracle:
-    """DOP853 (rtol = atol = 1e-12) from every sample point, as one system, dense."""
-
-    def __init__(self, f, points, t_end, names=None):
-        self.points = np.asarray(points, float)
-        S, n = self.points.shape
-        self.n, self.S, self.t_end = n, S, float(t_end)
-        self.names = names or [f"x{i + 1}" for i in range(n)]
-        t0 = time.perf_counter()
-
-        def rhs(t, y):
-            return np.asarray(f(y.reshape(n, S)), dtype=float).reshape(-1)
-
-        sol = solve_ivp(rhs, (0.0, self.t_end), self.points.T.reshape(-1), method="DOP853",
-                        rtol=1e-12, atol=1e-12, dense_output=True)
-        if not sol.success:
-            raise RuntimeError(f"oracle: DOP853 failed: {sol.message}")
-        self._sol = sol.sol
-        self.wall = time.perf_counter() - t0
-
-    def states(self, t):
-        """Sampled states at time(s) t: (S, n), or (len(t), S, n)."""
-        t = np.asarray(t, float)
-        if t.ndim == 0:
-            return self.points.copy() if t == 0 else self._sol(float(t)).reshape(self.n, self.S).T
-        y = self._sol(t).reshape(self.n, self.S, t.size)
-        y[..., t == 0] = self.points.T[..., None]
-        return y.transpose(2, 1, 0)
-
-    def hull_width(self, t):
-        x = self.states(t)
-        return x.max(axis=0) - x.min(axis=0)
-
-
 def _inside(x, boxes):
     """(S,) bool: is each point (S, n) in the union of boxes (B, n)? (relative slack)"""
-    lo, hi = boxes.lo.reshape(-1, boxes.shape[-1]), boxes.hi.reshape(-1, boxes.shape[-1])
-    s = SLACK * np.maximum(1.0, np.abs(x))
-    ok = np.zeros(x.shape[0], dtype=bool)
-    for b in range(0, lo.shape[0], 256):
-        l, h = lo[b:b + 256], hi[b:b + 256]
-        ok |= np.any(np.all((l[None] - s[:, None] <= x[:, None]) & (x[:, None] <= h[None] + s[:, None]),
-                            axis=-1), axis=1)
-        if ok.all():
-            break
-    return ok
+    return inside_union(x, boxes.lo, boxes.hi, SLACK, relative=True)
 
 
 def containment(sol, oracle):
     """(misses, checks): sampled states outside the enclosure at the output times and
     at the midpoints of up to TUBE_CHECKS steps (tube boxes), up to the time reached."""
-    n = sol.hull.shape[-1]
-    misses = checks = 0
-    for t, boxes in zip(sol.t, sol.boxes):
-        if t > oracle.t_end:
-            continue
-        ok = _inside(oracle.states(float(t))[:, :n], boxes)
-        misses += int((~ok).sum())
-        checks += ok.size
-    steps = len(sol.tube)
-    for j in np.unique(np.linspace(0, steps - 1, min(steps, TUBE_CHECKS)).astype(int)) if steps else ():
-        tm = 0.5 * (sol.tube_t[j] + sol.tube_t[j + 1])
-        if tm > oracle.t_end:
-            continue
-        ok = _inside(oracle.states(tm)[:, :n], sol.tube[j])
-        misses += int((~ok).sum())
-        checks += ok.size
-    return misses, checks
+    return count_outside(sol, oracle, TUBE_CHECKS, SLACK, relative=True)
 
 
 # -------------------------------------------------------------------------- runs
