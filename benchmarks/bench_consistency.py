@@ -30,22 +30,19 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))  # tests/oracles: the sampling oracle
 
 from mbs.simulate import simulate  # noqa: E402
 from models import double_pendulum as dp  # noqa: E402
 from models import pendulum as pd  # noqa: E402
+from oracles.sampling import end_states, hull_widths, states_at  # noqa: E402
 from verified.interval import Interval  # noqa: E402
 
 
 def sampled_hull(f, lo, hi, ts, n=401):
-    from scipy.integrate import solve_ivp
-    pts = np.linspace(lo, hi, n)
-    out = np.empty((n, len(ts), lo.size))
-    for i, x0 in enumerate(pts):
-        s = solve_ivp(lambda t, x: np.asarray(f(x), float), (0, ts[-1]), x0, method="DOP853", rtol=1e-12,
-                      atol=1e-12, t_eval=ts)
-        out[i] = s.y.T
-    return out.max(axis=0) - out.min(axis=0)  # (len(ts), n)
+    """Widths (len(ts), n) of the hull of DOP853 trajectories (rtol = atol = 1e-12) from
+    ``n`` points on the box's diagonal, lo to hi, at the times ``ts``."""
+    return hull_widths(states_at(f, np.linspace(lo, hi, n), ts))
 
 
 def _row(name, sol, true_w=None):
@@ -274,11 +271,9 @@ def work_precision(out_json="work_precision.json", plot="work_precision.png", qu
 
 
 def _grid_hull(f, lo, hi, T, k=41):
-    from scipy.integrate import solve_ivp
+    """Widths at T of the hull of DOP853 trajectories (rtol = atol = 1e-12) from a k^n grid."""
     g = np.array(np.meshgrid(*[np.linspace(a, b, k) for a, b in zip(lo, hi)])).reshape(lo.size, -1).T
-    ends = np.array([solve_ivp(lambda t, x: np.asarray(f(x), float), (0, T), x0, method="DOP853", rtol=1e-12,
-                               atol=1e-12).y[:, -1] for x0 in g])
-    return ends.max(axis=0) - ends.min(axis=0)
+    return hull_widths(end_states(f, g, T))
 
 
 def _plot_work_precision(results, path):
