@@ -42,23 +42,18 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))  # tests/oracles: the sampling oracle
 
-
-def pin_plant(chain, payloads=()):
-    import pinocchio as pin
-    model = pin.Model(chain.to_pinocchio())
-    for link, m, com in payloads:
-        fr = model.frames[model.getFrameId(link)]
-        model.inertias[fr.parentJoint] = model.inertias[fr.parentJoint] + fr.placement.act(
-            pin.Inertia(m, np.asarray(com, float), np.zeros((3, 3))))
-    return model
+from oracles.sampling import SLACK, dop853, hull_widths, inside_union, pinocchio_with  # noqa: E402
 
 
 def sample_oracle(sol, count=24, seed=0, frame=None, payload_link=None):
     """Sampled states (S, k, 2n) at sol.t and frame positions (S, k, 3) (or None):
-    Pinocchio aba + the float controller of sol.control, DOP853."""
+    Pinocchio aba (the sampling oracle's ``pinocchio_with`` plant, with the sampled
+    payload) + the float controller of sol.control, DOP853 at rtol = atol = 1e-11. The
+    points: ``mbs.app.runner.sample_points`` of the initial box x parameter box (centre,
+    corners, random points), as ``mbs simulate --samples`` draws them."""
     import pinocchio as pin
-    from scipy.integrate import solve_ivp
     from mbs.app.runner import sample_points
     loop = sol.control
     chain = loop.chain
@@ -86,15 +81,14 @@ def sample_oracle(sol, count=24, seed=0, frame=None, payload_link=None):
         payloads = []
         if payload_link is not None:   # a point payload at the link's origin (the scenes' payloads)
             payloads.append((payload_link, float(p[names.index("payload.mass")]), [0, 0, 0]))
-        plant = pin_plant(chain, payloads)
+        plant = pinocchio_with(chain, payloads)
         data = plant.createData()
 
         def f(t, x, p=p):
             xs = list(x) + ([t] if loop.timed else [])
             tau = np.array([float(v) for v in loop.torque(xs, list(p), t)])
             return np.r_[x[n:], pin.aba(plant, data, x[:n], x[n:], tau)]
-        s = solve_ivp(f, (0.0, T), x0, method="DOP853", rtol=1e-11, atol=1e-11, dense_output=True)
-        assert s.success
+        s = dop853(f, x0, T, rtol=1e-11, atol=1e-11)
         X = np.array([s.sol(t) for t in sol.t])
         states.append(X)
         if fid is not None:
@@ -140,17 +134,16 @@ def run_case(label, scene_name, cap, mode=None, extra=None, samples=24, frame="t
         st, fr = sample_oracle(sol, samples, frame=frame, payload_link=pl["link"] if pl else None)
         k = len(sol.t) - 1
         enc = np.asarray(sol.hull.width()[k], float)[:2 * n]
-        spread = st[:, k, :2 * n].max(axis=0) - st[:, k, :2 * n].min(axis=0)
-        inside = all(np.any(np.all((np.asarray(sol.boxes[j].lo)[..., :2 * n] - 1e-9 <= st[s, j]) &
-                                   (st[s, j] <= np.asarray(sol.boxes[j].hi)[..., :2 * n] + 1e-9), axis=-1))
-                     for s in range(st.shape[0]) for j in range(len(sol.t)))
+        spread = hull_widths(st[:, k, :2 * n])
+        inside = all(inside_union(st[:, j], np.asarray(b.lo)[..., :2 * n], np.asarray(b.hi)[..., :2 * n],
+                                  SLACK).all() for j, b in enumerate(sol.boxes))
         row.update(t_out=float(sol.t[k]), width_q=enc[:n], width_qd=enc[n:], ratio=float(np.max(enc / spread)),
                    ratio_q=float(np.max(enc[:n] / spread[:n])), inside=inside)
         if fr is not None:
             e = sol.frame(frame)
             fw = np.asarray(e.position.width()[k], float)
-            fs = fr[:, k].max(axis=0) - fr[:, k].min(axis=0)
-            fin = all(e.contains(j, fr[s, j], 1e-9) for s in range(fr.shape[0]) for j in range(len(sol.t)))
+            fs = hull_widths(fr[:, k])
+            fin = all(e.contains(j, fr[s, j], SLACK) for s in range(fr.shape[0]) for j in range(len(sol.t)))
             row.update(frame=frame, frame_w=fw, frame_ratio=float(np.max(fw / np.maximum(fs, 1e-300))),
                        frame_inside=fin, frame_tube_w=np.asarray(e.tube_hull.width(), float))
     return row
