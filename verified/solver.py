@@ -343,10 +343,12 @@ def solve(
         pendulum from one box to 1.54 s (against 1.46 s) at 1.3x the wall time.
     model_caps : dict or None (only with ``set_step="composition"``): how many of a set's
         widest symbols get quadratic, cubic, quartic and star monomials in the
-        composition's Taylor models, e.g. ``{"quadratic": 32, "cubic": 16}``; keys among
+        composition's Taylor models, e.g. ``{"quadratic": 32, "cubic": 16}``, and
+        ``"pool"``: how many symbols the remainders born inside the model graph may claim
+        (``verified.tm_flow``, module docstring; 0 turns them off); keys among
         :data:`MODEL_CAPS`, each an int >= 0, missing ones at the defaults
         (``verified.tm_flow``: quadratic 32 and cubic 16 for up to 9 states, else 16 and 6;
-        quartic 4, star 6). More monomials mean fewer terms bounded at every operation at
+        quartic 4, star 6, pool 64). More monomials mean fewer terms bounded at every operation at
         a higher cost per step. Measured (q0 +- 1e-3, degree 3), 32 / 16 against 16 / 6:
         the planar 4-link chain to T = 1 at ratio 1.29 in 20 s (break-down at 0.95 s), the
         3-link arm to T = 2 at ratio 1.21 (1.35) in 2.5x the time, the double pendulum
@@ -742,8 +744,9 @@ def _stepper(kind: SetKind, prob: VerifiedODE, order, params, error_basis, absor
 
 
 #: the keys of ``solve(model_caps=...)``: the symbols with quadratic, cubic, quartic and
-#: star monomials in the composition's Taylor models (verified.tm_flow.TaylorModelFlowStepper)
-MODEL_CAPS = ("quadratic", "cubic", "quartic", "star")
+#: star monomials in the composition's Taylor models, and the pool of symbols for the
+#: remainders born inside the graph (verified.tm_flow.TaylorModelFlowStepper)
+MODEL_CAPS = ("quadratic", "cubic", "quartic", "star", "pool")
 
 
 def _check_model_caps(model_caps, set_step):

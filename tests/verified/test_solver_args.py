@@ -105,6 +105,8 @@ SETTINGS = [
     ("model_caps", dict(model_caps={"cubic": -1}, set_order=2, set_step="composition")),
     ("model_caps", dict(model_caps={"star": True}, set_order=2, set_step="composition")),
     ("model_caps", dict(model_caps=[32, 16], set_order=2, set_step="composition")),
+    ("model_caps", dict(model_caps={"pool": -4}, set_order=2, set_step="composition")),
+    ("model_caps", dict(model_caps={"pool": 2.5}, set_order=2, set_step="composition")),
 ]
 
 
@@ -209,10 +211,13 @@ def test_model_caps_reach_the_composition_stepper(monkeypatch):
 
     def record(self, *a, **k):
         real(self, *a, **k)
-        seen.update(quadratic=self.quadratic_cap, cubic=self.cubic_cap, star=self.star_cap)
+        seen.update(quadratic=self.quadratic_cap, cubic=self.cubic_cap, star=self.star_cap, pool=self.pool_cap)
 
     monkeypatch.setattr(tm_flow.TaylorModelFlowStepper, "__init__", record)
     sol = solve(_oscillator(), BOX2, (0.0, 0.1), set_order=2, set_step="composition", arithmetic="taylor_model",
                 model_caps={"quadratic": 5, "cubic": 3})
     assert sol.status == "completed"
-    assert seen == dict(quadratic=5, cubic=3, star=tm_flow.STAR_CAP)
+    assert seen == dict(quadratic=5, cubic=3, star=tm_flow.STAR_CAP, pool=tm_flow.TaylorModelFlowStepper.POOL)
+    sol = solve(_oscillator(), BOX2, (0.0, 0.1), set_order=2, set_step="composition", arithmetic="taylor_model",
+                model_caps={"pool": 0})
+    assert sol.status == "completed" and seen["pool"] == 0

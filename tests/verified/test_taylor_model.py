@@ -74,13 +74,14 @@ def _pointwise_ode():
 
 
 def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_symbols=0, quartic_symbols=0,
-                           star_symbols=0, fresh=False, n_points=12, seed=0):
+                           star_symbols=0, fresh=False, pool=0, pool_tol=0.0, n_points=12, seed=0):
     """The models themselves, not only their ranges: inputs ``c + r eps`` (one symbol per
     state, ``c`` and ``r`` dyadic), and at dyadic points ``eps`` (corners included) the exact
     coefficients (arb) must lie within the model's polynomial at ``eps`` (evaluated in arb)
     plus or minus its remainder. ``fresh``: ``n order`` fresh symbols follow (the
     coefficients' remainders move there, ``TaylorModelODE._run(fresh=True)``), whose
-    values are unknown: their terms count as remainder."""
+    values are unknown: their terms count as remainder. ``pool``: that many symbols
+    before them for the remainders born inside the graph (``_run(pool=...)``), likewise."""
     from flint import arb
 
     c, r = np.asarray(c, float), np.asarray(r, float)
@@ -88,16 +89,19 @@ def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_sy
     ev = TaylorModelODE(graph, quadratic_symbols, cubic_symbols, quartic_symbols, star_symbols)
     mq, m3, m4, ms = ev.symbol_caps(m)
     ns = m - mq  # the star reaches the states' symbols, not the fresh ones
-    mt = m + (n * order if fresh else 0)
+    mt = m + pool + (n * order if fresh else 0)
     X = np.zeros((n, 1, mt + 2))
     X[:, 0, 0] = c
     X[np.arange(n), 0, 1 + np.arange(n)] = r
     out = ev._run(tm.forms_to_models(X, mq, m3, m4, ms, ns), np.zeros((0, 1, model_length(mt, mq, m3, m4, ms, ns))),
-                  order, mt, mq, m3, m4, ms, ns, fresh=fresh)
-    if fresh:
-        # the fresh symbols' coefficients join the remainder; the model without them
+                  order, mt, mq, m3, m4, ms, ns, fresh=fresh, pool=pool, pool_tol=pool_tol)
+    pool_used = None
+    if fresh or pool:
+        # the fresh and pool symbols' coefficients join the remainder; the model without them
         held = np.abs(out[..., 1 + m: 1 + mt]).sum(axis=-1) * (1 + 2.0**-40) + out[..., -1]
-        assert out[:, 1:, :, -1].max() == 0.0  # (moved, not kept)
+        if fresh:
+            assert out[:, 1:, :, -1].max() == 0.0  # (moved, not kept)
+        pool_used = bool(np.abs(out[..., 1 + m: 1 + m + pool]).max() > 0) if pool else False
         out = np.concatenate([out[..., : 1 + m], out[..., 1 + mt:]], axis=-1)
         out[..., -1] = held
     pi, pj = tm._pairs(mq)
@@ -122,6 +126,7 @@ def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_sy
                     assert abs(exact[k, i] - poly) <= arb(float(coef[-1])), (
                         f"x_[{k}][{i}] outside its model at eps {eps.tolist()}: exact {exact[k, i]}, "
                         f"polynomial {poly}, remainder {coef[-1]}")
+    return pool_used if pool else None
 
 
 # --------------------------------------------------------------------------- default run
@@ -361,6 +366,56 @@ def test_models_contain_exact_coefficients_pointwise(c, r, quad, cubic, quartic,
 def test_models_with_fresh_symbols_contain_exact_coefficients_pointwise(c, r, quad, cubic, quartic, star):
     check_models_pointwise(_pointwise_ode(), c, r, 4, quadratic_symbols=quad, cubic_symbols=cubic,
                            quartic_symbols=quartic, star_symbols=star, fresh=True)
+
+
+@pytest.mark.parametrize("quad, cubic, quartic, star", [(2, 0, 0, 0), (2, 2, 0, 0), (1, 1, 1, 1)])
+@pytest.mark.parametrize("c, r", [([0.375, -0.25], [0.125, 0.25]), ([1.5, 0.5], [0.0625, 0.5])])
+@pytest.mark.parametrize("pool, fresh", [(3, False), (20, True)])
+def test_models_with_pool_symbols_contain_exact_coefficients_pointwise(c, r, quad, cubic, quartic, star, pool, fresh):
+    """Remainders born inside the graph moved into symbols of their own (a pool of 3
+    runs out; one of 20 does not), with and without the coefficients' fresh symbols."""
+    assert check_models_pointwise(_pointwise_ode(), c, r, 4, quadratic_symbols=quad, cubic_symbols=cubic,
+                                  quartic_symbols=quartic, star_symbols=star, fresh=fresh, pool=pool)
+
+
+def test_oracle_catches_pool_symbols_that_lose_the_remainder(monkeypatch):
+    """A kernel that clears a slot's remainder without moving it into its pool symbol
+    must fail the pointwise check."""
+    args = (_pointwise_ode(), [0.375, -0.25], [0.125, 0.25], 3)
+    assert check_models_pointwise(*args, cubic_symbols=2, pool=8)
+    _mutant_kernel(monkeypatch, "_model_kernel", "Z[1 + pool0 + used[b]] = Z[E]", "Z[1 + pool0 + used[b]] = 0.0")
+    with pytest.raises(AssertionError, match="outside its model"):
+        check_models_pointwise(*args, cubic_symbols=2, pool=8)
+
+
+def test_pool_symbols_tighten_the_arm_and_stay_clear_of_the_quadratic_ones():
+    """On the 3-link arm's right-hand side over a set with more symbols than quadratic
+    and cubic monomials (12 symbols, 4 quadratic, 2 cubic: the products past the caps
+    are bounded where they arise), the pool's symbols make the qdd enclosure at least
+    2x narrower (the cancellations downstream of where remainders are born are kept;
+    measured 3.6 / 3.2 / 2.5x); a pool that would overlap the quadratic symbols is
+    refused."""
+    from models.planar import planar_chain
+    from mbs.simulate import system_for
+
+    g = system_for(planar_chain(3), "i").rhs
+    n, m0, mq, m3 = 6, 12, 4, 2
+    ev = TaylorModelODE(g, mq, m3, 0, 0)
+    A = np.random.default_rng(0).normal(size=(n, m0)) * np.array([0.01] * 3 + [0.1] * 3)[:, None] / np.sqrt(m0)
+    widths = []
+    for pool in (0, 64):
+        m = m0 + pool
+        X = np.zeros((n, 1, m + 2))
+        X[:, 0, 0] = [0.5, -0.3, 0.2, 0.0, 0.0, 0.0]
+        X[:, 0, 1: m0 + 1] = A
+        out = ev._run(tm.forms_to_models(X, mq, m3), np.zeros((0, 1, model_length(m, mq, m3))), 1, m, mq, m3,
+                      pool=pool)
+        lo, hi = tm.models_to_interval(out[3:, 1], m, mq)
+        widths.append(hi - lo)
+    assert (widths[1] < 0.5 * widths[0]).all(), widths
+    with pytest.raises(ValueError, match="overlap"):
+        ev._run(np.zeros((n, 1, model_length(8, 6, 6))), np.zeros((0, 1, model_length(8, 6, 6))), 1, 8, 6, 6,
+                pool=4)
 
 
 def test_oracle_catches_fresh_symbols_that_lose_the_remainder(monkeypatch):

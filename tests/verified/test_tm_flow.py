@@ -73,10 +73,10 @@ def test_oracle_bites_when_the_model_remainder_is_dropped(monkeypatch, fresh):
         y[..., -1] = 0.0
         return y
 
-    def no_fresh(self, X, P, order, m, *caps, fresh=False):
-        out = real_run(self, X, P, order, m, *caps, fresh=fresh)
-        if fresh:
-            f0 = m - self.n * order
+    def no_fresh(self, X, P, order, m, *caps, fresh=False, pool=0, pool_tol=1e-8):
+        out = real_run(self, X, P, order, m, *caps, fresh=fresh, pool=pool, pool_tol=pool_tol)
+        if fresh or pool:
+            f0 = m - (self.n * order if fresh else 0) - pool
             out[..., 1 + f0: 1 + m] = 0.0
         return out
 
