@@ -94,7 +94,7 @@ def robot_case(name, eps, T, order, tol):
 
 
 def controlled_case():
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    sys.path.append(str(Path(__file__).resolve().parents[1] / "tests"))
     from mbs.control import ComputedTorque
     from mbs.simulate import simulate
     q0 = np.array([0.5, -0.3])

@@ -37,7 +37,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # tests/oracles: the sampling oracle
+# tests/oracles (the sampling oracle) after the repository root: tests/mbs, a directory
+# without __init__, must not shadow the mbs package
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.append(str(Path(__file__).resolve().parents[1] / "tests"))
 
 import bench_robots as br  # noqa: E402
 from oracles.sampling import states_at  # noqa: E402

@@ -25,7 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # tests/oracles: the sampling oracle
+# tests/oracles (the sampling oracle) after the repository root: tests/mbs, a directory
+# without __init__, must not shadow the mbs package
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.append(str(Path(__file__).resolve().parents[1] / "tests"))
 
 from models import double_pendulum as dp  # noqa: E402
 from oracles.sampling import Ensemble, hull_widths  # noqa: E402
