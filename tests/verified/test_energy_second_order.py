@@ -198,8 +198,15 @@ def test_pendulum_second_order_with_the_energy_test_prunes_and_keeps_every_traje
 def test_a_pruning_test_that_drops_consistent_parts_is_caught(monkeypatch):
     """The same run with a test that also discards every cut part whose energy
     residual's enclosure is centred above 0 (consistent ones too): the sampling
-    oracle must see states outside (so the test above can fail). (Measured: 49.)"""
+    oracle must see states outside (so the test above can fail). (Measured: 49.)
+    The mutant drops one part more than the real test; the step control's remainder
+    cut is pinned at 1.2 (the default is 1.5), whose ten steps and five tests put the
+    sampled trajectories through that part (with 1.5: five steps, three tests, and
+    none goes through it; a mutant dropping every other part instead drops every set
+    in the bisection and ends the run at the first test)."""
     from verified import branch_prune as bp
+    from verified.tm_flow import TaylorModelFlowStepper
+    monkeypatch.setattr(TaylorModelFlowStepper, "REMAINDER_GROWTH", 1.2)
     real = bp.inconsistent
 
     def drops_more(checks):
