@@ -402,6 +402,8 @@ class TaylorModelFlowStepper(LohnerStepper):
     (ratio 1.32) and breaks down at 1.34 s with 0; the UR5 to T = 1 ratio 1.16 against
     1.22 at the same cost; chains n = 5 / 7 0.70 / 0.23 s against 0.57 / 0.21 s in
     60 s. ``fresh_symbols`` (None: ``FRESH_SYMBOLS``, True): see the module docstring.
+    ``pool_cap`` (None: ``POOL`` = 64; 0: off): the symbols the remainders born inside
+    the model graph may claim (module docstring; needs ``fresh_symbols``).
 
     ``absorb_ratio`` None (default): 1 % of the carried width for systems of 6 states or
     more, 10 % (as the mean-value step) below. Why early on robots: the error part is a
