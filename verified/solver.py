@@ -348,7 +348,7 @@ def solve(
         (``verified.tm_flow``, module docstring; 0 turns them off); keys among
         :data:`MODEL_CAPS`, each an int >= 0, missing ones at the defaults
         (``verified.tm_flow``: quadratic 32 and cubic 16 for up to 9 states, else 16 and 6;
-        quartic 4, star 6, pool 64). More monomials mean fewer terms bounded at every operation at
+        quartic 4, star 6, pool 128). More monomials mean fewer terms bounded at every operation at
         a higher cost per step. Measured (q0 +- 1e-3, degree 3), 32 / 16 against 16 / 6:
         the planar 4-link chain to T = 1 at ratio 1.29 in 20 s (break-down at 0.95 s), the
         3-link arm to T = 2 at ratio 1.21 (1.35) in 2.5x the time, the double pendulum

@@ -604,7 +604,7 @@ def _quotient_step(Z, F, s, u, v, k, b, PA, PB, PC, rec, T, S):
 
 @njit(cache=True)
 def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA, PB, PC, deg, fresh0, F, REC,
-                  pool0=-1, pool_n=0, pool_tol=0.0):
+                  pool0=-1, pool_n=0, pool_tol=0.0, pool_orders=1):
     """Taylor models of x_[0..order]; X (n, B, L) and P (p, B, L) are the input models.
 
     ``F`` (slots, order + 1, B, L) and ``REC`` (slots, B, L) are the caller's work
@@ -760,13 +760,13 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                         _clear(V)
                         _sqrconv(V, F, u, k, 0, b, PA, PB, PC)
                         _quotient_step(Z, F, s, u, vs, k, b, PA, PB, PC, REC[s, b], T, S)
-            if k == 0 and pool0 >= 0 and o != T_INPUT and o != T_PARAM and o != T_CONST and o != T_MID:
+            if k < pool_orders and pool0 >= 0 and o != T_INPUT and o != T_PARAM and o != T_CONST and o != T_MID:
                 # a remainder born here becomes the coefficient of a symbol of its own
                 # (zero in every input: nothing upstream carries it), so the operations
                 # downstream carry it linearly, with its cancellations
                 for b in range(nb):
                     if used[b] < pool_n:
-                        Z = F[s, 0, b]
+                        Z = F[s, k, b]
                         if Z[E] > pool_tol * (np.abs(Z[1:E]).sum() + abs(Z[0])) and Z[E] < np.inf:
                             Z[1 + pool0 + used[b]] = Z[E]
                             Z[E] = 0.0
@@ -884,7 +884,7 @@ class TaylorModelODE:
         m3 = min(mq, self.cubic_symbols)
         return mq, m3, min(m3, self.quartic_symbols), min(mq, self.star_symbols)
 
-    def _run(self, X, P, order, m, mq, m3=0, m4=0, ms=0, ns=None, fresh=False, pool=0, pool_tol=1e-8):
+    def _run(self, X, P, order, m, mq, m3=0, m4=0, ms=0, ns=None, fresh=False, pool=0, pool_tol=1e-8, pool_orders=1):
         """The kernel on input models ``X`` (n, B, L) and parameter models ``P`` (p, B, L),
         ``L = model_length(m, mq, m3, m4, ms, ns)``: (n, order + 1, B, L).
 
@@ -908,7 +908,9 @@ class TaylorModelODE:
         0.24 / 0.69 / 0.97 without, 0.04 / 0.12 / 0.19 with a pool of 64 (the graph has
         208 slots; 256 gives the same). Sound for the same reason as ``fresh``: a
         slot's true value is its polynomial plus ``e delta`` for some ``delta`` in
-        ``[-1, 1]``, which every later operation treats as a symbol."""
+        ``[-1, 1]``, which every later operation treats as a symbol. ``pool_orders``:
+        the orders ``k < pool_orders`` of the recursion whose slots may claim one (the
+        same pool, in order of computation: order 0's slots first)."""
         t = self._tape
         PA, PB, PC = product_table(m, mq, m3, m4, ms, ns)
         L = model_length(m, mq, m3, m4, ms, ns)
@@ -925,7 +927,7 @@ class TaylorModelODE:
         F, REC = self._work(t.op.size, int(order), X.shape[1], L)
         return _model_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs,
                              np.ascontiguousarray(X), np.ascontiguousarray(P), int(order), PA, PB, PC,
-                             4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0, F, REC, pool0, int(pool), float(pool_tol))
+                             4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0, F, REC, pool0, int(pool), float(pool_tol), int(pool_orders))
 
     def __getstate__(self):
         # the kernel's work memory is scratch (tens to hundreds of MB): not pickled

@@ -57,20 +57,20 @@ Two things keep those bounds from feeding on themselves over a long run:
   the same width, break-down at 1.27 s; with star monomials T = 2).
 
 * *Symbols for the remainders born inside the graph* (``pool_cap``, default ``POOL`` =
-  64; ``solve(model_caps={"pool": ...})``): at order 0, the first slots of the model
-  graph whose remainder is more than ``POOL_TOL`` of their magnitude get a symbol of
-  their own for it (:meth:`verified.taylor_model.TaylorModelODE._run`), so what one
+  128; ``solve(model_caps={"pool": ...})``): at the first ``POOL_ORDERS`` = 3 orders of
+  the recursion, the first slots of the model graph whose remainder is more than
+  ``POOL_TOL`` of their magnitude get a symbol of their own for it (:meth:`verified.taylor_model.TaylorModelODE._run`), so what one
   product bounds is carried linearly through the rest of the graph. On a robot the
   remainder of ``qdd`` is born in the bias products, spread over every joint's torque
   and recombined by the mass-matrix solve, where the values cancel and independent
   radii did not: on the 3-link arm's set at 0.5 s the remainder of ``qdd`` is 5x
   smaller. The step bounds these symbols' terms with the fresh ones. Measured (degree 3,
   q0 +- 1e-3 unless said, one-off runs of case 8's settings): the 3-link arm +- 0.01
-  from 0.61 s to 0.91 s, the planar chains n = 5 / 6 / 7 from 0.71 / 0.59 / 0.37 s to
-  0.88 / 0.67 / 0.45 s, the 4-link chain to T = 1 at ratio 1.21 (1.29), the 3-link arm
-  to T = 2 at 1.18 (1.21), the UR5 to T = 1 at 1.12 (1.14) in 215 steps (226); the
-  Panda (0.455 s), the double pendulum from one box (1.71 s) and the pendulum over
-  the top as before.
+  from 0.61 s to 0.96 s, the planar chains n = 5 / 6 / 7 from 0.71 / 0.59 / 0.37 s to
+  0.99 / 0.83 / 0.65 s, the 4-link chain to T = 1 at ratio 1.20 (1.29), the 3-link arm
+  to T = 2 at 1.18 (1.21), the UR5 to T = 1 at 1.12 (1.14); the Panda (0.46 s), the
+  double pendulum from one box (1.71 s) and the pendulum over the top as before
+  (order 0 alone with 64 symbols: ``POOL``).
 
 Rigor: the input models enclose the set (every float product's rounding is added
 to the remainder), the model kernel is checked against arb
@@ -402,7 +402,7 @@ class TaylorModelFlowStepper(LohnerStepper):
     (ratio 1.32) and breaks down at 1.34 s with 0; the UR5 to T = 1 ratio 1.16 against
     1.22 at the same cost; chains n = 5 / 7 0.70 / 0.23 s against 0.57 / 0.21 s in
     60 s. ``fresh_symbols`` (None: ``FRESH_SYMBOLS``, True): see the module docstring.
-    ``pool_cap`` (None: ``POOL`` = 64; 0: off): the symbols the remainders born inside
+    ``pool_cap`` (None: ``POOL`` = 128; 0: off): the symbols the remainders born inside
     the model graph may claim (module docstring; needs ``fresh_symbols``).
 
     ``absorb_ratio`` None (default): 1 % of the carried width for systems of 6 states or
@@ -468,7 +468,8 @@ class TaylorModelFlowStepper(LohnerStepper):
         M = M_set + pool + (self.n * K if self.fresh_symbols else 0)
         Xm = more_symbols(Xs, M_set, M - M_set) if M > M_set else Xs
         out = self.models._run(Xm, self._param_models(nb, M, caps), K, M, *caps,
-                               fresh=self.fresh_symbols, pool=pool, pool_tol=self.POOL_TOL)  # (n, K + 1, B, L)
+                               fresh=self.fresh_symbols, pool=pool, pool_tol=self.POOL_TOL,
+                               pool_orders=self.POOL_ORDERS)  # (n, K + 1, B, L)
         mq = caps.mq
         cX = self.models._interval(out, M, mq)
         if self.SET_AFFINE_CHECK:
@@ -567,12 +568,18 @@ class TaylorModelFlowStepper(LohnerStepper):
     #: see suggest_step
     REMAINDER_GROWTH = 1.5
 
-    #: symbols for the remainders born inside the model graph at order 0 (see
-    #: TaylorModelODE._run's ``pool`` and the module docstring), and the relative size
-    #: that claims one. 64 covers the 3-link arm's 208 slots (256: the same steps and
-    #: widths); on the UR5, 256 gave ratio 1.117 at T = 1 against 1.124 with 64
-    POOL = 64
+    #: symbols for the remainders born inside the model graph at the first
+    #: ``POOL_ORDERS`` orders of the recursion (see TaylorModelODE._run's ``pool`` and
+    #: the module docstring), and the relative size that claims one. Order 0 alone, 64
+    #: symbols: the 3-link arm +- 0.01 to 0.914 s, chains n = 5 / 6 / 7 to 0.872 /
+    #: 0.667 / 0.454 s; orders 0-2 with 128 (the default): 0.955 s (ratio at 0.9 s 2.05
+    #: against 4.89), 0.990 / 0.826 / 0.647 s, the UR5 at T = 1 1.118 (1.124), the arm
+    #: +- 1e-3 1.176 (1.179), the 4-link chain 1.198 (1.205), at the same cost per step;
+    #: all 8 orders with 256: the arm 0.958 s. The Panda, the one-box double pendulum and
+    #: the pendulum over the top do not move
+    POOL = 128
     POOL_TOL = 1e-8
+    POOL_ORDERS = 3
     #: the tube's coefficients (the a-priori test) with the pool too
     TUBE_POOL = True
 

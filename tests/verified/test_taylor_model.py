@@ -74,7 +74,7 @@ def _pointwise_ode():
 
 
 def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_symbols=0, quartic_symbols=0,
-                           star_symbols=0, fresh=False, pool=0, pool_tol=0.0, n_points=12, seed=0):
+                           star_symbols=0, fresh=False, pool=0, pool_tol=0.0, pool_orders=1, n_points=12, seed=0):
     """The models themselves, not only their ranges: inputs ``c + r eps`` (one symbol per
     state, ``c`` and ``r`` dyadic), and at dyadic points ``eps`` (corners included) the exact
     coefficients (arb) must lie within the model's polynomial at ``eps`` (evaluated in arb)
@@ -94,7 +94,7 @@ def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_sy
     X[:, 0, 0] = c
     X[np.arange(n), 0, 1 + np.arange(n)] = r
     out = ev._run(tm.forms_to_models(X, mq, m3, m4, ms, ns), np.zeros((0, 1, model_length(mt, mq, m3, m4, ms, ns))),
-                  order, mt, mq, m3, m4, ms, ns, fresh=fresh, pool=pool, pool_tol=pool_tol)
+                  order, mt, mq, m3, m4, ms, ns, fresh=fresh, pool=pool, pool_tol=pool_tol, pool_orders=pool_orders)
     pool_used = None
     if fresh or pool:
         # the fresh and pool symbols' coefficients join the remainder; the model without them
@@ -370,22 +370,25 @@ def test_models_with_fresh_symbols_contain_exact_coefficients_pointwise(c, r, qu
 
 @pytest.mark.parametrize("quad, cubic, quartic, star", [(2, 0, 0, 0), (2, 2, 0, 0), (1, 1, 1, 1)])
 @pytest.mark.parametrize("c, r", [([0.375, -0.25], [0.125, 0.25]), ([1.5, 0.5], [0.0625, 0.5])])
-@pytest.mark.parametrize("pool, fresh", [(3, False), (20, True)])
-def test_models_with_pool_symbols_contain_exact_coefficients_pointwise(c, r, quad, cubic, quartic, star, pool, fresh):
+@pytest.mark.parametrize("pool, fresh, orders", [(3, False, 1), (20, True, 1), (40, True, 3), (12, False, 4)])
+def test_models_with_pool_symbols_contain_exact_coefficients_pointwise(c, r, quad, cubic, quartic, star, pool, fresh,
+                                                                        orders):
     """Remainders born inside the graph moved into symbols of their own (a pool of 3
-    runs out; one of 20 does not), with and without the coefficients' fresh symbols."""
+    runs out; one of 20 does not), with and without the coefficients' fresh symbols, at
+    order 0 only or at the first 3 / 4 orders of the recursion."""
     assert check_models_pointwise(_pointwise_ode(), c, r, 4, quadratic_symbols=quad, cubic_symbols=cubic,
-                                  quartic_symbols=quartic, star_symbols=star, fresh=fresh, pool=pool)
+                                  quartic_symbols=quartic, star_symbols=star, fresh=fresh, pool=pool,
+                                  pool_orders=orders)
 
 
 def test_oracle_catches_pool_symbols_that_lose_the_remainder(monkeypatch):
     """A kernel that clears a slot's remainder without moving it into its pool symbol
     must fail the pointwise check."""
     args = (_pointwise_ode(), [0.375, -0.25], [0.125, 0.25], 3)
-    assert check_models_pointwise(*args, cubic_symbols=2, pool=8)
+    assert check_models_pointwise(*args, cubic_symbols=2, pool=8, pool_orders=3)
     _mutant_kernel(monkeypatch, "_model_kernel", "Z[1 + pool0 + used[b]] = Z[E]", "Z[1 + pool0 + used[b]] = 0.0")
     with pytest.raises(AssertionError, match="outside its model"):
-        check_models_pointwise(*args, cubic_symbols=2, pool=8)
+        check_models_pointwise(*args, cubic_symbols=2, pool=8, pool_orders=3)
 
 
 def test_pool_symbols_tighten_the_arm_and_stay_clear_of_the_quadratic_ones():

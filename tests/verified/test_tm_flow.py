@@ -73,8 +73,8 @@ def test_oracle_bites_when_the_model_remainder_is_dropped(monkeypatch, fresh):
         y[..., -1] = 0.0
         return y
 
-    def no_fresh(self, X, P, order, m, *caps, fresh=False, pool=0, pool_tol=1e-8):
-        out = real_run(self, X, P, order, m, *caps, fresh=fresh, pool=pool, pool_tol=pool_tol)
+    def no_fresh(self, X, P, order, m, *caps, fresh=False, pool=0, **pool_args):
+        out = real_run(self, X, P, order, m, *caps, fresh=fresh, pool=pool, **pool_args)
         if fresh or pool:
             f0 = m - (self.n * order if fresh else 0) - pool
             out[..., 1 + f0: 1 + m] = 0.0
