@@ -896,9 +896,10 @@ class TaylorModelODE:
         is the polynomial at some value of that symbol in ``[-1, 1]``.
 
         ``pool``: the ``pool`` symbols before the fresh ones (or last, without them),
-        zero in ``X`` and ``P``, are handed out at order 0 to the slots of the graph, in
-        the tape's order, whose remainder exceeds ``pool_tol`` times their model's
-        magnitude (per set, until the pool runs out): that remainder becomes the
+        zero in ``X`` and ``P``, are handed out at the orders ``k < pool_orders`` (default:
+        order 0 only), in order of computation (order by order, each in the tape's order),
+        to the slots whose remainder exceeds ``pool_tol`` times their model's magnitude
+        (per set, until the pool runs out): that remainder becomes the
         coefficient of the slot's own symbol, so every operation downstream carries it
         linearly and its cancellations are kept. A remainder born in one product and
         spread over many results (a bias force transmitted to every joint's torque, then
@@ -908,26 +909,27 @@ class TaylorModelODE:
         0.24 / 0.69 / 0.97 without, 0.04 / 0.12 / 0.19 with a pool of 64 (the graph has
         208 slots; 256 gives the same). Sound for the same reason as ``fresh``: a
         slot's true value is its polynomial plus ``e delta`` for some ``delta`` in
-        ``[-1, 1]``, which every later operation treats as a symbol. ``pool_orders``:
-        the orders ``k < pool_orders`` of the recursion whose slots may claim one (the
-        same pool, in order of computation: order 0's slots first)."""
+        ``[-1, 1]``, which every later operation treats as a symbol."""
         t = self._tape
         PA, PB, PC = product_table(m, mq, m3, m4, ms, ns)
         L = model_length(m, mq, m3, m4, ms, ns)
         if X.shape[-1] != L or P.shape[-1] != L:
             raise ValueError(f"models of length {L} expected for {m} symbols ({mq} quadratic, {m3} cubic, "
                              f"{m4} quartic, {ms} star), got {X.shape[-1]} and {P.shape[-1]}")
+        # (the first symbol with linear terms only: the fresh and pool symbols must be past it)
+        linear_only = mq + star_span(m, mq, ns if ms else 0)
         fresh0 = m - self.n * int(order) if fresh else -1
-        if fresh and fresh0 < mq + star_span(m, mq, ns if ms else 0):
+        if fresh and fresh0 < linear_only:
             raise ValueError(f"{self.n * int(order)} fresh symbols among {m} overlap the {mq} quadratic ones "
                              f"or the star's")
         pool0 = (fresh0 if fresh else m) - int(pool) if pool else -1
-        if pool and pool0 < mq + star_span(m, mq, ns if ms else 0):
+        if pool and pool0 < linear_only:
             raise ValueError(f"{int(pool)} pool symbols among {m} overlap the {mq} quadratic ones or the star's")
         F, REC = self._work(t.op.size, int(order), X.shape[1], L)
         return _model_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs,
                              np.ascontiguousarray(X), np.ascontiguousarray(P), int(order), PA, PB, PC,
-                             4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0, F, REC, pool0, int(pool), float(pool_tol), int(pool_orders))
+                             4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0, F, REC,
+                             pool0, int(pool), float(pool_tol), int(pool_orders))
 
     def __getstate__(self):
         # the kernel's work memory is scratch (tens to hundreds of MB): not pickled
@@ -959,7 +961,9 @@ class TaylorModelODE:
 
         ``caps``: ``(mq, m3, m4, ms)`` for these forms instead of :meth:`symbol_caps`
         (each at most ``m``). ``fresh``: the recursion with fresh symbols per
-        coefficient (:meth:`_run`), appended after the ``m`` symbols."""
+        coefficient (:meth:`_run`), appended after the ``m`` symbols; ``pool``: that many
+        symbols before them for the remainders born inside the graph at order 0
+        (:meth:`_run`'s ``pool``)."""
         n, nb, m2 = X.shape
         if n != self.n:
             raise ValueError(f"forms must have shape ({self.n}, B, m + 2), got {X.shape}")

@@ -59,8 +59,9 @@ Two things keep those bounds from feeding on themselves over a long run:
 * *Symbols for the remainders born inside the graph* (``pool_cap``, default ``POOL`` =
   128; ``solve(model_caps={"pool": ...})``): at the first ``POOL_ORDERS`` = 3 orders of
   the recursion, the first slots of the model graph whose remainder is more than
-  ``POOL_TOL`` of their magnitude get a symbol of their own for it (:meth:`verified.taylor_model.TaylorModelODE._run`), so what one
-  product bounds is carried linearly through the rest of the graph. On a robot the
+  ``POOL_TOL`` of their magnitude get a symbol of their own for it
+  (:meth:`verified.taylor_model.TaylorModelODE._run`), so what one product bounds is
+  carried linearly through the rest of the graph (the tube's coefficients, order 0). On a robot the
   remainder of ``qdd`` is born in the bias products, spread over every joint's torque
   and recombined by the mass-matrix solve, where the values cancel and independent
   radii did not: on the 3-link arm's set at 0.5 s the remainder of ``qdd`` is 5x
@@ -292,7 +293,8 @@ def tube_view(models: np.ndarray, M: int, mq: int) -> SetView:
 
 
 def tube_coefficients(models, tube: np.ndarray, M: int, mq: int, order: int, params=None,
-                      quadratic_cap: int = TUBE_QUADRATIC_CAP, cubic_cap: int = TUBE_CUBIC_CAP, pool: int = 0) -> Interval:
+                      quadratic_cap: int = TUBE_QUADRATIC_CAP, cubic_cap: int = TUBE_CUBIC_CAP,
+                      pool: int = 0) -> Interval:
     """Enclosures (B, order + 1, n) of the Taylor coefficients ``x_[0..order]`` over a
     tube given as models ``tube`` (n, B, L) over ``M`` symbols (``mq`` of them with
     quadratic monomials), in Taylor models of their own made for a tube
@@ -310,7 +312,8 @@ def tube_coefficients(models, tube: np.ndarray, M: int, mq: int, order: int, par
     cancellations, where a model's remainder is multiplied by every operation. Sound:
     the tube's points are ``p(e) + r`` with ``r`` in the per-state remainder box, each
     ``r_i = rad_i delta_i`` for some ``delta_i`` in ``[-1, 1]``; the symbols' order and
-    caps change only which products are kept.
+    caps change only which products are kept. ``pool``: symbols for the remainders born
+    inside the graph at order 0 (:meth:`~verified.taylor_model.TaylorModelODE._run`).
 
     Measured on the Panda +- 1e-3 (order 8, ``benchmarks/bench_robots.py`` case 8):
     ``x_[8]`` over the tube a median 140x narrower than in affine arithmetic with fresh
@@ -580,8 +583,6 @@ class TaylorModelFlowStepper(LohnerStepper):
     POOL = 128
     POOL_TOL = 1e-8
     POOL_ORDERS = 3
-    #: the tube's coefficients (the a-priori test) with the pool too
-    TUBE_POOL = True
 
     #: default of ``fresh_symbols``: see TaylorModelODE._run
     FRESH_SYMBOLS = True
@@ -681,8 +682,7 @@ class TaylorModelFlowStepper(LohnerStepper):
                 trial[:, :, 0] += bm.T
                 trial[:, :, -1] = _k_round_up(_k_round_up(trial[:, :, -1] + (slack + br).T) + np.abs(trial[:, :, 0]) * 2.0**-52)
             if how == "tube_models":
-                cE = tube_coefficients(self.models, trial, M2, mq, K, self._params(nb),
-                                        pool=self.pool_cap if self.TUBE_POOL else 0)
+                cE = tube_coefficients(self.models, trial, M2, mq, K, self._params(nb), pool=self.pool_cap)
             elif how == "set_models":
                 co = self.models._run(np.ascontiguousarray(trial), P, K, M2, *caps)
                 cE = self._tighter(self.models._interval(co, M2, mq), trial, M2, mq, K)

@@ -47,9 +47,9 @@ def sample_initial_points(lo, hi, n_random, seed=0, edge_points=0):
     if edge_points and wide.size:
         s = np.linspace(0, 1, edge_points)
         for i in wide:  # edges along component i, at every corner of the others
+            others = [j for j in wide if j != i]
             for c in itertools.product(*[(0, 1)] * (wide.size - 1)):
                 base = lo.copy()
-                others = [j for j in wide if j != i]
                 base[others] = np.where(np.array(c, bool), hi[others], lo[others])
                 e = np.repeat(base[None], edge_points, axis=0)
                 e[:, i] = lo[i] + s * (hi[i] - lo[i])
