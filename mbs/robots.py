@@ -85,8 +85,54 @@ ERD_PREFIX = "example-robot-data:"
 #: the paper's models (sec. 5.1, 5.2): the names of ``models.registry.SYSTEMS``, System
 #: factories (:class:`models.paper.PaperModel`): a DH chain in modes i/ii, the
 #: hand-written eqs. (18)/(19), (22)/(24) in mode iii (here too, so that scenes can
-#: list them without importing ``models``)
+#: list them without loading the registry)
 PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
+
+#: the entry-point group through which an installed distribution offers ready models.
+#: The modeling core never imports :mod:`models`: this project's pyproject.toml declares
+#: ``[project.entry-points."mbs.models"] registry = "models.registry"``, and each entry
+#: point of the group names a registry object (here that module) with ``NAMES`` (chain
+#: model names), ``get(name)`` (a new :class:`mbs.Chain`) and ``SYSTEMS`` (name ->
+#: System factory).
+MODELS_GROUP = "mbs.models"
+
+_NOT_INSTALLED = (f"no ready models: no entry point of group {MODELS_GROUP!r} is installed "
+                  "(install the package: pip install -e . in the checkout)")
+
+
+@lru_cache(maxsize=None)
+def _entry_points() -> tuple:
+    """The entry points of :data:`MODELS_GROUP` (read once: the scan of the installed
+    distributions takes a few ms), in the order of their names."""
+    return tuple(sorted(md.entry_points(group=MODELS_GROUP), key=lambda ep: (ep.name, ep.value)))
+
+
+@lru_cache(maxsize=None)
+def registries() -> tuple:
+    """The registries of ready models offered through :data:`MODELS_GROUP`, loaded
+    once, in the order of their entry-point names (a name two registries offer is the
+    first one's). Raises :class:`ModelError` (one line, naming the fix) when none is
+    installed or one does not load."""
+    eps = _entry_points()
+    if not eps:
+        raise ModelError(_NOT_INSTALLED)
+    out = []
+    for ep in eps:
+        try:
+            out.append(ep.load())
+        except ImportError as e:  # metadata of an install whose files are gone, a stale egg-link
+            raise ModelError(f"the model registry {ep.value!r} (entry point {ep.name!r} of group "
+                             f"{MODELS_GROUP!r}) does not import: {e} (reinstall the package: "
+                             "pip install -e . in the checkout)") from e
+    return tuple(out)
+
+
+def _installed() -> tuple:
+    """:func:`registries`, or () when none is installed (URDF paths and
+    example-robot-data names need none); a registry that does not load still raises."""
+    if not _entry_points():
+        return ()
+    return registries()
 
 
 def system_entry(name):
@@ -98,15 +144,14 @@ def system_entry(name):
     ``param_names``."""
     if not isinstance(name, str):
         return None
-    from models.registry import SYSTEMS  # (import here: models imports mbs)
-    return SYSTEMS.get(name)
+    return next((r.SYSTEMS[name] for r in _installed() if name in r.SYSTEMS), None)
 
 
 def model_names() -> list:
     """Every model name :func:`load_model` accepts besides paths and
-    ``example-robot-data:NAME``: the registry's names and the aliases."""
-    from models.registry import NAMES  # (import here: models imports mbs)
-    return list(NAMES) + sorted(set(ALIASES) - set(NAMES))
+    ``example-robot-data:NAME``: the registries' names and the aliases."""
+    names = list(dict.fromkeys(n for r in registries() for n in r.NAMES))
+    return names + sorted(set(ALIASES) - set(names))
 
 
 def load_model(spec: str):
@@ -118,14 +163,15 @@ def load_model(spec: str):
       ``robots/`` or a file stem; panda's fingers are locked);
     - a path to a URDF file.
 
+    The ready models come from the registries of :data:`MODELS_GROUP` (:func:`registries`).
     Raises :class:`ModelError` (one line) naming what was tried."""
-    from models.registry import NAMES, get  # (import here: models imports mbs)
     if not isinstance(spec, str) or not spec:
         raise ModelError(f"expected a model name, example-robot-data:NAME or a URDF path, got {spec!r}")
-    if spec in NAMES:
-        return get(spec)
-    if spec in ALIASES:
-        return get(ALIASES[spec])
+    regs = _installed()
+    for name in (spec, ALIASES.get(spec)):
+        reg = next((r for r in regs if name in r.NAMES), None)
+        if reg is not None:
+            return reg.get(name)
     if spec.startswith(ERD_PREFIX):
         return load(spec[len(ERD_PREFIX):])
     p = Path(spec)
@@ -133,5 +179,7 @@ def load_model(spec: str):
         if not p.is_file():
             raise ModelError(f"URDF file {spec!r} not found")
         return Chain.from_urdf(p)
+    if not regs:
+        raise ModelError(f"unknown model {spec!r}: {_NOT_INSTALLED}")
     raise ModelError(f"unknown model {spec!r}; give a name ({', '.join(model_names())}), "
                      "example-robot-data:NAME or a URDF file path")

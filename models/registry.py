@@ -5,6 +5,10 @@
   paper's models, which :func:`mbs.simulate.simulate` builds per mode: the DH chain in
   modes i and ii, the hand-written equations in mode iii.
 
+The modeling core (:mod:`mbs`) does not import this module: pyproject.toml offers it as
+the entry point ``registry`` of group ``mbs.models`` (:data:`mbs.robots.MODELS_GROUP`),
+through which :func:`mbs.robots.load_model` and :func:`mbs.robots.system_entry` find it.
+
 >>> from models.registry import get, NAMES
 >>> chain = get("ur5")
 """
