@@ -51,10 +51,10 @@ def sample_oracle(sol, count=24, seed=0, frame=None, payload_link=None):
     """Sampled states (S, k, 2n) at sol.t and frame positions (S, k, 3) (or None):
     Pinocchio aba (the sampling oracle's ``pinocchio_with`` plant, with the sampled
     payload) + the float controller of sol.control, DOP853 at rtol = atol = 1e-11. The
-    points: ``mbs.app.runner.sample_points`` of the initial box x parameter box (centre,
+    points: ``mbs.app.sampling.sample_points`` of the initial box x parameter box (centre,
     corners, random points), as ``mbs simulate --samples`` draws them."""
     import pinocchio as pin
-    from mbs.app.runner import sample_points
+    from mbs.app.sampling import sample_points
     loop = sol.control
     chain = loop.chain
     n = chain.n

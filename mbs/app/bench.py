@@ -40,8 +40,8 @@ from verified.interval import Interval
 from ..modes import MODES, get_mode
 from ..simulate import simulate
 from . import figures
-from .figures import sample_initial_points, sample_trajectories
 from .runner import check_samples, reference_system
+from .sampling import line_points, sample_initial_points, sample_trajectories
 from .scene import scene_dir
 
 __all__ = ["run", "work_precision", "stress_cases", "startup", "run_case"]
@@ -68,10 +68,9 @@ def _sampled(system, x0, times, n_samples, params=None, seed=0):
     lo, hi = np.asarray(x0.lo, float), np.asarray(x0.hi, float)
     free = np.flatnonzero(hi > lo)
     if free.size == 1:
-        pts = np.repeat(((lo + hi) / 2)[None], n_samples, axis=0)
-        pts[:, free[0]] = np.linspace(lo[free[0]], hi[free[0]], n_samples)
-    else:
-        pts = sample_initial_points(lo, hi, n_samples, seed=seed)
+        pts = line_points(lo, hi, n_samples, free[0])
+    else:  # (at most 2^10 corners)
+        pts = sample_initial_points(lo, hi, n_samples, seed=seed, corner_limit=10)
     return sample_trajectories(system.rhs, pts, times, params)
 
 

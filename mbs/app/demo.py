@@ -25,8 +25,9 @@ from verified.warmup import finish_background, start_in_background
 
 from ..modes import ALL_MODES, MODE_I, MODE_II, MODES
 from ..simulate import simulate, system_for
-from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
+from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
 from .runner import check_samples
+from .sampling import line_points, sample_trajectories
 from .scene import load_scene
 
 #: demo settings. 256 pieces with the scene's error_basis="auto": every mode reaches
@@ -99,8 +100,7 @@ def _run(out, t_end, pieces, samples, log) -> int:
 
     # sampled true trajectories: x1(0) dense over its interval (the other states are points)
     lo, hi = np.asarray(x0.lo, float), np.asarray(x0.hi, float)
-    pts = np.repeat(((lo + hi) / 2)[None], samples, axis=0)
-    pts[:, 0] = np.linspace(lo[0], hi[0], samples)
+    pts = line_points(lo, hi, samples, 0)
     t_out = max((s.t for s in sols.values()), key=len)
     dense = np.unique(np.concatenate([t_out, np.linspace(0, t_end, 201)]))
     traj = sample_trajectories(system_for("double_pendulum_paper", MODE_I).rhs, pts, dense)

@@ -8,12 +8,11 @@
   tested sub-boxes, kept ones outlined, pruned ones crossed.
 * :func:`fig_enclosures` -- Fig. 5: the hull of the enclosure of each state over time
   for several modes overlaid (solid (i), grey (ii), dashed (iii), as in the paper),
-  optionally with sampled true trajectories (:func:`sample_trajectories`).
+  optionally with sampled true trajectories (:func:`mbs.app.sampling.sample_trajectories`).
 * :func:`fig_work_precision` -- final width ratio against wall time (benchmarks).
 """
 from __future__ import annotations
 
-import itertools
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +22,7 @@ from verified.interval import Interval, hull
 from ..modes import MODE_I, MODE_II, MODE_III
 
 __all__ = ["fig_reduction_area", "fig_consistency_plane", "fig_enclosures", "fig_work_precision",
-           "sample_trajectories", "sample_initial_points", "inconsistent_cells"]
+           "inconsistent_cells"]
 
 MODE_STYLE = {MODE_I.name: dict(color="black", ls="-", lw=1.2, label=MODE_I.label),
               MODE_II.name: dict(color="0.55", ls="-", lw=2.2, label=MODE_II.label),
@@ -43,58 +42,6 @@ def _save(fig, path):
     fig.savefig(path, dpi=110, bbox_inches="tight")
     _plt().close(fig)
     return path
-
-
-# --------------------------------------------------------------------------- sampling
-def sample_initial_points(lo, hi, n_random, seed=0):
-    """All corners of the box (up to 2^10 of them), ``n_random`` uniform points, the centre."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    free = np.flatnonzero(hi > lo)
-    base = (lo + hi) / 2
-    pts = []
-    if free.size <= 10:
-        for corner in itertools.product(*[(lo[i], hi[i]) for i in free]):
-            p = lo.copy()
-            p[free] = corner
-            pts.append(p)
-    rng = np.random.default_rng(seed)
-    pts.extend(lo + rng.uniform(0, 1, (n_random, lo.size)) * (hi - lo))
-    pts.append(base)
-    return np.array(pts)
-
-
-def sample_trajectories(f, points, times, params=None):
-    """States at ``times`` of the float ODE ``x' = f(x)`` from each point (DOP853,
-    rtol = atol = 1e-12, all points integrated as one vectorized system).
-
-    ``f`` maps an (n, S) array (column per trajectory) to its (n, S) derivative, or is
-    an expression Graph (evaluated with ``eval_float``). Returns (S, len(times), n);
-    trajectories that fail are NaN from the failure on.
-    """
-    from scipy.integrate import solve_ivp  # (scipy.integrate, ~0.5 s, only when trajectories are sampled)
-
-    pts = np.asarray(points, float)
-    S, n = pts.shape
-    times = np.asarray(times, float)
-    if hasattr(f, "eval_float"):
-        graph = f
-        p = None if params is None else np.asarray(params, float)
-
-        def fv(x):
-            return graph.eval_float(x.T, p).T
-    else:
-        fv = f
-
-    def rhs(t, y):
-        return np.asarray(fv(y.reshape(n, S)), float).reshape(-1)
-
-    out = np.full((S, times.size, n), np.nan)
-    t_end = float(times.max())
-    sol = solve_ivp(rhs, (0.0, t_end), pts.T.reshape(-1), method="DOP853", rtol=1e-12, atol=1e-12,
-                    t_eval=times)
-    k = sol.y.shape[1]
-    out[:, :k, :] = sol.y.reshape(n, S, k).transpose(1, 2, 0)
-    return out
 
 
 # --------------------------------------------------------------------------- Fig. 2

@@ -25,9 +25,10 @@ from ..frames import default_frame
 from ..modes import get_mode
 from ..progress import Progress
 from ..simulate import simulate, system_for
-from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area, sample_trajectories
+from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
 from .frame_figures import fig_frame_region
 from .results import write_result
+from .sampling import sample_points, sample_trajectories
 from .scene import Scene, SceneError, output_times, parse_scene, scene_dir
 from ..uncertain import ParameterError
 
@@ -46,37 +47,10 @@ def reference_system(model, mode="ii", energy_rate="unsimplified", params=None, 
                       control=control, q_init=q_init)
 
 
-def sample_points(lo, hi, count: int, seed: int = 0) -> np.ndarray:
-    """Exactly ``count`` points (count, d) of the box [lo, hi]: its centre, then corners
-    (all of them if ``count`` allows, in a fixed pseudo-random order otherwise), then
-    uniform random points."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    if count <= 0:
-        return np.zeros((0, lo.size))
-    rng = np.random.default_rng(seed)
-    pts = [(lo + hi) / 2]
-    free = np.flatnonzero(hi > lo)
-    n_corners = 2 ** free.size if free.size < 62 else None
-    want = count - 1
-    if n_corners is not None and n_corners <= want:
-        codes = np.arange(n_corners)
-    else:
-        codes = rng.choice(n_corners, size=want, replace=False) if n_corners is not None and n_corners < 2**20 \
-            else rng.integers(0, 2, size=(want, free.size))
-    for c in codes[:want]:
-        p = lo.copy()
-        bits = c if isinstance(c, np.ndarray) else np.array([(int(c) >> k) & 1 for k in range(free.size)])
-        p[free] = np.where(bits.astype(bool), hi[free], lo[free])
-        pts.append(p)
-    rest = count - len(pts)
-    if rest > 0:
-        pts.extend(lo + rng.uniform(0, 1, (rest, lo.size)) * (hi - lo))
-    return np.array(pts[:count])
-
-
 def sample_states(system, x0_lo, x0_hi, count: int, times, params=None, seed: int = 0):
     """(states (S, len(times), n), initial points (S, n + p)): DOP853 trajectories of
-    ``system.rhs`` (rtol = atol = 1e-12) from ``count`` points of the initial box times
+    ``system.rhs`` (rtol = atol = 1e-12, :func:`mbs.app.sampling.sample_trajectories`)
+    from ``count`` points (:func:`mbs.app.sampling.sample_points`) of the initial box times
     the parameter box ``params`` ({name: (lo, hi)}, the graph's parameters; each
     sample has its own parameter values, held constant)."""
     g = system.rhs

@@ -3,7 +3,7 @@ inconsistent; sampled trajectories agree with an independent integration."""
 import numpy as np
 
 from models import pendulum
-from mbs.app import figures
+from mbs.app import figures, sampling
 from verified.graph import trace
 from verified.interval import Interval
 
@@ -30,14 +30,13 @@ def test_inconsistent_cells_are_inconsistent():
 
 
 def test_sampled_trajectories_match_scipy():
-    from oracles.sampling import states_at
     lo, hi = np.array([2.1, 3.1]), np.array([2.2, 3.2])
-    pts = figures.sample_initial_points(lo, hi, 5)
+    pts = sampling.sample_initial_points(lo, hi, 5, corner_limit=10)
     assert pts.shape == (4 + 5 + 1, 2) and (pts >= lo).all() and (pts <= hi).all()
     rhs = trace(pendulum.rhs, 2)
     times = np.linspace(0, 1, 11)
-    traj = figures.sample_trajectories(rhs, pts, times)
-    one = states_at(pendulum.rhs, [pts[3]], times, rtol=1e-12, atol=1e-12)[0]
+    traj = sampling.sample_trajectories(rhs, pts, times)
+    one = sampling.states_at(pendulum.rhs, [pts[3]], times, rtol=1e-12, atol=1e-12)[0]
     assert np.allclose(traj[3], one, atol=1e-9)
 
 
@@ -48,8 +47,8 @@ def test_paper_figures(tmp_path):
                                          test_interval=0.1, test_splits=4)
     assert set(sols) == {"i", "ii", "iii"}
     times = np.linspace(0, 0.4, 41)
-    traj = figures.sample_trajectories(trace(pendulum.rhs, 2), figures.sample_initial_points(x0.lo, x0.hi, 6),
-                                       times)
+    traj = sampling.sample_trajectories(trace(pendulum.rhs, 2), sampling.sample_initial_points(x0.lo, x0.hi, 6),
+                                        times)
     p5 = figures.fig_enclosures(sols, tmp_path / "fig5.png", samples=traj, sample_times=times)
     assert p5.stat().st_size > 5000
     sol = sols["ii"]
