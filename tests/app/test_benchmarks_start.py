@@ -2,7 +2,9 @@
 another directory: its imports resolve (``--help`` parses the arguments after every
 module-level import). Why: with ``tests/`` first on ``sys.path`` and the repository root
 absent, ``import mbs`` found ``tests/mbs`` as a namespace package and six benchmarks
-failed at import while the test suite, which puts the root on the path, passed."""
+failed at import while the test suite, which puts the root on the path, passed. The
+default run has the cheap companion, test_benchmarks_import.py (every module imported in
+one interpreter, a few seconds)."""
 
 import subprocess
 import sys
