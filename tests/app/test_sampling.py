@@ -71,3 +71,13 @@ def test_sample_trajectories_nan_after_a_failure_and_agree_with_the_ensemble():
     a = sampling.sample_trajectories(f, pts, t)
     b = sampling.Ensemble(f, pts, 1.0).states(t).transpose(1, 0, 2)
     assert np.allclose(a, b, rtol=0, atol=1e-10)
+
+
+def test_the_only_dop853_call():
+    """No other module of the library, the tests or the benchmarks integrates with scipy
+    on its own (one home: dop853 here)."""
+    root = SAMPLING.parents[2]
+    call = "solve_ivp" + "("  # (not spelled out: this file would match)
+    users = sorted(str(p.relative_to(root)) for d in ("mbs", "models", "tests", "benchmarks")
+                   for p in (root / d).rglob("*.py") if call in p.read_text())
+    assert users == ["mbs/app/sampling.py"]
