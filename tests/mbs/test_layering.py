@@ -59,16 +59,15 @@ def test_the_registry_is_an_installed_entry_point():
 
 @pytest.fixture
 def no_registry(monkeypatch):
-    """As if the package were not installed: no entry point of the group."""
-    monkeypatch.setattr(mbs.robots.md, "entry_points", lambda group=None: ())
-    mbs.robots._entry_points.cache_clear()
+    """As if the package were not installed: no entry point of the group (importlib's
+    own entry_points stays as it is: numba and others read it)."""
+    monkeypatch.setattr(mbs.robots, "_entry_points", lambda: ())
     mbs.robots.registries.cache_clear()
     yield
-    mbs.robots._entry_points.cache_clear()
     mbs.robots.registries.cache_clear()
 
 
-def test_without_the_entry_point_a_one_line_error_names_the_fix(no_registry, capsys, tmp_path):
+def test_without_the_entry_point_a_one_line_error_names_the_fix(no_registry, capsys):
     from mbs.app import cli
     with pytest.raises(ModelError, match=r"^unknown model 'ur5': no ready models: no entry point of group "
                                          r"'mbs.models' is installed \(install the package: pip install -e \. "):
@@ -86,13 +85,11 @@ def test_without_the_entry_point_a_one_line_error_names_the_fix(no_registry, cap
 
 def test_a_registry_that_does_not_import_is_a_one_line_error(monkeypatch):
     ep = md.EntryPoint("registry", "no_such_module_xyz.registry", mbs.robots.MODELS_GROUP)
-    monkeypatch.setattr(mbs.robots.md, "entry_points", lambda group=None: (ep,))
-    mbs.robots._entry_points.cache_clear()
+    monkeypatch.setattr(mbs.robots, "_entry_points", lambda: (ep,))
     mbs.robots.registries.cache_clear()
     try:
         with pytest.raises(ModelError, match=r"the model registry 'no_such_module_xyz.registry' .* does not "
                                              r"import: No module named 'no_such_module_xyz' \(reinstall"):
             mbs.robots.load_model("ur5")
     finally:
-        mbs.robots._entry_points.cache_clear()
         mbs.robots.registries.cache_clear()
