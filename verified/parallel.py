@@ -77,16 +77,19 @@ from __future__ import annotations
 import atexit
 import copy
 import hashlib
+import inspect
 import logging
 import math
 import os
 import pickle
+import queue
 import signal
 import threading
 import time
 import uuid
 import warnings
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -94,12 +97,12 @@ from .graph import trace
 from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate, hull, stack
 # (solver imports this module only inside solve(), when workers or a client are asked for)
-from .solver import Solution, VerifiedODE, solve
+from .solver import Solution, Start, VerifiedODE, solve
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "SchedulerError", "WorkerStartError", "CONNECT_TIMEOUT", "CHUNK_TARGET",
-           "MIN_CHUNK_BOXES", "interrupt_runs"]
+           "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs"]
 
 #: seconds to wait for a scheduler before :class:`SchedulerError`
 CONNECT_TIMEOUT = 10.0
@@ -133,6 +136,16 @@ MIN_CHUNK_BOXES = 64
 #: below, the default plan is one chunk, which runs in this process anyway (it was 32,
 #: with the cluster's start of ~2-3 s once per process the reason)
 AUTO_MIN_PIECES = 2 * MIN_CHUNK_BOXES
+#: re-chunking (``rechunk``): a piece pauses once it holds this many times as many sets
+#: as it started with (and at least this many times the plan's mean chunk size and
+#: ``RECHUNK_MIN_SETS``), and its sets are cut into pieces of about the larger of the two
+RECHUNK_GROWTH = 2
+#: pieces cut from a paused chunk hold at least this many sets (the fixed cost of a step,
+#: ~2 ms of Python per step and batch, against ~0.15 ms per set: MIN_CHUNK_BOXES); a test
+#: may lower it
+RECHUNK_MIN_SETS = MIN_CHUNK_BOXES
+#: solve's default max_boxes (each initial chunk's budget of sets)
+_MAX_BOXES = inspect.signature(solve).parameters["max_boxes"].default
 _STATUS_RANK = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
 
 
@@ -316,6 +329,244 @@ def _split_hooks(hooks, t_start_wall: float):
     return out, deadline
 
 
+class _Pause(Hook):
+    """Re-chunking: stop after the step at which the run holds ``at`` sets or more and
+    keep where it stands (:class:`verified.solver.Start`) in ``start``; not on the step
+    that records the last output (the run is done then)."""
+
+    def __init__(self, at: int):
+        self.at = int(at)
+        self.start = None
+
+    def after_step(self, step, sets, run):
+        if run.sets.n_sets < self.at or (step.landed and run.next_out + 1 >= run.outs.size):
+            return None
+        wrap = getattr(run, "wrap", None)
+        self.start = Start(sets=run.sets, t_exact=run.t_exact,
+                           h_limit=math.inf if wrap is None else float(wrap.h_limit))
+        run.stop(f"paused at {run.sets.n_sets} sets to be cut into new chunks", "stopped")
+        return None
+
+
+# ----------------------------------------------------------------------------- pieces
+@dataclass
+class _Piece:
+    """One solve of a chunked run: an initial chunk (``start`` None) or a piece cut from
+    the sets of a paused one (``parent``), continuing at ``start.t_exact``."""
+
+    family: int  # the initial chunk it descends from
+    parent: int | None
+    lo: np.ndarray  # (B, n) boxes it starts from (with start: the hull of its sets)
+    hi: np.ndarray
+    params: object
+    start: Start | None
+    max_boxes: int
+    pause_at: int | None
+    sol: Solution | None = None
+    paused: Start | None = None
+    children: list = field(default_factory=list)
+
+
+def _resume_params(params):
+    """``(ok, params)``: what a piece cut from a chunk with these parameters gets
+    (``solve(start=)`` takes the parameters as given to the chunk, or their hull). Per-box
+    exact parameters that differ cannot follow sets that split: no re-chunking then."""
+    if params is None or params.ndim == 1:
+        return True, params
+    if (params.width() > 0).any():
+        return True, hull(params, axis=0)  # carried as states, clipped to this hull as in the chunk
+    if (params.lo == params.lo[:1]).all() and (params.hi == params.hi[:1]).all():
+        return True, params[0]
+    return False, None
+
+
+class _Pieces:
+    """The pieces of a chunked run: the initial chunks and, with re-chunking, the pieces
+    cut from the sets of those that paused; :meth:`families` stitches each initial
+    chunk's pieces into one Solution for :func:`merge_solutions`."""
+
+    def __init__(self, boxes, ranges, chunk_params, rechunk: bool, max_boxes: int):
+        self.n = boxes.shape[-1]
+        self.ranges = ranges
+        # pieces of about the plan's mean chunk size, not below RECHUNK_MIN_SETS
+        self.target = max(1, RECHUNK_MIN_SETS, int(round(boxes.shape[0] / len(ranges))))
+        self.items: list[_Piece] = []
+        self.cuts = 0
+        self.family_params = []
+        for i, (a, b) in enumerate(ranges):
+            p = chunk_params(a, b)
+            ok, rp = _resume_params(p)
+            self.family_params.append(rp)
+            self.items.append(_Piece(family=i, parent=None, lo=boxes.lo[a:b], hi=boxes.hi[a:b], params=p,
+                                     start=None, max_boxes=max_boxes,
+                                     pause_at=self._pause_at(b - a) if rechunk and ok else None))
+
+    def _pause_at(self, n_sets: int) -> int:
+        return RECHUNK_GROWTH * max(int(n_sets), self.target)
+
+    def done(self, index: int, sol, paused) -> list[int]:
+        """Record piece ``index``'s Solution; when it paused (``paused``: its Start), cut
+        its sets into new pieces and return their indices (to be run)."""
+        piece = self.items[index]
+        piece.sol, piece.paused = sol, paused
+        if paused is None:
+            return []
+        return self._cut(index)
+
+    def _cut(self, index: int) -> list[int]:
+        parent = self.items[index]
+        st = parent.paused
+        sets = st.sets
+        S = sets.n_sets
+        k = max(2, min(S, int(S // self.target)))
+        edges = np.linspace(0, S, k + 1).round().astype(int)
+        X = sets.hull()  # (S, N)
+        W = np.asarray(hull(X, axis=0).width(), float)  # the union the parent's splitting judged against
+        # (the paused run's own scale: the Start it was given; a pause hook's Start has none)
+        own = None if parent.start is None else parent.start.split_scale
+        scale0 = np.ones_like(W) if own is None else np.asarray(own, float)
+        new = []
+        for a, b in zip(edges[:-1], edges[1:]):
+            idx = np.arange(a, b)
+            part = sets.take(idx)
+            Xp = X[idx]
+            Wp = np.asarray(hull(Xp, axis=0).width(), float)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                scale = np.where(Wp > 0, scale0 * W / Wp, scale0)
+            start = Start(sets=part, t_exact=st.t_exact, h_limit=st.h_limit, split_scale=scale)
+            # splitting budget: the parent's, less the sets its other pieces held when cut
+            budget = int(max(b - a, parent.max_boxes - (S - (b - a))))
+            self.items.append(_Piece(family=parent.family, parent=index, lo=np.asarray(Xp.lo[:, :self.n]),
+                                     hi=np.asarray(Xp.hi[:, :self.n]), params=self.family_params[parent.family],
+                                     start=start, max_boxes=budget, pause_at=self._pause_at(b - a)))
+            new.append(len(self.items) - 1)
+        parent.children = new
+        self.cuts += 1
+        return new
+
+    # ------------------------------------------------------------------ stitching
+    def _dfs(self, root: int) -> list[int]:
+        out, stack = [], [root]
+        while stack:
+            i = stack.pop()
+            out.append(i)
+            stack.extend(reversed(self.items[i].children))
+        return out
+
+    def families(self, outs, t0):
+        """One Solution per initial chunk (None: it never ran): see :func:`_stitch`."""
+        return [self._stitch(i, outs, t0) for i in range(len(self.ranges))]
+
+    def _stitch(self, root: int, outs, t0):
+        """The pieces of initial chunk ``root`` as one Solution, as if that chunk had run
+        alone: ``t``/``boxes`` the outputs every path of pieces recorded (each output's boxes
+        concatenated over the pieces that recorded it, depth-first order); the tube on the
+        union of the pieces' step times, one box per piece live on each interval (the hull
+        of its step's boxes); ``t_reached``/``status``/``reason`` those of the earliest
+        worst leaf (a piece not cut; one that never ran counts as interrupted at its
+        start); counters summed over the pieces."""
+        items = self.items
+        if items[root].sol is None or not items[root].children:
+            return items[root].sol  # (not re-chunked: the chunk's own Solution)
+        order = self._dfs(root)
+        index_of = {float(t): j for j, t in enumerate(outs)}
+        recorded = {}
+        for i in order:
+            sol = items[i].sol
+            if sol is None:
+                recorded[i] = {}
+                continue
+            ts = np.asarray(sol.t, float)
+            first = 0 if items[i].start is None else 1  # a continued piece's t[0] is its start
+            recorded[i] = {index_of[float(t)]: j for j, t in enumerate(ts[first:], first)}
+        leaves = [i for i in order if not items[i].children]
+        worst, reason, t_reached, reason_t = "completed", "", math.inf, math.inf
+        k_f = len(outs)
+        for leaf in leaves:
+            sol = items[leaf].sol
+            if sol is None:
+                st = "interrupted"
+                tr = float(items[leaf].start.t_exact) if items[leaf].start is not None else float(t0)
+                why = "interrupted before this piece ran"
+            else:
+                st, tr, why = sol.status, float(sol.t_reached), sol.reason
+            rank = _STATUS_RANK.get(st, 3)
+            if st != "completed" and (rank > _STATUS_RANK[worst] or (rank == _STATUS_RANK[worst] and tr < reason_t)):
+                worst, reason_t = st, tr
+                reason = why if items[leaf].start is None else f"piece at t = {float(items[leaf].start.t_exact):g}: {why}"
+            t_reached = min(t_reached, tr)
+            got, i = set(), leaf
+            while i is not None:
+                got |= set(recorded[i])
+                i = items[i].parent
+            k = 0
+            while k < len(outs) and k in got:
+                k += 1
+            k_f = min(k_f, k)
+        boxes = []
+        for k in range(k_f):
+            parts = [items[i].sol.boxes[recorded[i][k]] for i in order if k in recorded[i]]
+            boxes.append(concatenate(parts, axis=0))
+        ran = [i for i in order if items[i].sol is not None]
+        grid = np.unique(np.concatenate([np.asarray(items[i].sol.tube_t, float) for i in ran]))
+        grid = grid[grid <= t_reached]
+        n = self.n
+        tube = []
+        lo_h, hi_h = [], []
+        if grid.size > 1:
+            mids = 0.5 * (grid[:-1] + grid[1:])
+            rows_lo = [[] for _ in mids]
+            rows_hi = [[] for _ in mids]
+            for i in order:
+                sol = items[i].sol
+                if sol is None or not len(sol.tube):
+                    continue
+                tt = np.asarray(sol.tube_t, float)
+                tl, th = _chunk_tube_hulls(sol)
+                js = np.flatnonzero((mids > tt[0]) & (mids < tt[-1]))
+                for j, s in zip(js, np.searchsorted(tt, mids[js], side="right") - 1):
+                    rows_lo[j].append(tl[s])
+                    rows_hi[j].append(th[s])
+            for j in range(mids.size):
+                if not rows_lo[j]:  # every path of pieces covers every interval up to t_reached
+                    raise RuntimeError(f"re-chunking lost the tube on [{grid[j]}, {grid[j + 1]}] (a bug)")
+                lo, hi = np.array(rows_lo[j]), np.array(rows_hi[j])
+                tube.append(Interval._from_bounds(lo, hi))
+                lo_h.append(lo.min(axis=0))
+                hi_h.append(hi.max(axis=0))
+        tube_hull = (Interval._from_bounds(np.array(lo_h), np.array(hi_h)) if tube
+                     else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))))
+        stats = {}
+        for i in ran:
+            for key, v in items[i].sol.stats.items():
+                if key in ("order", "worker_pid", "chunk_task_s", "boxes", "final_boxes", "max_boxes") \
+                        or isinstance(v, bool):
+                    continue
+                if isinstance(v, (int, float, np.integer, np.floating)):
+                    stats[key] = stats.get(key, 0) + v
+        r = items[root].sol
+        stats["order"] = r.stats.get("order")
+        stats["worker_pid"] = r.stats.get("worker_pid")
+        stats["boxes"] = r.stats.get("boxes")
+        done = [items[i].sol for i in leaves if items[i].sol is not None]
+        stats["final_boxes"] = sum(s.stats.get("final_boxes", 0) for s in done)
+        stats["max_boxes"] = sum(s.stats.get("max_boxes", 0) for s in done)  # (approximate: at different times)
+        stats["pieces"] = len(ran)
+        stats["rechunks"] = sum(1 for i in order if items[i].children)
+        sol = Solution(t=np.asarray(outs[:k_f], float), boxes=boxes, hull=stack([hull(b, axis=0) for b in boxes], axis=0),
+                       tube_t=grid, tube=tube, tube_hull=tube_hull, t_reached=float(grid[-1]), status=worst,
+                       reason=reason if worst != "completed" else "", stats=stats, state_names=r.state_names,
+                       consistency=r.consistency if len(ran) == 1 else None)
+        sol.pieces = [dict(parent=items[i].parent, t_start=float(items[i].start.t_exact) if items[i].start else float(t0),
+                           sets=(items[i].lo.shape[0]), status=None if items[i].sol is None else items[i].sol.status,
+                           t_reached=None if items[i].sol is None else float(items[i].sol.t_reached),
+                           steps=None if items[i].sol is None else items[i].sol.stats.get("steps"),
+                           wall_s=None if items[i].sol is None else items[i].sol.stats.get("wall_s"),
+                           worker_pid=None if items[i].sol is None else items[i].sol.stats.get("worker_pid"))
+                      for i in order]
+        return sol
+
+
 # ----------------------------------------------------------------------------- Dask
 _LOCAL: dict = {}  # workers -> (cluster, client)
 
@@ -426,16 +677,26 @@ def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> fl
     return time.perf_counter() - t
 
 
-def _run_chunk(problem: _Problem, index: int, lo, hi, params, kwargs: dict, topic: str):
-    """One chunk on a worker (a Dask task)."""
+def _solve_piece(ode, piece: _Piece, kwargs: dict, extra_hooks=()):
+    """``solve`` of one piece; returns ``(Solution, Start or None)`` (None: it did not
+    pause for re-chunking)."""
+    kw = dict(kwargs)
+    pause = _Pause(piece.pause_at) if piece.pause_at is not None else None
+    kw["hooks"] = list(kw.get("hooks") or ()) + list(extra_hooks) + ([pause] if pause is not None else [])
+    kw["max_boxes"] = piece.max_boxes
+    sol = solve(ode, Interval(piece.lo, piece.hi), kw.pop("t_span"), params=piece.params, start=piece.start, **kw)
+    paused = pause.start if pause is not None and sol.status == "stopped" else None
+    return sol, paused
+
+
+def _run_chunk(problem: _Problem, piece: _Piece, kwargs: dict, topic: str):
+    """One piece on a worker (a Dask task): ``(Solution, Start or None)``."""
     t = time.perf_counter()
     ode = _prepared(problem)
-    kw = dict(kwargs)
-    kw["hooks"] = list(kw.get("hooks") or ()) + [_Report(topic, index)]
-    sol = solve(ode, Interval(lo, hi), kw.pop("t_span"), params=params, **kw)
+    sol, paused = _solve_piece(ode, piece, kwargs, [_Report(topic, piece.family)])
     sol.stats["chunk_task_s"] = time.perf_counter() - t
     sol.stats["worker_pid"] = os.getpid()
-    return sol
+    return sol, paused
 
 
 # ----------------------------------------------------------------------------- driver
@@ -468,6 +729,13 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     arithmetic = check_arithmetic("interval" if arithmetic is None else arithmetic)
     if chunks is not None and (isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or chunks < 1):
         raise ValueError(f"chunks must be None or an integer >= 1, got {chunks!r}")
+    rechunk = kwargs.pop("rechunk", None)
+    if rechunk is not None and not isinstance(rechunk, (bool, np.bool_)):
+        raise ValueError(f"rechunk must be None, True or False, got {rechunk!r}")
+    if rechunk and kwargs.get("consistency") is not None:
+        raise ValueError("rechunk=True cannot continue a consistency test in new chunks: pass rechunk=False "
+                         "(or None)")
+    kwargs.pop("start", None)
     if workers is not None and workers != "auto" and (isinstance(workers, bool) or
                                                       not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be None, 'auto' or an integer >= 1, got {workers!r}")
@@ -502,44 +770,51 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
         n_workers = 1
     # with a wall-clock cap every chunk should be running when it strikes: one per worker
     ranges = plan_chunks(nb, n_workers, chunks, max_per_worker=1 if deadline is not None else MAX_CHUNKS_PER_WORKER)
-    if backend == "dask-local" and len(ranges) == 1:
+    adaptive = bool(kwargs.get("adaptive", False))
+    rechunk_on = adaptive and consistency is None and (bool(rechunk) if rechunk is not None
+                                                       else backend != "inprocess")
+    if backend == "dask-local" and len(ranges) == 1 and not (rechunk_on and rechunk):
         # one chunk on a local cluster runs on the same cores as this process, only later
         # (a Dask round trip, ~10 ms here) and, on a first call, after the cluster's
         # start (1-3 s): run it here. 16 pieces with workers=2 went from 1.14-1.55x (T = 2)
         # and 1.52-1.66x (T = 0.5) of one in-process batch (bench_parallel overhead, two
         # runs, other jobs on the machine) to this batch itself
         backend, n_workers = "inprocess", 1
-    if backend == "inprocess" and len(ranges) == 1:  # one batch: exactly solve's own result
+    if backend == "inprocess" and len(ranges) == 1 and not rechunk_on:  # one batch: exactly solve's own result
         sol = solve(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
                     hooks=list(hooks_in), **kwargs)
         sol.stats.update(chunks=1, workers=1, backend="inprocess")
         return sol
     base = dict(kwargs, t_span=(t0, t1))
+    base.pop("max_boxes", None)  # (per piece: _Piece.max_boxes)
     board = _Board(progress, t0, t1, [b - a for a, b in ranges])
-    results: list = [None] * len(ranges)
     interrupted = False
-    stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend}
+    stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend, "rechunk": rechunk_on}
 
     def chunk_params(a, b):
         if params is None:
             return None
         return params[a:b] if params.ndim == 2 else params
 
+    pieces = _Pieces(boxes, ranges, chunk_params, rechunk_on, int(kwargs.get("max_boxes", _MAX_BOXES)))
     if backend == "inprocess":
         prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(graph, arithmetic)
         stats_extra["setup_s"] = time.perf_counter() - wall0
+        todo = deque(range(len(pieces.items)))
         try:
-            for i, (a, b) in enumerate(ranges):
+            while todo:
+                i = todo.popleft()
+                piece = pieces.items[i]
                 kw = dict(base)
-                kw.pop("t_span")
                 if not isinstance(kw.get("error_basis", "qr"), str):
                     kw["error_basis"] = copy.deepcopy(kw["error_basis"])
                 kw["consistency"] = None if consistency is None else copy.deepcopy(consistency)
-                kw["hooks"] = hooks + ([_Local(board, i)] if progress is not None else [])
+                kw["hooks"] = hooks + ([_Local(board, piece.family)] if progress is not None else [])
                 if progress is not None:
                     kw["hooks"].append(_EmitEvery(board))
-                results[i] = solve(prob, boxes[a:b], (t0, t1), params=chunk_params(a, b), **kw)
-                if results[i].status == "interrupted":
+                sol, paused = _solve_piece(prob, piece, kw)
+                todo.extendleft(reversed(pieces.done(i, sol, paused)))  # depth first: its pieces next
+                if sol.status == "interrupted":
                     interrupted = True
                     break
         except KeyboardInterrupt:
@@ -554,13 +829,15 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
                 c = local_client(n_workers)
                 if fresh:
                     stats_extra["cluster_start_s"] = time.perf_counter() - setup_t
-            results, interrupted, sizes = _run_on_dask(c, graph, arithmetic, boxes, ranges, chunk_params, base,
-                                                        consistency, hooks, board, deadline)
+            interrupted, sizes = _run_on_dask(c, graph, arithmetic, pieces, base, consistency, hooks, board)
             stats_extra.update(sizes)
         finally:
             if own_client is not None:
                 own_client.close()
         stats_extra["setup_s"] = stats_extra.pop("setup_s", time.perf_counter() - setup_t)
+    results = pieces.families(outs, t0)
+    stats_extra["pieces"] = sum(1 for p in pieces.items if p.sol is not None)
+    stats_extra["rechunks"] = pieces.cuts
     sol = merge_solutions(results, ranges, boxes[:, :graph.n_inputs], outs, t0,
                           tuple(graph.input_names[:graph.n_inputs]), interrupted=interrupted)
     board.emit()
@@ -609,7 +886,10 @@ class _SigintRaises:
 _SHIPPED: dict = {}  # (client id, token) -> (future of the shipped problem, workers warmed)
 
 
-def _run_on_dask(client, graph, arithmetic, boxes, ranges, chunk_params, base, consistency, hooks, board, deadline):
+def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, hooks, board):
+    """Run the pieces on ``client``'s cluster: the initial chunks at once, a piece cut
+    from a paused one as soon as the paused one's result arrives. Returns
+    ``(interrupted, sizes)``; the Solutions are in ``pieces``."""
     t_setup = time.perf_counter()
     blob = pickle.dumps(graph)
     problem = _Problem(graph=graph, arithmetic=arithmetic,
@@ -633,49 +913,60 @@ def _run_on_dask(client, graph, arithmetic, boxes, ranges, chunk_params, base, c
     kw = dict(base)
     kw["consistency"] = consistency
     kw["hooks"] = hooks
+    kw_bytes = len(pickle.dumps(kw))
     # workers new to this problem build its tapes and take a first step before the
     # chunks (queued first on each; their seconds come back as warm_s)
-    a0, b0 = ranges[0]
-    p0 = chunk_params(a0, a0 + 1)
-    warm = [client.submit(_warm_problem, fut_problem, boxes.lo[a0:a0 + 1], boxes.hi[a0:a0 + 1], p0, kw,
-                          workers=[addr], allow_other_workers=True, pure=False)  # a dead worker cannot block
+    first = pieces.items[0]
+    warm = [client.submit(_warm_problem, fut_problem, first.lo[:1], first.hi[:1],
+                          first.params[:1] if first.params is not None and first.params.ndim == 2 else first.params,
+                          kw, workers=[addr], allow_other_workers=True, pure=False)  # a dead worker cannot block
             for addr in sorted(workers - warmed)]
     warmed |= workers
-    futures = []
-    for i, (a, b) in enumerate(ranges):
-        p = chunk_params(a, b)
-        args = (boxes.lo[a:b], boxes.hi[a:b], p)
-        sent += len(pickle.dumps(args)) + len(pickle.dumps(kw))
-        futures.append(client.submit(_run_chunk, fut_problem, i, boxes.lo[a:b], boxes.hi[a:b], p, kw, topic,
-                                     key=f"verified-chunk-{i}-{topic[-12:]}", pure=False))
-    setup_s = time.perf_counter() - t_setup
-    results = [None] * len(ranges)
-    interrupted = False
-    try:
-        all_done, left, lock = threading.Event(), [len(futures)], threading.Lock()
+    done_q: queue.Queue = queue.Queue()
+    running: dict = {}  # piece index -> future
 
-        def one_done(_):
-            with lock:
-                left[0] -= 1
-                if left[0] == 0:
-                    all_done.set()
-        for f in futures:
-            f.add_done_callback(one_done)
+    def submit(i):
+        nonlocal sent
+        piece = pieces.items[i]
+        sent += len(pickle.dumps(piece)) + kw_bytes
+        f = client.submit(_run_chunk, fut_problem, piece, kw, topic, key=f"verified-chunk-{i}-{topic[-12:]}",
+                          pure=False)
+        running[i] = f
+        f.add_done_callback(lambda fut, i=i: done_q.put(i))
+
+    for i in range(len(pieces.items)):
+        submit(i)
+    setup_s = time.perf_counter() - t_setup
+    interrupted = False
+    received = 0
+
+    def take(i):
+        nonlocal received
+        f = running.pop(i)
+        out = f.result()  # (a chunk that raised raises here, as before)
+        received += len(pickle.dumps(out))
+        sol, paused = out
+        board.update(pieces.items[i].family, sol.t_reached)
+        return pieces.done(i, sol, paused)
+
+    try:
         with _SigintRaises():
-            while not all_done.wait(0.25):
-                if _INTERRUPT.is_set():
-                    raise KeyboardInterrupt
-                board.emit()
-        for i, f in enumerate(futures):
-            results[i] = f.result()
-            if results[i] is not None:
-                board.update(i, results[i].t_reached)
+            while running:
+                try:
+                    i = done_q.get(timeout=0.25)
+                except queue.Empty:
+                    if _INTERRUPT.is_set():
+                        raise KeyboardInterrupt
+                    board.emit()
+                    continue
+                for j in take(i):
+                    submit(j)
     except KeyboardInterrupt:
         interrupted = True
-        for i, f in enumerate(futures):
+        for i, f in list(running.items()):
             if f.done() and f.status == "finished":
-                results[i] = f.result()
-        client.cancel(futures)
+                take(i)  # (pieces it cuts are not run: they count as interrupted)
+        client.cancel(list(running.values()))
     finally:
         if board.progress is not None:
             try:
@@ -683,9 +974,7 @@ def _run_on_dask(client, graph, arithmetic, boxes, ranges, chunk_params, base, c
             except Exception:  # noqa: BLE001
                 pass
     warm_s = [f.result() if f.status == "finished" else None for f in warm]
-    received = sum(len(pickle.dumps(r)) for r in results if r is not None)
-    return results, interrupted, {"sent_bytes": sent, "received_bytes": received, "setup_s": setup_s,
-                                  "warm_s": warm_s}
+    return interrupted, {"sent_bytes": sent, "received_bytes": received, "setup_s": setup_s, "warm_s": warm_s}
 
 
 # ----------------------------------------------------------------------------- merge
@@ -773,7 +1062,8 @@ def merge_solutions(results, ranges, initial, outs, t0, state_names, interrupted
                        wall_s=None if s is None else s.stats.get("wall_s"),
                        worker_pid=None if s is None else s.stats.get("worker_pid"),
                        tube_t=None if s is None else s.tube_t, tube=None if s is None else s.tube,
-                       consistency=None if s is None else s.consistency)
+                       consistency=None if s is None else s.consistency,
+                       pieces=getattr(s, "pieces", None))
                   for s, (a, b) in zip(results, ranges)]
     return sol
 

@@ -49,7 +49,30 @@ from .taylor import TaylorODE
 from .taylor_model import TaylorModelODE
 from .variational import params_as_states, second_variational_graph, variational_graph
 
-__all__ = ["solve", "Solution", "VerifiedODE"]
+__all__ = ["solve", "Solution", "VerifiedODE", "Start"]
+
+
+@dataclass
+class Start:
+    """Where a run continues from (``solve(..., start=)``; :mod:`verified.parallel` cuts
+    a chunk whose sets split into pieces and continues each from here).
+
+    sets : the run's sets (:class:`~verified.sets.DoubletonSets` or
+        :class:`~verified.quadratic.QuadraticSets`, the kind of the run's ``set_order``
+        and ``set_step``) at ``t_exact``, with the uncertain parameters carried as states
+        when the run carries them (the same columns a run from boxes has)
+    t_exact : Fraction, the exact time of the sets (a sum of float steps)
+    h_limit : the wrapping control's step limit there (s; inf: none)
+    split_scale : None or (N,) factors on ``split_ratio`` per component: adaptive
+        splitting compares a set's injection with the width of the union of *all* sets
+        of a run, so a piece cut from a wider union judges against that union (the
+        piece's union times this scale) rather than its own
+    """
+
+    sets: object
+    t_exact: Fraction
+    h_limit: float = float("inf")
+    split_scale: np.ndarray | None = None
 
 
 class VerifiedODE:
@@ -246,6 +269,8 @@ def solve(
     workers=None,
     client=None,
     chunks=None,
+    rechunk=None,
+    start: Start | None = None,
 ) -> Solution:
     """Verified enclosure of all solutions of ``x' = f(x, p)`` from ``x0``.
 
@@ -404,6 +429,16 @@ def solve(
         when dask.distributed is installed and there are >= 2 boxes) or an int (> 1: a
         local Dask cluster of that many 1-thread processes, kept for later calls).
         ``client``: a ``distributed.Client`` or a scheduler address ``"tcp://host:port"``.
+    rechunk : None, True or False (chunked runs with ``adaptive``): a chunk whose sets
+        split to twice its size pauses and its sets are cut into new chunks that continue
+        from that time, each with its own step sizes (:mod:`verified.parallel`). None: on
+        Dask workers, off in this process.
+    start : :class:`Start` or None: continue from these sets at their exact time instead
+        of from ``x0`` at ``t_span[0]`` (``x0`` must be their hull boxes over the
+        ``n`` states; ``params`` as the run that made them got them, or their hull).
+        The Solution's first output is the start itself (``t[0] = float(t_exact)``),
+        then the outputs of ``t_eval`` after it; ``tube_t[0] = float(t_exact)``. No
+        consistency test.
 
     Returns
     -------
@@ -423,9 +458,14 @@ def solve(
         when ``ode`` is not a Graph or VerifiedODE.
     """
     if workers is not None or client is not None or chunks is not None:  # chunked: verified/parallel.py
-        kw = {k: v for k, v in locals().items() if k not in ("ode", "x0", "t_span", "workers", "client", "chunks")}
+        if start is not None:
+            raise ValueError("start= continues one batch: it cannot be combined with workers, client or chunks")
+        kw = {k: v for k, v in locals().items()
+              if k not in ("ode", "x0", "t_span", "workers", "client", "chunks", "start")}
         from .parallel import solve_parallel
         return solve_parallel(ode, x0, t_span, workers=workers, client=client, chunks=chunks, **kw)
+    if rechunk is not None and not isinstance(rechunk, (bool, np.bool_)):
+        raise ValueError(f"rechunk must be None, True or False, got {rechunk!r}")
     wall0 = time.perf_counter()
     # every argument is checked before the tapes are built and before any step
     t0, t1, outs, h_max = check_settings(
@@ -461,6 +501,8 @@ def solve(
         + check_hooks([] if consistency is None else [consistency]) + check_hooks(hooks)
     kind = set_kind(set_order, set_step)
     setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, kind.sets)
+    if start is not None:
+        setup, boxes = _resume(setup, start, boxes, kind, consistency)
     for hook in hook_list:
         setup = hook.before_run(setup) or setup
     appended = setup.graph is not prob.graph
@@ -479,13 +521,18 @@ def solve(
     stepper.steer = setup.n_steer
     control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
     wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
+    if start is not None:
+        wrap.h_limit = float(start.h_limit)
+        if adaptive and start.split_scale is not None:  # (an (N,) ratio: SplitPolicy broadcasts it)
+            split_ratio = split_ratio * np.asarray(start.split_scale, float)
     split = SplitPolicy(split_ratio, max_boxes, tol) if adaptive else None
     merge = MergePolicy(merge_slack) if adaptive and merge_slack is not None else None
     def make_stepper(graph):  # a stepper of this run's kind for another graph (backward tests)
         return _stepper(kind, VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis,
                         model_degree=model_degree, model_caps=model_caps)
 
-    run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper)
+    run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper, None if start is None else start.t_exact)
+    run.wrap = wrap  # (read by verified.parallel's pause hook: a piece continues with this limit)
     steps = 0
     try:
         while run.next_out < outs.size:
@@ -576,6 +623,27 @@ def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, sets_type=Double
     return setup, prob, param_boxes, boxes
 
 
+def _resume(setup: RunSetup, start: Start, boxes: Interval, kind: SetKind, consistency):
+    """``(setup, boxes)`` continuing from ``start`` (``solve(start=)``): its sets and
+    time instead of the sets made from ``x0``, after the checks that they fit."""
+    if consistency is not None:
+        raise ValueError("start= does not continue a consistency test")
+    sets = start.sets
+    if not isinstance(sets, kind.sets):
+        raise ValueError(f"start.sets must be {kind.sets.__name__} for this set_order/set_step, "
+                         f"got {type(sets).__name__}")
+    X = sets.hull()
+    if X.shape != boxes.shape:
+        raise ValueError(f"start.sets have hull shape {X.shape}, the run expects {boxes.shape} "
+                         "(x0: their hull boxes; params: as the run that made them)")
+    if not isinstance(start.t_exact, Fraction):
+        raise ValueError("start.t_exact must be a Fraction (the exact time of the sets)")
+    if not float(start.t_exact) >= setup.t0:
+        raise ValueError(f"start.t_exact = {float(start.t_exact):g} is before t_span[0] = {setup.t0:g}")
+    from dataclasses import replace
+    return replace(setup, sets=sets, t0=float(start.t_exact)), X
+
+
 def _state_view(view, n_sets: int, n_state: int):
     """The first ``n_state`` states of a step's tube view (copied, so that the step's
     full arrays are not kept alive for every step of a run), or None."""
@@ -589,7 +657,7 @@ class _Run:
     """The state of one integration: the sets, the exact time, what has been recorded,
     and the counters. It is the :class:`~verified.hooks.RunControl` the hooks get."""
 
-    def __init__(self, setup: RunSetup, initial: Interval, outs: np.ndarray, make_stepper):
+    def __init__(self, setup: RunSetup, initial: Interval, outs: np.ndarray, make_stepper, t_exact=None):
         self.sets = setup.sets
         self.outs = outs  # (k,) output times, outs[0] = t0
         self.make_stepper = make_stepper
@@ -597,8 +665,11 @@ class _Run:
         # Time is kept exactly (a sum of float steps) so that every enclosure belongs to
         # the time it is reported at; a step landing on an output time uses an interval
         # step [h] that encloses the exact remaining gap.
-        self.t_exact = Fraction(setup.t0)
+        self.t_exact = Fraction(setup.t0) if t_exact is None else t_exact
         self.t = setup.t0
+        if t_exact is not None:  # solve(start=): the outputs after the start (setup.t0 = float(t_exact))
+            while self.next_out < outs.size and Fraction(float(outs[self.next_out])) <= t_exact:
+                self.next_out += 1
         self.out_t, self.out_boxes = [setup.t0], [initial]  # initial (B, n_state): the boxes at t0
         # the sets at each output time over their own parameters (Solution.views)
         self.out_views = [set_view(setup.sets, setup.n_state)] if initial.shape[0] == setup.sets.n_sets else [None]
@@ -704,7 +775,7 @@ class _Run:
         # consistent lengths also when a KeyboardInterrupt arrived between two appends
         k = min(len(self.out_t), len(self.out_boxes))
         status, reason = self.status or "completed", self.reason
-        if status == "stopped" and k == self.outs.size:
+        if status == "stopped" and self.next_out == self.outs.size:
             status, reason = "completed", ""  # a stop asked for after the last output changes nothing
         n_tube = min(len(self.tube), len(self.tube_t) - 1)
         out_boxes, tube, tube_t = self.out_boxes[:k], self.tube[:n_tube], self.tube_t[:n_tube + 1]
