@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))  # tests/oracles: the sampling oracle
 
-from oracles.sampling import SLACK, dop853, hull_widths, inside_union, pinocchio_with  # noqa: E402
+from oracles.sampling import SLACK, dop853, hull_widths, inside_union, pinocchio_with, plant_acceleration  # noqa: E402
 
 
 def sample_oracle(sol, count=24, seed=0, frame=None, payload_link=None):
@@ -81,13 +81,12 @@ def sample_oracle(sol, count=24, seed=0, frame=None, payload_link=None):
         payloads = []
         if payload_link is not None:   # a point payload at the link's origin (the scenes' payloads)
             payloads.append((payload_link, float(p[names.index("payload.mass")]), [0, 0, 0]))
-        plant = pinocchio_with(chain, payloads)
-        data = plant.createData()
+        qdd = plant_acceleration(pinocchio_with(chain, payloads))
 
         def f(t, x, p=p):
             xs = list(x) + ([t] if loop.timed else [])
             tau = np.array([float(v) for v in loop.torque(xs, list(p), t)])
-            return np.r_[x[n:], pin.aba(plant, data, x[:n], x[n:], tau)]
+            return np.r_[x[n:], qdd(x[:n], x[n:], tau)]
         s = dop853(f, x0, T, rtol=1e-11, atol=1e-11)
         X = np.array([s.sol(t) for t in sol.t])
         states.append(X)

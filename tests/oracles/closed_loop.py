@@ -4,7 +4,7 @@ as the plant, the control law written again in numpy floats, DOP853 at rtol = at
 import numpy as np
 import pinocchio as pin
 
-from oracles.sampling import dop853, pinocchio_with
+from oracles.sampling import dop853, pinocchio_with, plant_acceleration
 from verified.interval import Interval
 
 Q0 = np.array([0.5, -0.3])
@@ -21,13 +21,13 @@ def pin_model(chain, scale=1.0, payloads=()):
 
 
 def closed_loop_trajectory(plant, law, x0, t_end):
-    """DOP853 (rtol = atol = 1e-12) of qdd = aba(q, qd, law(t, q, qd))."""
-    data = plant.createData()
+    """DOP853 (rtol = atol = 1e-12) of qdd = aba(q, qd, law(t, q, qd) - D qd)."""
+    qdd = plant_acceleration(plant)
     n = plant.nv
 
     def f(t, x):
         q, qd = x[:n], x[n:]
-        return np.r_[qd, pin.aba(plant, data, q, qd, law(t, q, qd))]
+        return np.r_[qd, qdd(q, qd, law(t, q, qd))]
     return dop853(f, x0, t_end).sol
 
 

@@ -4,9 +4,9 @@ put tests/ on sys.path and import ``oracles.sampling``). That module imports not
 from verified/ or the modeling core; see its docstring for what is in it."""
 
 from mbs.app.sampling import (SLACK, Ensemble, count_outside, dop853, end_states, hull_widths, in_union,
-                              inside_union, line_points, misses, pinocchio_with, sample_initial_points,
+                              inside_union, line_points, misses, pinocchio_with, plant_acceleration, sample_initial_points,
                               sample_points, sample_trajectories, states_at, trajectories)
 
 __all__ = ["SLACK", "Ensemble", "count_outside", "dop853", "end_states", "hull_widths", "in_union",
-           "inside_union", "line_points", "misses", "pinocchio_with", "sample_initial_points",
+           "inside_union", "line_points", "misses", "pinocchio_with", "plant_acceleration", "sample_initial_points",
            "sample_points", "sample_trajectories", "states_at", "trajectories"]
