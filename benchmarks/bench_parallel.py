@@ -22,6 +22,12 @@ overhead  16 pieces, T = 2 (break-down at 0.80 s) and T = 0.5 (short runs), warm
           with the default plan, and explicit ``chunks=1`` on a cluster of 1 and
           ``chunks=2`` on a cluster of 2 (what every call cost before the plan kept small
           batches in one chunk: Dask's own per-call cost)
+rechunk   adaptive splitting concentrated in one chunk: 64 pieces of the paper's box and 64
+          pieces 10x wider (the mixed batch), adaptive=True, T = 0.7, a local cluster of 2
+          workers, default plan (2 chunks: narrow, wide): rechunk=False (the wide chunk keeps
+          every set its splitting makes) against rechunk=True (a chunk that doubles its sets
+          pauses and its sets become new chunks), interleaved; wall times, the pieces run, and
+          the widths at T of the re-chunked run over the plain one (max and min over states)
 scaling   local clusters of 1, 2, 4 workers (processes, 1 thread each) on the speedup run,
           and from the measured per-chunk costs and message sizes an estimate for 64
           workers and 65,536 pieces
@@ -124,6 +130,39 @@ def section_mixed(ode, box, n_each, T, repeat, log):
     return rows
 
 
+def section_rechunk(ode, box, n_each, T, repeat, log):
+    from verified.parallel import local_client
+    from verified.solver import solve
+    boxes = mixed_boxes(box, n_each)
+    log(f"\n## re-chunking: {n_each} pieces of the paper's box + {n_each} pieces 10x wider, adaptive, T = {T}, "
+        "2 workers (default plan: 2 chunks)")
+    local_client(2)
+    solve(ode, boxes, (0, 0.05), workers=2, adaptive=True)  # graph shipped, first steps
+    rows = []
+    for r in range(repeat):
+        l1 = load()
+        w1, s1 = timed(lambda: solve(ode, boxes, (0, T), workers=2, adaptive=True, rechunk=False))
+        l2 = load()
+        w2, s2 = timed(lambda: solve(ode, boxes, (0, T), workers=2, adaptive=True, rechunk=True))
+        k = min(len(s1.t), len(s2.t)) - 1
+        wr = np.asarray(s2.hull[k].width(), float) / np.asarray(s1.hull[k].width(), float)
+        rows.append(dict(run=r + 1, plain_s=w1, rechunked_s=w2, speedup=w1 / w2, width_ratio_max=float(wr.max()),
+                         width_ratio_min=float(wr.min()), status=(s1.status, s2.status),
+                         t_reached=(s1.t_reached, s2.t_reached), final_sets=(s1.boxes[-1].shape[0],
+                                                                              s2.boxes[-1].shape[0]),
+                         splits=(s1.stats["splits"], s2.stats["splits"]), chunk_wall_s=s1.stats["chunk_wall_s"],
+                         pieces=s2.stats["pieces"], rechunks=s2.stats["rechunks"],
+                         piece_wall_s=[p["wall_s"] for c in s2.chunks for p in (c["pieces"] or [c])],
+                         load_1=l1, load_2=l2))
+        log(f"run {r + 1}: rechunk=False {w1:6.2f} s ({l1}), chunk walls "
+            f"{', '.join(f'{x:.2f}' for x in s1.stats['chunk_wall_s'])} s | rechunk=True {w2:6.2f} s ({l2}), "
+            f"{s2.stats['pieces']} pieces ({s2.stats['rechunks']} cuts) | speed-up {w1 / w2:.2f}x | widths at "
+            f"t = {s1.t[k]:g} re-chunked/plain {wr.min():.4f}..{wr.max():.4f} | sets {s1.boxes[-1].shape[0]} / "
+            f"{s2.boxes[-1].shape[0]}, splits {s1.stats['splits']} / {s2.stats['splits']} | "
+            f"{s1.status} at {s1.t_reached:g} / {s2.status} at {s2.t_reached:g}")
+    return rows
+
+
 def section_overhead(ode, box, Ts, repeat, log):
     from verified.parallel import local_client
     from verified.solver import solve
@@ -219,7 +258,7 @@ def estimate(scaling, pieces, log, target_pieces=65536, target_workers=64, bandw
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--only", default="speedup,mixed,overhead,scaling")
+    ap.add_argument("--only", default="speedup,mixed,rechunk,overhead,scaling")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     ap.add_argument("--json", default=None, help="write the measurements here")
@@ -227,6 +266,7 @@ def main(argv=None):
     only = set(args.only.split(","))
     pieces, T = (64, 0.5) if args.quick else (1024, 2.0)
     n_mixed, t_mixed = (16, 0.3) if args.quick else (128, 0.5)
+    n_rechunk, t_rechunk = (64, 0.5) if args.quick else (64, 0.7)
     log = print
     log(f"bench_parallel: {os.cpu_count()} CPUs, {load()}, {time.strftime('%H:%M:%S UTC', time.gmtime())}")
     ode, box = setup()
@@ -237,6 +277,8 @@ def main(argv=None):
         res["speedup"] = section_speedup(ode, box, pieces, T, args.repeat, log)
     if "mixed" in only:
         res["mixed"] = section_mixed(ode, box, n_mixed, t_mixed, args.repeat, log)
+    if "rechunk" in only:
+        res["rechunk"] = section_rechunk(ode, box, n_rechunk, t_rechunk, args.repeat, log)
     if "overhead" in only:
         res["overhead"] = section_overhead(ode, box, (0.5,) if args.quick else (2.0, 0.5), args.repeat, log)
     if "scaling" in only:

@@ -31,6 +31,28 @@ chunks are ordinary tasks, so Dask's scheduler retries a chunk whose worker died
 worker process lets glibc keep freed memory (:func:`_tune_malloc`: Dask's
 ``MALLOC_TRIM_THRESHOLD_=65536`` cost 40-60% more CPU per chunk).
 
+Re-chunking (``rechunk``; with ``adaptive`` the sets a chunk's splitting creates): a
+chunk runs until it holds ``RECHUNK_GROWTH`` (2) times as many sets as it started with
+(and at least 2x the plan's mean chunk size and 2x ``RECHUNK_MIN_SETS`` = 64), stops
+after that step (a hook, :class:`_Pause`) and returns its Solution so far and its sets
+with their exact time (:class:`verified.solver.Start`). The driver cuts the sets into
+contiguous pieces of about the plan's mean chunk size (at least ``RECHUNK_MIN_SETS``)
+and runs each as a new chunk from that time (``solve(start=)``): on Dask at once, on
+whichever worker is free, so the sets of one busy chunk spread over idle workers; in this
+process depth-first. Every set goes to exactly one piece, so their union is the paused
+chunk's set. What changes against the chunk run whole: each piece has its own step sizes;
+a piece starts with the wrapping control's limit of the paused chunk but without the
+stepper's guesses from its last step; the split due after the step a chunk paused at is
+decided again by its pieces' first step; splitting judges a set against the union the
+piece was cut from (``split_ratio`` times the widths of that union over the piece's own,
+:attr:`Start.split_scale`); ``max_boxes`` is each initial chunk's budget: a piece may grow
+to its parent's budget less the sets its siblings held when cut (so the pieces of one
+chunk together may exceed it: each checks only its own). Measured on the mixed batch
+(``benchmarks/bench_parallel.py --only rechunk``): see the benchmark. Default
+(``rechunk=None``): on for adaptive runs on Dask, off in this process (one core gains
+nothing from it); never with a consistency test (its record cannot be continued:
+``rechunk=True`` is an error then) or with per-box exact parameters that differ.
+
 What the merged Solution means (the union is the same set a single batch encloses,
 up to the step-size differences):
 
@@ -53,9 +75,18 @@ up to the step-size differences):
 ``stats``
     Counters summed over the chunks (``steps`` is the total of chunk steps,
     ``steps_max`` the longest chunk's), ``wall_s`` of the whole call, plus
-    ``chunks``, ``workers``, ``backend`` ("inprocess", "dask-local", "dask"),
+    ``chunks``, ``workers``, ``backend`` ("inprocess", "dask-local", "dask"), ``rechunk``
+    (on or off), ``pieces`` (solves run: chunks and pieces cut from them), ``rechunks``
+    (chunks or pieces that paused and were cut),
     ``chunk_wall_s`` (each chunk's own solve time), ``setup_s`` (cluster start and
     graph shipping), ``sent_bytes`` / ``received_bytes`` (pickled sizes per run).
+``chunks``
+    Per initial chunk: boxes, status, steps, its tube, ...; with re-chunking ``pieces``:
+    each piece's parent, start time, sets at its start, status, steps, wall time, worker.
+    A re-chunked chunk's outputs are the boxes of its pieces that recorded each output
+    (depth-first order), its tube one box per piece live on each interval of the union
+    of its pieces' step times (the hull of that piece's step), ``t_reached`` and
+    ``status`` those of its earliest worst piece not cut.
 ``consistency``
     With an energy test: the chunks' records interleaved by time (RA(t), H_H, H_V
     points of every chunk sorted by t; the tests of every chunk); each chunk's own
@@ -711,6 +742,11 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     client : None, a ``distributed.Client`` or a scheduler address (str)
     chunks : None (default plan, :func:`plan_chunks`: no chunk below
         ``MIN_CHUNK_BOXES`` boxes) or the number of chunks, used as given
+    rechunk : None, True or False (in ``kwargs``; module docstring): cut the sets of a
+        chunk whose adaptive splitting doubled them into new chunks. None: on for
+        ``adaptive`` runs on Dask (a local cluster or ``client``), off in this process.
+        True also in this process, and with ``workers > 1`` also for a plan of one chunk
+        (which then runs on the cluster instead of here).
     """
 
     wall0 = time.perf_counter()
