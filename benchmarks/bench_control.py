@@ -13,7 +13,11 @@ arm2_computed_torque}.toml, run through mbs.simulate exactly as the CLI does):
 6. case 1 as shipped, with ``invariant_after`` = 1 s: from then on every later time is
    enclosed at once by the closed loop's energy (``mbs.lyapunov``); cases 1, 4 and 5
    integrate without it;
-7. case 2 in mode ii (the energy test on second-order sets, with inputs), capped at 150 s.
+7. case 2 in mode ii (the energy test on second-order sets, with inputs), capped at 150 s;
+8. the Franka Panda (7 DOF, fingers locked) holding its ready pose under PD + gravity
+   compensation, q(0) +- 1 mrad, qd(0) +- 1 mrad/s, T = 5 (models/scenes/panda_pd_hold.toml:
+   second-order sets by composition). The Panda's URDF has joint damping, which the
+   oracle applies (Pinocchio's aba leaves it out).
 
 Case 2's scene runs second-order sets by composition (``set_order = 2``, ``set_step =
 "composition"``, Taylor models): T = 2 in about 52 s here; the first-order affine sets
@@ -166,7 +170,7 @@ def fmt(row):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--only", default="1,2,3,4,5,6,7", help="cases, e.g. 1,3")
+    ap.add_argument("--only", default="1,2,3,4,5,6,7,8", help="cases, e.g. 1,3")
     ap.add_argument("--cap", type=float, default=60.0, help="wall-clock cap per run [s]")
     ap.add_argument("--samples", type=int, default=24)
     a = ap.parse_args(argv)
@@ -197,8 +201,10 @@ def main(argv=None):
         cases += [("UR5 PD hold, payload, T = 5, invariant after 1 s", "ur5_pd_payload", "i", None)]
     if 7 in only:  # the energy test's cost on the quintic (second-order sets, as shipped); 150-s cap
         cases += [("UR5 quintic in 2 s, payload (energy test)", "ur5_quintic", "ii", {"cap": 150.0})]
+    if 8 in only:  # a 7-DOF arm as users run it: held by a controller (free, it is chaotic: issue 17)
+        cases += [("Panda PD hold, T = 5", "panda_pd_hold", None, None)]
     for label, scene, mode, extra in cases:
-        frame = "link2" if scene.startswith("arm2") else "tool0"
+        frame = "link2" if scene.startswith("arm2") else "panda_hand_tcp" if scene.startswith("panda") else "tool0"
         extra = dict(extra or {})
         cap = max(a.cap, extra.pop("cap", a.cap))
         row = run_case(label, scene, cap, mode, extra, a.samples, frame, drop_payload="no payload" in label)

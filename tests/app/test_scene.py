@@ -228,7 +228,7 @@ def test_solver_invariant_after():
 def test_control_scenes_parse():
     """[control] tables are kept for simulate; structure errors name the file and key."""
     from mbs.control import parse_control
-    for name in ("arm2_computed_torque", "ur5_pd_payload", "ur5_quintic"):
+    for name in ("arm2_computed_torque", "ur5_pd_payload", "ur5_quintic", "panda_pd_hold"):
         s = load_scene(name)
         assert s.control is not None and parse_control(s.control)
         assert s.simulate_kwargs()["control"] == s.control

@@ -34,3 +34,15 @@ def test_the_closed_loop_oracle_bites(monkeypatch):
     monkeypatch.setitem(bench_control.TARGET_T, "ur5_quintic", 0.3)
     row = bench_control.run_case("quintic", "ur5_quintic", 120.0, None, None, samples=12)
     assert not row["inside"]
+
+
+@pytest.mark.slow  # ~15 s: 0.5 s of the hold (about 10 Panda steps) and 12 closed-loop samples
+def test_shipped_panda_hold_scene_encloses_the_sampled_closed_loop(monkeypatch):
+    """The Panda's URDF has joint damping (0.003 N m s/rad), which Pinocchio's aba leaves
+    out: the oracle applies it (mbs.app.sampling.plant_acceleration), and the composition
+    step's enclosure holds every sample and tool position."""
+    monkeypatch.setitem(bench_control.TARGET_T, "panda_pd_hold", 0.5)
+    row = bench_control.run_case("panda hold", "panda_pd_hold", 120.0, None, None, samples=12,
+                                 frame="panda_hand_tcp")
+    assert row["status"] == "completed" and row["t_reached"] == pytest.approx(0.5)
+    assert row["inside"] and row["frame_inside"]
