@@ -369,22 +369,30 @@ def _sym_rhs_graph(self, tau_params=False):
             x = list(x)
             vals = mb(*x)
             M = [vals[i * n:(i + 1) * n] for i in range(n)]
-            b = vals[n * n:]
-            d = [float(v) for v in self.D.diagonal()] if n else []
-            rhs = []
-            for i in range(n):
-                r = -b[i]
-                if d[i] != 0:
-                    r = r - d[i] * x[n + i]
-                if tau_params:
-                    r = r + p[i]
-                rhs.append(r)
-            return x[n:] + _ldl_solve_named(self, M, rhs, x)
+            return x[n:] + _qdd(self, M, vals[n * n:], x, p if tau_params else None)
         names = [str(s) for s in list(self.q) + list(self.qd)]
         return trace(fn, 2 * n, n if tau_params else 0, input_names=names,
                      param_names=[str(s) for s in self.tau] if tau_params else None,
                      output_names=[f"d{s}" for s in names])
     return _cached_graph(self.chain, f"sym-rhs-tau{int(bool(tau_params))}", build)
+
+
+def _qdd(self, M, b, x, tau=None):
+    """qdd = M^{-1} (tau - D qd - b) at ``x = (q, qd)``: ``M`` and the bias ``b = c + g``
+    evaluated there, ``tau`` the joint torques (None: 0), ``D`` the joints' viscous
+    damping (eq. (7)); by LDL^T (:func:`_ldl_solve_named`). The one place the symbolic
+    model's graphs form qdd (the right-hand side and the chain-rule dH/dt)."""
+    n = self.n
+    d = [float(v) for v in self.D.diagonal()] if n else []
+    rhs = []
+    for i in range(n):
+        r = -b[i]
+        if d[i] != 0:
+            r = r - d[i] * x[n + i]
+        if tau is not None:
+            r = r + tau[i]
+        rhs.append(r)
+    return _ldl_solve_named(self, M, rhs, x)
 
 
 def _ldl_solve_named(self, M, rhs, x):
@@ -422,7 +430,6 @@ def _sym_energy_rate_graph(self, simplified=False):
     Cached on disk."""
     n = self.n
     inputs = list(self.q) + list(self.qd)
-    d = [float(v) for v in self.D.diagonal()] if n else []
     if simplified:
         def build():
             rate = (self.qd.T * (-self.D * self.qd))[0, 0] if n else sympy.Integer(0)
@@ -440,8 +447,7 @@ def _sym_energy_rate_graph(self, simplified=False):
             M = [vals[i * n:(i + 1) * n] for i in range(n)]
             k = n * n
             b, gq, gqd = vals[k:k + n], vals[k + n:k + 2 * n], vals[k + 2 * n:k + 3 * n]
-            rhs = [(-b[i] - d[i] * x[n + i]) if d[i] != 0 else -b[i] for i in range(n)]
-            qdd = _ldl_solve_named(self, M, rhs, x)
+            qdd = _qdd(self, M, b, x)
             r = 0
             for i in range(n):
                 r = r + gq[i] * x[n + i] + gqd[i] * qdd[i]
