@@ -77,11 +77,15 @@ class Simulation(Solution):
         The uncertain physical parameters the run covered, ``{name: (lo, hi)}``.
     control : object or None
         The closed loop (:mod:`mbs.control`) when a controller drove the joints.
+    frame : mbs.frames.Frames or None
+        Enclosures of the chain's frames over the run (``sol.frame("tool0")``), for runs
+        of a chain (:func:`mbs.frames.attach_frames`); None for a bare System.
     """
 
     mode: str = ""
     params: dict = field(default_factory=dict)
     control: object = None
+    frame: object = None
 
     @classmethod
     def of(cls, sol: Solution, **extra) -> "Simulation":
