@@ -24,7 +24,9 @@ read through their ``lo``/``hi`` arrays only.
   :func:`misses` (a solution's output and tube boxes against dense trajectories, every
   step) and :func:`count_outside` (against an :class:`Ensemble`, up to a number of
   steps);
-* :func:`pinocchio_with`: Pinocchio's model of a chain with scaled inertias and payloads.
+* robot plants: :func:`pinocchio_with` (Pinocchio's model of a chain with scaled
+  inertias and payloads) and :func:`plant_acceleration` (its ``aba`` with the joints'
+  damping, as the library's models have it).
 """
 from __future__ import annotations
 
@@ -318,7 +320,7 @@ def plant_acceleration(model):
     torque alone differs from the model by ``M^-1 D qd``. On the Panda (0.003 N m s/rad
     per joint) that is 2.5e-4 rad/s^2 in qdd at qd ~ 1e-3, and held at a pose by PD
     control the sampled qd7 then left a 2e-3-wide enclosure by 5 % at 0.25 s."""
-    import pinocchio as pin
+    import pinocchio as pin  # (pinocchio only for the robot plants, not to sample a given rhs)
     data = model.createData()
     damping = np.asarray(model.damping, float).copy()
 
@@ -331,7 +333,7 @@ def pinocchio_with(chain, payloads=(), scale=1.0):
     """Pinocchio's model of ``chain`` (its own URDF parser and frames) with every joint's
     inertia scaled by ``scale`` and point-mass payloads [(link, mass, com in the link
     frame)] added to the joint that carries the link: the oracle's plant."""
-    import pinocchio as pin
+    import pinocchio as pin  # (see plant_acceleration)
     model = pin.Model(chain.to_pinocchio())
     for j in range(1, model.njoints):
         I = model.inertias[j]
