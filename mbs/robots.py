@@ -84,8 +84,9 @@ ERD_PREFIX = "example-robot-data:"
 
 #: the paper's models (sec. 5.1, 5.2): the names of ``models.registry.SYSTEMS``, System
 #: factories (:class:`models.paper.PaperModel`): a DH chain in modes i/ii, the
-#: hand-written eqs. (18)/(19), (22)/(24) in mode iii (here too, so that scenes can
-#: list them without loading the registry)
+#: hand-written eqs. (18)/(19), (22)/(24) in mode iii. Names only (re-exported by
+#: :mod:`mbs.simulate`, read by :mod:`mbs.app.scene`); tests/mbs/test_modes.py checks
+#: that they are the registry's keys
 PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
 
 #: the entry-point group through which an installed distribution offers ready models.
