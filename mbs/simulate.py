@@ -434,7 +434,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         test = EnergyTest(system.energy, system.energy_rate, constraints,
                           test_interval=mode.test_interval if test_interval is None else test_interval,
                           test_splits=mode.test_splits if test_splits is None else test_splits,
-                          strategy=split_strategy, refine=refine, min_gain=min_gain, backward_depth=backward_depth,
+                          split_strategy=split_strategy, refine=refine, min_gain=min_gain, backward_depth=backward_depth,
                           max_boxes=solver_kwargs.get("max_boxes", 4096), contract=contract, prune=prune)
     elif constraints:
         raise ValueError("mode i runs without consistency tests; use mode ii or iii for constraints")

@@ -129,9 +129,10 @@ class EnergyTest(Hook):
         Parts per set at a test (paper: 10 and 50; old name ``splits``). "gradient"/"widest" bisect
         ``round(log2(splits))`` times, pruning between rounds; "grid" cuts the two
         directions that widen ``H_H`` most into a ``k x k`` grid, ``k^2 ~ splits``.
-    strategy : "gradient", "widest" or "grid"
+    split_strategy : "gradient" (default), "widest" or "grid"
         Direction choice: largest ``|dG/dx . column| x width`` (the part of ``H_H``'s
-        width a direction causes), largest share of the set's own width, or a grid.
+        width a direction causes), largest share of the set's own width, or a grid
+        (the name :func:`mbs.simulate.simulate` and scenes use; old name ``strategy``).
     refine : "pruned" or "always"
         "pruned" (default): a set is replaced by its surviving parts (as the largest
         consistent subtrees) only when that narrows its hull by at least
@@ -168,18 +169,20 @@ class EnergyTest(Hook):
 
     def __init__(self, energy: Graph | None = None, energy_rate="derive", constraints=(), *,
                  test_interval: float | None = None, test_splits: int | None = None,
-                 strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
+                 split_strategy: str | None = None, refine: str = "pruned", min_gain: float = 0.1,
                  backward_depth: int = 0, max_boxes: int = 4096, contract: str = "step",
                  prune: bool = True, align=None, check_claim: bool = True, reset_h: bool = False,
                  max_interval: float | None = None, splits: int | None = None, contract_backoff: int | None = None,
-                 test_backoff: int | None = None):
-        # one name per knob (issue 15): test_interval / test_splits as everywhere else;
+                 test_backoff: int | None = None, strategy: str | None = None):
+        # one name per knob (issue 15): test_interval / test_splits / split_strategy as everywhere else;
         # the old names are accepted so that existing callers keep working, and the
         # error messages below name whichever the caller used
         interval_name = "max_interval" if max_interval is not None else "test_interval"
         splits_name = "splits" if splits is not None else "test_splits"
+        strategy_name = "strategy" if strategy is not None else "split_strategy"
         test_interval = _renamed(test_interval, max_interval, "test_interval", "max_interval", 0.1)
         test_splits = _renamed(test_splits, splits, "test_splits", "splits", 10)
+        split_strategy = _renamed(split_strategy, strategy, "split_strategy", "strategy", "gradient")
         if energy is None and not constraints:
             raise ValueError("EnergyTest needs an energy graph or at least one constraint")
         if energy is not None and (not isinstance(energy, Graph) or energy.n_outputs != 1):
@@ -189,8 +192,8 @@ class EnergyTest(Hook):
             deprecated("EnergyTest(energy, None)")
             energy_rate = "zero"
         check_energy_rate(energy_rate, SYSTEM_RATES, "EnergyTest", graph=True)
-        if strategy not in STRATEGIES:
-            raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
+        if split_strategy not in STRATEGIES:
+            raise ValueError(f"{strategy_name} must be one of {STRATEGIES}, got {split_strategy!r}")
         if contract not in ("step", "test", "off"):
             raise ValueError(f"contract must be 'step', 'test' or 'off', got {contract!r}")
         if refine not in ("pruned", "always"):
@@ -206,7 +209,7 @@ class EnergyTest(Hook):
         self.constraints = tuple(constraints)
         self.test_interval = float(test_interval)
         self.test_splits = int(test_splits)
-        self.strategy = strategy
+        self.split_strategy = split_strategy
         self.refine = refine
         if not 0 <= float(min_gain) < 1:
             raise ValueError(f"min_gain must be in [0, 1), got {min_gain!r}")
@@ -419,7 +422,7 @@ class EnergyTest(Hook):
         backward test (or None)."""
         w0 = time.perf_counter()
         nb0 = sets.n_sets
-        res = branch_and_prune(self._lifted, sets, t_iv, strategy=self.strategy, test_splits=self.test_splits,
+        res = branch_and_prune(self._lifted, sets, t_iv, strategy=self.split_strategy, test_splits=self.test_splits,
                                refine=self.refine, min_gain=self.min_gain)
         parts, root = res.parts, res.root
         tested_hulls, tested_kept = res.tested_hulls, res.tested_kept

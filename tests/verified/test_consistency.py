@@ -151,6 +151,20 @@ def test_test_interval_and_test_splits_are_the_knobs_names():
         EnergyTest(H, test_interval=0.1, max_interval=0.1)
 
 
+def test_split_strategy_is_the_knobs_name():
+    """One name per knob: EnergyTest takes simulate's and the scenes' split_strategy; the
+    old strategy still works, both names at once do not, and an error names the one used."""
+    rhs, H = _pendulum_graphs()
+    assert EnergyTest(H).split_strategy == "gradient"
+    assert EnergyTest(H, split_strategy="grid").split_strategy == EnergyTest(H, strategy="grid").split_strategy == "grid"
+    with pytest.raises(ValueError, match=r"^split_strategy must be one of"):
+        EnergyTest(H, split_strategy="random")
+    with pytest.raises(ValueError, match=r"^strategy must be one of"):
+        EnergyTest(H, strategy="random")
+    with pytest.raises(TypeError, match="not both"):
+        EnergyTest(H, split_strategy="grid", strategy="grid")
+
+
 def test_clear_errors_for_bad_settings():
     rhs, H = _pendulum_graphs()
     with pytest.raises(ValueError, match="strategy"):
