@@ -270,13 +270,14 @@ def _frame_samples(sol, frame, traj, names):
 
 # ---------------------------------------------------------------------- scale-out (issue 16)
 def parallel_kwargs(workers=None, client=None) -> dict:
-    """Keyword arguments of simulate for chunked execution: {} for one in-process batch
-    (``workers`` None or 1 and no client), else ``workers``/``client`` (see
+    """Keyword arguments of simulate for chunked execution: ``{"workers": 1}`` for one
+    in-process batch (``workers`` None or 1 and no client: simulate's own default, None,
+    is every core when worthwhile), else ``workers``/``client`` (see
     :mod:`verified.parallel`; ``workers="auto"``: every core when worthwhile)."""
     if client is not None:
         return {"client": client}
     if workers is None or workers == 1:
-        return {}
+        return {"workers": 1}
     return {"workers": workers}
 
 
