@@ -376,7 +376,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         (:mod:`mbs.lyapunov`, :class:`verified.invariant.InvariantHook`); every later
         output time then gets those boxes, valid for all later times
         (``stats["invariant_from"]``). While a set's box cannot be verified the
-        integration goes on.
+        integration goes on. Runs in one process (the default ``workers=None`` becomes
+        ``workers=1`` here; other ``workers``, ``client``, ``chunks`` are refused).
     energy_shell : bool
         Hold the enclosure inside the energy shell ``H(q, qd) <= hmax``
         (:class:`verified.energy_shell.EnergyShellHook`; ``hmax`` the interval bound of
@@ -388,7 +389,11 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         completed at 3.2 (without: break-down at 4.12 s). Default False: on enclosures
         that stay narrow it only costs time.
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
-        an unknown keyword raises ``TypeError`` naming ``simulate()``
+        an unknown keyword raises ``TypeError`` naming ``simulate()``. ``workers``: as in
+        ``solve``, default None: every core of this machine when worthwhile (>= 128
+        initial boxes after ``subdivision`` and dask.distributed installed; else, and
+        without Dask silently, one batch in this process); ``workers=1``: one batch in
+        this process
 
     Returns
     -------
@@ -455,9 +460,11 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [_energy_shell_hook(masses, loop, box)]
     t_eval = output_times(t0, t_end, output_dt)
     if invariant_after is not None:
-        if solver_kwargs.get("workers") == "auto" and solver_kwargs.get("client") is None:
-            solver_kwargs.pop("workers")  # "every core when worthwhile": here it is not
-        if any(solver_kwargs.get(k) is not None for k in ("workers", "client", "chunks")):
+        if solver_kwargs.get("client") is None and solver_kwargs.get("chunks") is None and (
+                solver_kwargs.get("workers") is None or isinstance(solver_kwargs["workers"], str)
+                and solver_kwargs["workers"] == "auto"):
+            solver_kwargs["workers"] = 1  # "every core when worthwhile" (the default): here it is not
+        if solver_kwargs.get("workers") != 1 or any(solver_kwargs.get(k) is not None for k in ("client", "chunks")):
             raise ValueError("invariant_after runs in one process (no workers, client or chunks): the "
                              "invariant is proven for every set at once")
         solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [

@@ -9,16 +9,24 @@ with its own step sizes, wrapping control and (with ``adaptive``) its own splitt
 
 Where the chunks run:
 
-* in this process, one after the other (``workers=1`` with ``chunks > 1``, or when
-  Dask is not installed): only the per-chunk step sizes change; a plan of one chunk
-  (the default for fewer than ``2 * MIN_CHUNK_BOXES`` boxes, :func:`plan_chunks`) with
-  ``workers > 1`` is one in-process batch, exactly ``solve``'s result: a local
-  cluster's worker would run it on the same cores after a Dask round trip (and, on a
-  first call, the cluster's start);
-* on a local Dask cluster (``dask.distributed.LocalCluster``, one process per worker,
-  1 thread each), created on first use and kept for later calls
-  (:func:`local_client`); its workers load the numba caches once when they start
-  (:func:`_warm_kernels`);
+* in this process, one after the other (``workers=1`` with ``chunks > 1``, an adaptive
+  ``workers=1`` run with ``rechunk=True``, or when Dask is not installed): only the
+  per-chunk step sizes change; a plan of one chunk (the default for fewer than
+  ``2 * MIN_CHUNK_BOXES`` boxes, :func:`plan_chunks`) with ``workers > 1`` is one
+  in-process batch, exactly ``solve``'s result: a local cluster's worker would run it
+  on the same cores after a Dask round trip (and, on a first call, the cluster's
+  start);
+* on a local Dask cluster (one process per worker, 1 thread each), created on first
+  use and kept for later calls (:func:`local_client`); its workers load the numba
+  caches once when they start (:func:`_warm_kernels`). On POSIX the workers are fresh
+  interpreters (``python -m dask spec``, under a nanny that restarts a worker process
+  that dies) with the scheduler in this process, not ``LocalCluster``'s spawned
+  processes, which re-run the calling script's top level: a script needs no
+  ``if __name__ == "__main__":`` guard (:func:`_start_local_cluster`). So
+  ``workers=None``, the default of ``solve``, means "every core when worthwhile"
+  (:func:`auto_workers`: at least ``AUTO_MIN_PIECES`` boxes, Dask installed, more
+  than one core; else one in-process batch, also silently without Dask); ``workers=1``
+  is one in-process batch;
 * on an existing Dask cluster: ``client=`` a ``distributed.Client`` or a scheduler
   address ``"tcp://host:port"`` (:func:`connect`: an unreachable address is a one-line
   :class:`SchedulerError` after ``CONNECT_TIMEOUT`` seconds, never a hang).
@@ -115,6 +123,7 @@ import os
 import pickle
 import queue
 import signal
+import sys
 import threading
 import time
 import uuid
@@ -132,8 +141,8 @@ from .solver import Solution, Start, VerifiedODE, solve
 from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
-           "default_workers", "dask_available", "SchedulerError", "WorkerStartError", "CONNECT_TIMEOUT", "CHUNK_TARGET",
-           "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs"]
+           "default_workers", "dask_available", "auto_workers", "subprocess_workers_supported", "SchedulerError",
+           "WorkerStartError", "CONNECT_TIMEOUT", "CHUNK_TARGET", "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs"]
 
 #: seconds to wait for a scheduler before :class:`SchedulerError`
 CONNECT_TIMEOUT = 10.0
@@ -202,6 +211,50 @@ def default_workers() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
+
+
+def _in_dask_worker() -> bool:
+    if "distributed" not in sys.modules:
+        return False
+    try:
+        from distributed import get_worker
+        get_worker()
+    except ValueError:
+        return False
+    return True
+
+
+def _box_count(ode, x0, subdivision) -> int:
+    """The number of initial boxes ``solve`` would run (0 when the arguments are bad:
+    solve's own checks report them)."""
+    from .solver_args import _subdivision
+    try:
+        graph = ode.graph if isinstance(ode, VerifiedODE) else ode
+        n = int(graph.n_inputs)
+        nb = initial_boxes(x0, n, None).shape[0]
+        if subdivision is not None:
+            nb *= math.prod(int(k) for k in np.broadcast_to(_subdivision(subdivision, n), (n,)))
+        return int(nb)
+    except Exception:  # noqa: BLE001
+        return 0
+
+
+def auto_workers(ode, x0, subdivision=None):
+    """What ``solve(..., workers=None)`` means: ``"auto"`` (a local cluster of every
+    core) when that is worthwhile, else None (one batch in this process). Worthwhile:
+    at least ``AUTO_MIN_PIECES`` boxes (and 2 per core), more than one core,
+    dask.distributed installed (an optional extra), workers that do not re-run the
+    calling script (POSIX, :func:`subprocess_workers_supported`) and not already on a
+    Dask worker (a chunk, or a user's task, runs in its process)."""
+    n = default_workers()
+    if n < 2:
+        return None
+    nb = _box_count(ode, x0, subdivision)
+    if nb < max(AUTO_MIN_PIECES, 2 * n):
+        return None
+    if not subprocess_workers_supported() or not dask_available() or _in_dask_worker():
+        return None
+    return "auto"
 
 
 def plan_chunks(n_pieces: int, workers: int, chunks: int | None = None,
@@ -278,7 +331,7 @@ def _warm_kernels() -> float:
     t = time.perf_counter()
     g = trace(lambda x, p: [x[1], -np.sin(x[0])], 2)
     for arithmetic in ("interval", "affine"):
-        solve(g, Interval([0.1, 0.0], [0.11, 0.01]), (0.0, 0.02), arithmetic=arithmetic, h_max=0.01)
+        solve(g, Interval([0.1, 0.0], [0.11, 0.01]), (0.0, 0.02), arithmetic=arithmetic, h_max=0.01, workers=1)
     return time.perf_counter() - t
 
 
@@ -601,28 +654,138 @@ class _Pieces:
 # ----------------------------------------------------------------------------- Dask
 _LOCAL: dict = {}  # workers -> (cluster, client)
 
+#: seconds to wait for the local workers to connect (:func:`local_client`)
+LOCAL_START_TIMEOUT = 120.0
+
+
+def subprocess_workers_supported() -> bool:
+    """Whether :func:`local_client` starts its workers as fresh interpreters (every POSIX
+    system; Dask's subprocess workers do not run on Windows)."""
+    return os.name == "posix"
+
+
+def _worker_env() -> dict:
+    """The environment of a local worker process: this one's, with this process's
+    ``sys.path`` (a spawned process got it; a fresh interpreter needs it on
+    ``PYTHONPATH``: the script's folder, a path added at run time) and Dask
+    configuration (also what was set at run time with ``dask.config.set``)."""
+    import dask.config
+    env = dict(os.environ)
+    path = [os.getcwd() if p == "" else p for p in sys.path]
+    env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(path))
+    # (its errors only, as LocalCluster(silence_logs=ERROR): a nanny left without this
+    # process logs its goodbye at INFO)
+    config = dask.config.merge(dask.config.global_config, {"logging": {"distributed": "error"}})
+    env["DASK_INTERNAL_INHERIT_CONFIG"] = dask.config.serialize(config)
+    return env
+
+
+def _subprocess_worker_class():
+    """:class:`distributed.deploy.subprocess.SubprocessWorker` started as its own session
+    (Ctrl-C in a terminal reaches the whole foreground process group: the workers would
+    shut down with this process's KeyboardInterrupt) with :func:`_worker_env`."""
+    import asyncio
+    import json
+    import subprocess
+
+    from distributed.deploy.subprocess import SubprocessWorker
+
+    class _Worker(SubprocessWorker):
+        async def _start(self) -> None:
+            opts = dict(self.worker_kwargs)
+            if self.name is not None:
+                opts.setdefault("name", self.name)  # the cluster tracks its workers by name
+            cmd = [sys.executable, "-m", "dask", "spec", self.scheduler,
+                   "--spec", json.dumps({"cls": self.worker_class, "opts": opts})]
+            self.process = await asyncio.create_subprocess_exec(
+                *cmd, env=_worker_env(), stdin=subprocess.DEVNULL, start_new_session=True)
+
+    return _Worker
+
+
+def _start_local_cluster(workers: int):
+    """(cluster, client): ``workers`` 1-thread worker processes on this machine.
+
+    Not ``LocalCluster``: its nannies start the workers with multiprocessing's "spawn",
+    which first re-runs the calling script's top level (``__main__``) in every worker,
+    so a script without ``if __name__ == "__main__":`` ran itself again in each and
+    failed. Here (POSIX) the scheduler runs in this process, as in ``LocalCluster``, and
+    each worker is a nanny started as a fresh interpreter, ``python -m dask spec``
+    (Dask's :mod:`distributed.deploy.subprocess`), whose ``__main__`` is Dask's command
+    line: the script is never imported there. Its nanny restarts a worker process that
+    dies (a killed worker's chunk is retried by the scheduler). The workers are their
+    own session (a terminal's Ctrl-C does not stop them) and leave when this process
+    does: a worker that loses the scheduler closes, and its nanny with it."""
+    from distributed import Client, Scheduler, SpecCluster
+    from distributed.worker_memory import parse_memory_limit
+
+    host = "127.0.0.1"
+    worker = {"cls": _subprocess_worker_class(),
+              "options": {"worker_class": "distributed.Nanny",
+                          "worker_kwargs": {"host": host, "nthreads": 1, "silence_logs": logging.ERROR,
+                                            "memory_limit": parse_memory_limit("auto", 1, workers,
+                                                                                logger=logging.getLogger(__name__))}}}
+    # the scheduler's HTTP server on a free port (":8787" warns when another cluster runs)
+    scheduler = {"cls": Scheduler, "options": {"host": host, "port": 0, "dashboard": True,
+                                               "dashboard_address": ":0"}}
+    cluster = SpecCluster(workers={i: worker for i in range(workers)}, worker=worker, scheduler=scheduler,
+                          name="mbs-verified-local", silence_logs=logging.ERROR)
+    try:
+        client = Client(cluster, set_as_default=False)
+        # the nannies only start their processes: wait until every worker has connected,
+        # and give up at once when one of those processes has exited
+        deadline = time.monotonic() + LOCAL_START_TIMEOUT
+        while True:
+            try:
+                client.wait_for_workers(workers, timeout=0.5)
+                break
+            except TimeoutError:
+                codes = [getattr(getattr(w, "process", None), "returncode", None) for w in cluster.workers.values()]
+                dead = [c for c in codes if c is not None]
+                if dead:
+                    raise RuntimeError(f"a worker process exited with code {dead[0]} while starting "
+                                       "(its error is above)") from None
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"the workers did not connect within {LOCAL_START_TIMEOUT:g} s") from None
+    except BaseException:
+        cluster.close()
+        raise
+    return cluster, client
+
 
 def local_client(workers: int):
     """A ``distributed.Client`` of a local cluster with ``workers`` processes of one
     thread each, created on first use (with warm numba caches in every worker) and
-    kept for later calls until :func:`close_local_clients` / exit."""
+    kept for later calls until :func:`close_local_clients` / exit.
+
+    On POSIX the workers are fresh interpreters (:func:`_start_local_cluster`): the
+    calling script needs no ``if __name__ == "__main__":`` guard. Elsewhere it is a
+    ``LocalCluster``, whose spawned workers re-run an unguarded script's top level:
+    :class:`WorkerStartError` says so."""
     got = _LOCAL.get(workers)
     if got is not None and got[1].status == "running":
         return got[1]
-    from distributed import Client, LocalCluster
-    try:
-        # the scheduler's HTTP server on a free port (":8787" warns when another cluster runs)
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
-    except RuntimeError as exc:
-        # Dask spawns its worker processes, and a spawned process first re-runs the
-        # calling script's top level: unguarded, that reaches this call again while the
-        # process is still starting, and the parent only sees "Nanny failed to start"
-        raise WorkerStartError(
-            f"could not start {workers} local Dask worker processes ({exc}); worker processes re-run "
-            "the calling script's top level, so put it under `if __name__ == \"__main__\":`, or pass "
-            "workers=None to run in this process") from None
-    client = Client(cluster, set_as_default=False)
+    if subprocess_workers_supported():
+        try:
+            cluster, client = _start_local_cluster(workers)
+        except Exception as exc:  # noqa: BLE001 - one line, the cause named
+            why = " ".join(str(exc).split()) or type(exc).__name__
+            raise WorkerStartError(f"could not start {workers} local Dask worker processes ({why}); pass "
+                                   "workers=1 to run in this process") from None
+    else:  # pragma: no cover - Windows
+        from distributed import Client, LocalCluster
+        try:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                   silence_logs=logging.ERROR)
+        except RuntimeError as exc:
+            # Dask spawns its worker processes, and a spawned process first re-runs the
+            # calling script's top level: unguarded, that reaches this call again while the
+            # process is still starting, and the parent only sees "Nanny failed to start"
+            raise WorkerStartError(
+                f"could not start {workers} local Dask worker processes ({exc}); worker processes re-run "
+                "the calling script's top level, so put it under `if __name__ == \"__main__\":`, or pass "
+                "workers=1 to run in this process") from None
+        client = Client(cluster, set_as_default=False)
     client.run(_warm_kernels)
     client.register_worker_callbacks(_warm_kernels)  # also workers restarted later (a killed worker)
     _LOCAL[workers] = (cluster, client)
@@ -702,7 +865,7 @@ def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> fl
                                                  "wrap_target")}
     t0, t1 = kwargs["t_span"]
     try:
-        solve(ode, Interval(box_lo, box_hi), (t0, t1), params=params, max_steps=1, **kw)
+        solve(ode, Interval(box_lo, box_hi), (t0, t1), params=params, max_steps=1, workers=1, **kw)
     except Exception:  # noqa: BLE001 - the chunk itself will report a real problem
         pass
     return time.perf_counter() - t
@@ -715,7 +878,8 @@ def _solve_piece(ode, piece: _Piece, kwargs: dict, extra_hooks=()):
     pause = _Pause(piece.pause_at) if piece.pause_at is not None else None
     kw["hooks"] = list(kw.get("hooks") or ()) + list(extra_hooks) + ([pause] if pause is not None else [])
     kw["max_boxes"] = piece.max_boxes
-    sol = solve(ode, Interval(piece.lo, piece.hi), kw.pop("t_span"), params=piece.params, start=piece.start, **kw)
+    sol = solve(ode, Interval(piece.lo, piece.hi), kw.pop("t_span"), params=piece.params, start=piece.start,
+                workers=1, **kw)  # (one batch: never a cluster of its own)
     paused = pause.start if pause is not None and sol.status == "stopped" else None
     return sol, paused
 
@@ -734,11 +898,13 @@ def _run_chunk(problem: _Problem, piece: _Piece, kwargs: dict, topic: str):
 def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, **kwargs):
     """``solve(ode, x0, t_span, **kwargs)`` in chunks (see the module docstring).
 
-    workers : None, "auto" or an int >= 1. "auto": every core of this machine
+    workers : None, "auto" or an int >= 1. None and "auto": every core of this machine
         (:func:`default_workers`) when Dask is installed and there are at least
-        ``AUTO_MIN_PIECES`` boxes, else in-process. An int > 1 without Dask warns and
-        runs in-process. A plan of one chunk runs in-process too. Ignored when
-        ``client`` is given (then even one chunk runs on that cluster).
+        ``AUTO_MIN_PIECES`` boxes, else in-process, silently (on Windows, whose local
+        workers would re-run an unguarded script, None is in-process and "auto" a
+        ``LocalCluster``). 1: in-process. An int > 1 without Dask warns and runs
+        in-process. A plan of one chunk runs in-process too. Ignored when ``client``
+        is given (then even one chunk runs on that cluster).
     client : None, a ``distributed.Client`` or a scheduler address (str)
     chunks : None (default plan, :func:`plan_chunks`: no chunk below
         ``MIN_CHUNK_BOXES`` boxes) or the number of chunks, used as given
@@ -792,13 +958,15 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
         backend = "dask"
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
     else:
-        n_workers = default_workers() if workers in (None, "auto") else int(workers)
-        if workers == "auto" and nb < max(AUTO_MIN_PIECES, 2 * n_workers):
-            n_workers = 1  # not worth a cluster
+        auto = workers is None or (isinstance(workers, str) and workers == "auto")
+        n_workers = default_workers() if auto else int(workers)
+        if auto and (nb < max(AUTO_MIN_PIECES, 2 * n_workers) or _in_dask_worker()
+                     or (workers is None and not subprocess_workers_supported())):
+            n_workers = 1  # not worth a cluster (or one that would re-run the script: Windows)
         if n_workers > 1 and nb >= 2:
             if dask_available():
                 backend = "dask-local"
-            elif workers != "auto":
+            elif not auto:
                 warnings.warn(f"workers={workers}: dask.distributed is not installed "
                               "(pip install 'mbs-verified[parallel]'); running the chunks in this process",
                               RuntimeWarning, stacklevel=3)
@@ -818,7 +986,7 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
         backend, n_workers = "inprocess", 1
     if backend == "inprocess" and len(ranges) == 1 and not rechunk_on:  # one batch: exactly solve's own result
         sol = solve(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
-                    hooks=list(hooks_in), **kwargs)
+                    hooks=list(hooks_in), workers=1, **kwargs)
         sol.stats.update(chunks=1, workers=1, backend="inprocess")
         return sol
     base = dict(kwargs, t_span=(t0, t1))

@@ -425,9 +425,15 @@ def solve(
         them given the initial boxes are split into ``chunks`` contiguous chunks, each
         integrated with its own step sizes, and the results merged into one Solution
         (merged tube: one box per chunk on the union of the chunks' step times).
-        ``workers``: None (default: this process, one batch), ``"auto"`` (every core
-        when dask.distributed is installed and there are >= 2 boxes) or an int (> 1: a
-        local Dask cluster of that many 1-thread processes, kept for later calls).
+        ``workers``: None (default) or ``"auto"``: every core of this machine when it is
+        worthwhile -- dask.distributed installed (an optional extra: without it the run
+        is one batch in this process, silently), more than one core, and at least
+        ``verified.parallel.AUTO_MIN_PIECES`` (128) boxes -- else one batch in this
+        process; no ``if __name__ == "__main__":`` guard is needed (the local workers
+        are fresh interpreters that do not import the calling script; on Windows None
+        stays in this process). ``1``: one batch in this process (``chunks=k``: k
+        chunks, one after the other). An int > 1: a local Dask cluster of that many
+        1-thread processes. Clusters are kept for later calls.
         ``client``: a ``distributed.Client`` or a scheduler address ``"tcp://host:port"``.
     rechunk : None, True or False (chunked runs with ``adaptive``): a chunk whose sets
         split to twice its size pauses and its sets are cut into new chunks that continue
@@ -457,11 +463,18 @@ def solve(
     TypeError
         when ``ode`` is not a Graph or VerifiedODE.
     """
-    if workers is not None or client is not None or chunks is not None:  # chunked: verified/parallel.py
+    if workers is None and client is None and chunks is None and start is None:
+        from .parallel import auto_workers  # None ("every core when worthwhile"): decided there
+        workers = auto_workers(ode, x0, subdivision)
+    one_batch = client is None and chunks is None and not rechunk and (
+        workers is None or (isinstance(workers, (int, np.integer)) and not isinstance(workers, (bool, np.bool_))
+                            and workers == 1))
+    if not one_batch:  # chunked: verified/parallel.py
         if start is not None:
             raise ValueError("start= continues one batch: it cannot be combined with workers, client or chunks")
         kw = {k: v for k, v in locals().items()
-              if k not in ("ode", "x0", "t_span", "workers", "client", "chunks", "start")}
+              if k not in ("ode", "x0", "t_span", "workers", "client", "chunks", "start", "auto_workers",
+                           "one_batch")}
         from .parallel import solve_parallel
         return solve_parallel(ode, x0, t_span, workers=workers, client=client, chunks=chunks, **kw)
     if rechunk is not None and not isinstance(rechunk, (bool, np.bool_)):

@@ -47,18 +47,12 @@ def oracle(box):
 
 @pytest.fixture(scope="module")
 def client():
-    from distributed import Client, LocalCluster
-    # the workers import this module (the slow hook below), which imports tests/oracles:
-    # put tests/verified and tests/ on their path
-    here = os.path.dirname(__file__)
-    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (here, os.path.dirname(here), os.environ.get("PYTHONPATH"))
-                                               if p)
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=50)
-    c = Client(cluster, set_as_default=False)
+    """The local cluster workers=None / "auto" / N start (parallel.local_client: fresh
+    worker interpreters with this process's sys.path, so they import this module for
+    the hooks below, and tests/ for the oracles)."""
+    c = parallel.local_client(2)
     yield c
-    c.close()
-    cluster.close()
+    parallel.close_local_clients()
 
 
 @pytest.fixture(scope="module")
@@ -244,36 +238,123 @@ def test_merged_consistency_record_is_the_max_over_chunks_not_a_sawtooth():
 
 
 def test_local_workers_that_cannot_start_are_one_clear_error(monkeypatch):
-    """Dask's "Nanny failed to start" (what an unguarded script gets: the spawned workers
-    re-run its top level) becomes WorkerStartError naming the fix."""
+    """A local cluster that cannot start is one line naming the cause and workers=1; on
+    Windows (a LocalCluster, whose spawned workers re-run an unguarded script: Dask's
+    bare "Nanny failed to start") it names the main guard too."""
     import distributed
 
     def failing(*args, **kwargs):
         raise RuntimeError("Nanny failed to start.")
-    monkeypatch.setattr(distributed, "LocalCluster", failing)
     monkeypatch.setattr(parallel, "_LOCAL", {})
+    monkeypatch.setattr(parallel, "_start_local_cluster", lambda workers: failing())
+    with pytest.raises(parallel.WorkerStartError, match="Nanny failed to start") as e:
+        parallel.local_client(2)
+    assert "\n" not in str(e.value) and "workers=1" in str(e.value)
+    monkeypatch.setattr(parallel, "subprocess_workers_supported", lambda: False)
+    monkeypatch.setattr(distributed, "LocalCluster", failing)
     with pytest.raises(parallel.WorkerStartError, match="__name__ == .__main__.") as e:
         parallel.local_client(2)
-    assert "\n" not in str(e.value) and "workers=None" in str(e.value)
+    assert "\n" not in str(e.value) and "workers=1" in str(e.value)
 
 
-@pytest.mark.slow
-def test_unguarded_script_gets_the_worker_start_error(tmp_path):
-    """A real script without the main guard (2 workers, 256 pieces): it exits with
-    WorkerStartError, not Dask's bare "Nanny failed to start"."""
+def test_worker_process_that_exits_at_start_is_one_line_error(tmp_path, monkeypatch):
+    """A worker interpreter that dies while starting (here a `dask` package that exits)
+    is a WorkerStartError at once, not a wait for LOCAL_START_TIMEOUT."""
+    fake = tmp_path / "dask"
+    fake.mkdir()
+    (fake / "__init__.py").write_text("")
+    (fake / "__main__.py").write_text("raise SystemExit(3)\n")
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    monkeypatch.setattr(parallel, "_worker_env", lambda: env)
+    monkeypatch.setattr(parallel, "_LOCAL", {})
+    t = time.perf_counter()
+    with pytest.raises(parallel.WorkerStartError, match="exited with code 3") as e:
+        parallel.local_client(2)
+    assert "\n" not in str(e.value) and time.perf_counter() - t < 30
+
+
+UNGUARDED = """
+import numpy as np
+print("TOP LEVEL RAN", flush=True)
+from verified.solver import solve
+from verified.interval import Interval
+from verified.graph import trace
+from models import double_pendulum as dp
+lo, hi = dp.initial_box()
+g = trace(dp.rhs, 4)
+kw = dict(t_eval=[0.1, 0.2], subdivision=[256, 1, 1, 1])
+par = solve(g, Interval(lo, hi), (0.0, 0.2), **kw)   # workers=None: 256 boxes, every core
+one = solve(g, Interval(lo, hi), (0.0, 0.2), workers=1, **kw)
+print("BACKEND", par.stats["backend"], par.stats["chunks"], par.status, one.status, par.t_reached, one.t_reached)
+lo_d = max(float(np.max(np.abs(a.lo - b.lo))) for a, b in zip(par.boxes, one.boxes))
+hi_d = max(float(np.max(np.abs(a.hi - b.hi))) for a, b in zip(par.boxes, one.boxes))
+w = float(np.max(np.abs(np.asarray(par.hull[-1].width()) / np.asarray(one.hull[-1].width()) - 1)))
+print("DIFF", lo_d, hi_d, w)
+"""
+
+
+@pytest.mark.slow  # ~10-20 s: a fresh interpreter, a cluster start and two 256-box runs
+def test_unguarded_script_runs_once_on_every_core(tmp_path):
+    """A script without the main guard, run as `python script.py`, that solves 256 boxes
+    with the default workers=None: the chunks run on a local cluster of every core, the
+    script's top level runs once (the workers never import it), and the enclosures are
+    those of one in-process batch (up to the chunks' own step sizes)."""
     import subprocess
     import sys
     script = tmp_path / "unguarded.py"
-    script.write_text(
-        "from verified.solver import solve\nfrom verified.interval import Interval\n"
-        "from verified.graph import trace\nfrom models import double_pendulum as dp\n"
-        "lo, hi = dp.initial_box()\n"
-        "solve(trace(dp.rhs, 4), Interval(lo, hi), (0.0, 0.01), subdivision=[256, 1, 1, 1], workers=2)\n")
+    script.write_text(UNGUARDED)
     root = Path(__file__).resolve().parents[2]
-    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
-                         cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(root)})
-    assert out.returncode != 0
-    assert "WorkerStartError" in out.stderr and "__main__" in out.stderr
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    code = "import os; print(len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count())"
+    cores = int(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout)
+    if cores < 2:
+        pytest.skip("one core: workers=None runs in this process")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600,
+                         cwd=tmp_path, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.count("TOP LEVEL RAN") == 1, out.stdout
+    backend = next(line for line in out.stdout.splitlines() if line.startswith("BACKEND")).split()
+    assert backend[1:] == ["dask-local", "2", "completed", "completed", "0.2", "0.2"]
+    lo_d, hi_d, w = map(float, next(line for line in out.stdout.splitlines() if line.startswith("DIFF")).split()[1:])
+    assert w < 0.01  # worst width ratio at T
+    assert lo_d < 1e-6 and hi_d < 1e-6
+
+
+def test_default_workers_on_a_small_batch_stays_in_process(ode, box, single, monkeypatch):
+    """workers=None below AUTO_MIN_PIECES boxes is solve's own batch (no cluster asked
+    for), as is workers=1 at any size; None asks for every core from AUTO_MIN_PIECES
+    boxes on, only with Dask, more than one core and workers that do not re-run the
+    script."""
+    def no_cluster(workers):
+        raise AssertionError("a local cluster was asked for")
+    monkeypatch.setattr(parallel, "local_client", no_cluster)
+    monkeypatch.setattr(parallel, "default_workers", lambda: 2)
+    sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB)
+    assert "backend" not in sol.stats and sol.status == single.status and sol.t_reached == single.t_reached
+    np.testing.assert_array_equal(sol.tube_t, single.tube_t)
+    np.testing.assert_array_equal(sol.hull[-1].lo, single.hull[-1].lo)
+    n = parallel.AUTO_MIN_PIECES
+    one = solve(ode, box, (0.0, 0.01), subdivision=[n, 1, 1, 1], workers=1)
+    assert "backend" not in one.stats and one.status == "completed" and one.boxes[-1].shape == (n, 4)
+    auto = parallel.auto_workers
+    assert auto(ode, box, [n - 1, 1, 1, 1]) is None and auto(ode, box, [n, 1, 1, 1]) == "auto"
+    assert auto(ode, box.subdivide([n, 1, 1, 1]).reshape(-1, 4)) == "auto"
+    assert auto(ode, "not a box", [n, 1, 1, 1]) is None  # (solve's own checks report it)
+    for name, value in (("subprocess_workers_supported", False), ("dask_available", False),
+                        ("_in_dask_worker", True)):
+        with monkeypatch.context() as m:
+            m.setattr(parallel, name, lambda value=value: value)
+            assert auto(ode, box, [n, 1, 1, 1]) is None
+    monkeypatch.setattr(parallel, "default_workers", lambda: 1)
+    assert auto(ode, box, [n, 1, 1, 1]) is None
+
+
+def test_cli_workers_1_is_one_in_process_batch():
+    """--workers 1 (and run_scene's workers=None) pass workers=1 to simulate: its default,
+    None, would be every core."""
+    from mbs.app.runner import parallel_kwargs
+    assert parallel_kwargs(None) == parallel_kwargs(1) == {"workers": 1}
+    assert parallel_kwargs("auto") == {"workers": "auto"} and parallel_kwargs(2) == {"workers": 2}
 
 
 def test_fallbacks_and_bad_arguments(ode, box, monkeypatch):
