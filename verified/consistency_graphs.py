@@ -39,6 +39,7 @@ def prove_energy_rate(rhs: Graph, energy: Graph, rate: Graph | None) -> bool:
     """Symbolic proof (sympy) that ``grad H . f - rate`` is identically 0 (``rate``
     None: the claim ``dH/dt = 0``). True when proven; False when sympy cannot
     simplify it to 0 (no refutation: use the interval check)."""
+    # (import here: sympy, ~0.4 s, only for this symbolic proof)
     import sympy
 
     from .graph_sympy import graph_to_sympy

@@ -20,11 +20,15 @@ Domains here:
 """
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from .graph import Graph, Op
+from . import interval as _interval
+from .opcodes import Op
+
+if TYPE_CHECKING:  # (annotations only: verified.ir imports this module)
+    from .ir import Graph
 
 __all__ = [
     "Domain",
@@ -36,6 +40,8 @@ __all__ = [
     "eval_interval",
     "jacobian_float",
     "jacobian_interval",
+    "SympyDomain",
+    "to_sympy",
 ]
 
 
@@ -205,10 +211,8 @@ class FloatDomain(Domain):
 
 
 def _iv():
-    """The interval module, imported on first use (the IR itself does not need it)."""
-    from . import interval
-
-    return interval
+    """The interval module."""
+    return _interval
 
 
 class IntervalDomain(Domain):
@@ -518,3 +522,62 @@ def jacobian_interval(graph: Graph, x, p=None, *, wrt: str = "x"):
     """Interval enclosure of the Jacobian over each box -> Interval (..., m, k); see :func:`jacobian_float`."""
     xs, ps, shape = _interval_inputs(graph, x, p, "jacobian_interval")
     return _jacobian(graph, IntervalDomain(), xs, ps, shape, wrt)
+
+
+# --------------------------------------------------------------------------- sympy
+
+
+class SympyDomain(Domain):
+    """sympy expressions (a debugging aid, not rigorous): constants that are exact
+    doubles become exact sympy numbers, enclosed constants (e.g. pi, 1/3) the Float of
+    their nearest double; ``mid`` is the identity (exact math: the frozen point may be
+    the value itself)."""
+
+    def __init__(self):
+        import sympy  # (import here: sympy, ~0.4 s, only when a graph is printed as sympy)
+
+        self.sympy = sympy
+
+    def const(self, lo, hi, value):
+        sp = self.sympy
+        return sp.Integer(int(value)) if lo == hi and value.is_integer() else sp.Float(value)
+
+    def sqr(self, a):
+        return a**2
+
+    def pow(self, a, k):
+        return a**k
+
+    def sqrt(self, a):
+        return self.sympy.sqrt(a)
+
+    def exp(self, a):
+        return self.sympy.exp(a)
+
+    def log(self, a):
+        return self.sympy.log(a)
+
+    def sin(self, a):
+        return self.sympy.sin(a)
+
+    def cos(self, a):
+        return self.sympy.cos(a)
+
+    def tan(self, a):
+        return self.sympy.tan(a)
+
+    def atan(self, a):
+        return self.sympy.atan(a)
+
+    def mid(self, a):
+        return a
+
+
+def to_sympy(graph: Graph, inputs=None, params=None) -> list:
+    """Debugging aid: the graph's outputs as sympy expressions of ``inputs``/``params``
+    (default: Symbols named after the graph's inputs and parameters); see :class:`SympyDomain`."""
+    domain = SympyDomain()
+    sp = domain.sympy
+    xs = list(inputs) if inputs is not None else [sp.Symbol(n) for n in graph.input_names]
+    ps = list(params) if params is not None else [sp.Symbol(n) for n in graph.param_names]
+    return evaluate(graph, domain, xs, ps)

@@ -23,7 +23,8 @@ from typing import Sequence
 
 import sympy
 
-from .graph import Graph, GraphBuilder, Op, enclose_approximation, enclose_rational
+from .evaluate import to_sympy
+from .ir import Graph, GraphBuilder, enclose_approximation, enclose_rational
 
 __all__ = ["from_sympy", "graph_to_sympy", "sympy_constant_enclosure", "sympy_number_node"]
 
@@ -241,43 +242,6 @@ def from_sympy(exprs, inputs, params=(), *, cse: bool = True, output_names: Sequ
     return builder.build(outputs, output_names)
 
 
-def graph_to_sympy(graph: Graph, inputs=None, params=None) -> list:
-    """Debugging aid: the graph's outputs as sympy expressions.
-
-    Constants that are exact doubles become exact sympy numbers; enclosed constants
-    (e.g. pi, 1/3) appear as the Float of their nearest double.
-    """
-    xs = list(inputs) if inputs is not None else [sympy.Symbol(n) for n in graph.input_names]
-    ps = list(params) if params is not None else [sympy.Symbol(n) for n in graph.param_names]
-    vals: list = []
-    for op, args, data in graph.nodes:
-        a = [vals[i] for i in args]
-        if op == Op.CONST:
-            lo, hi, value = data
-            v = sympy.Integer(int(value)) if lo == hi and value.is_integer() else sympy.Float(value)
-        elif op == Op.INPUT:
-            v = xs[data]
-        elif op == Op.PARAM:
-            v = ps[data]
-        elif op == Op.ADD:
-            v = a[0] + a[1]
-        elif op == Op.SUB:
-            v = a[0] - a[1]
-        elif op == Op.MUL:
-            v = a[0] * a[1]
-        elif op == Op.DIV:
-            v = a[0] / a[1]
-        elif op == Op.NEG:
-            v = -a[0]
-        elif op == Op.SQR:
-            v = a[0] ** 2
-        elif op == Op.POW:
-            v = a[0] ** data
-        elif op == Op.SQRT:
-            v = sympy.sqrt(a[0])
-        elif op == Op.MID:  # exact math: the frozen point may be the value itself
-            v = a[0]
-        else:
-            v = getattr(sympy, op.name.lower())(a[0])
-        vals.append(v)
-    return [vals[o] for o in graph.outputs]
+# sympy expressions of a graph's outputs: an evaluator like the others (one home, in
+# verified.evaluate, so that Graph.to_sympy needs no import of this module)
+graph_to_sympy = to_sympy

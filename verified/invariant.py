@@ -827,7 +827,7 @@ class QuadraticLyapunov:
         ``margin``, ``d2``: the position block of ``D^2``, ``p_min``, ``pinv``: diag of
         ``P_low^-1``, ``p_low``, ``p_hi``: float matrices bounding every member of ``P``),
         or None."""
-        import scipy.linalg as sla
+        import scipy.linalg as sla  # (import here: scipy.linalg, ~0.5 s, only when this check runs)
         n = self.n
         Q = _blocks(Kb * eps, Dm * (0.5 * eps), Dm.swapaxes(-1, -2) * (0.5 * eps), Ds - A * eps - Nm * (0.5 * eps))
         P = _blocks(Kb * 0.5, A * (0.5 * eps), A * (0.5 * eps), A * 0.5)
@@ -965,7 +965,7 @@ def _psd_margin(m, r):
 def _max_ratio(p_hi, p_low):
     """A verified ``mu >= max y^T p_hi y / y^T p_low y`` (floats, ``p_low`` positive
     definite): ``mu p_low - p_hi >= 0`` checked with :func:`_psd_margin`; None if not."""
-    import scipy.linalg as sla
+    import scipy.linalg as sla  # (import here: see above)
     try:
         mu = float(sla.eigh(p_hi, p_low, eigvals_only=True)[-1])
     except (np.linalg.LinAlgError, ValueError):

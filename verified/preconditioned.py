@@ -36,6 +36,9 @@ from typing import Sequence
 
 import numpy as np
 
+from .evaluate import IntervalDomain
+from .interval import Interval
+
 __all__ = ["frozen_point", "solve", "congruence_pivots"]
 
 
@@ -53,11 +56,7 @@ def frozen_point(x):
     method = getattr(x, "mid", None)
     if method is None:
         return x
-    from .interval import Interval
-
     if isinstance(x, Interval):
-        from .evaluate import IntervalDomain
-
         return IntervalDomain().mid(x)
     return method()
 

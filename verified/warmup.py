@@ -37,6 +37,8 @@ def _rhs(x, p):
 def compile_kernels(log=None) -> float:
     """Run the tiny integrations (about 2 minutes cold on 2 shared cores, a second warm);
     returns the wall time in s."""
+    # (import here: the solver and the kernels (~1.5 s) only in the process that compiles;
+    # mbs.app.demo imports this module to start that process)
     from . import interval as iv, linalg
     from .affine_taylor import AffineTaylorODE, affine_range, box_forms
     from .interval import Interval, point

@@ -32,7 +32,7 @@ MODE_STYLE = {MODE_I.name: dict(color="black", ls="-", lw=1.2, label=MODE_I.labe
 def _plt():
     import matplotlib  # (matplotlib only when plotting, here and below)
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # (see above)
     return plt
 
 

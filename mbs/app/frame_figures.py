@@ -23,9 +23,9 @@ def fig_frame_region(enc, path, *, title: str | None = None, samples=None, max_t
     ``samples``: positions (S, k, 3) or (N, 3) of sampled trajectories (m)."""
     import matplotlib  # (matplotlib only when plotting)
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import PatchCollection
-    from matplotlib.patches import Rectangle
+    import matplotlib.pyplot as plt  # (see above; pyplot after use("Agg"))
+    from matplotlib.collections import PatchCollection  # (see above)
+    from matplotlib.patches import Rectangle  # (see above)
 
     hull = enc.tube_hull
     lo, hi = np.asarray(hull.lo, float), np.asarray(hull.hi, float)

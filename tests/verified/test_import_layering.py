@@ -1,0 +1,83 @@
+"""Issue 15: no import cycles. The graph modules import in one direction,
+opcodes -> evaluate -> ir -> tracer, graph_sympy -> graph (the public front), and
+no module of mbs/, models/ or verified/ takes part in a cycle of module-level imports."""
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGES = ("mbs", "models", "verified")
+
+
+def _modules():
+    mods = {}
+    for pkg in PACKAGES:
+        for p in (ROOT / pkg).rglob("*.py"):
+            parts = p.relative_to(ROOT).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            mods[name] = p
+    return mods
+
+
+def _targets(mods, cur, node):
+    pkg = cur if mods[cur].name == "__init__.py" else cur.rsplit(".", 1)[0]
+    names = []
+    if isinstance(node, ast.Import):
+        names = [a.name for a in node.names]
+    else:
+        base = node.module or ""
+        if node.level:
+            parts = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
+            base = ".".join(parts + ([base] if base else []))
+        names = [f"{base}.{a.name}" if f"{base}.{a.name}" in mods else base for a in node.names]
+    for n in names:
+        while n and n not in mods:
+            n = n.rsplit(".", 1)[0] if "." in n else ""
+        if n and n != cur:
+            yield n
+
+
+def _module_level_imports(mods, name):
+    """Imports executed when the module is imported: not inside functions, not under
+    ``if TYPE_CHECKING``."""
+    out = set()
+
+    def walk(node):
+        for ch in ast.iter_child_nodes(node):
+            if isinstance(ch, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                continue
+            if isinstance(ch, ast.If) and "TYPE_CHECKING" in ast.unparse(ch.test):
+                continue
+            if isinstance(ch, (ast.Import, ast.ImportFrom)):
+                out.update(_targets(mods, name, ch))
+            walk(ch)
+
+    walk(ast.parse(mods[name].read_text()))
+    return out
+
+
+def test_no_cycles_of_module_level_imports():
+    mods = _modules()
+    edges = {m: _module_level_imports(mods, m) for m in mods}
+    state, cycles = {}, []
+
+    def visit(m, path):
+        state[m] = 1
+        for t in sorted(edges[m]):
+            if state.get(t) == 1:
+                cycles.append(path[path.index(t):] + [t])
+            elif t not in state:
+                visit(t, path + [t])
+        state[m] = 2
+
+    for m in sorted(mods):
+        if m not in state:
+            visit(m, [m])
+    assert cycles == []
+
+
+def test_graph_modules_import_downward():
+    mods = _modules()
+    order = ["verified.opcodes", "verified.evaluate", "verified.ir", "verified.tracer", "verified.graph_sympy",
+             "verified.graph"]
+    for i, m in enumerate(order):
+        assert not (_module_level_imports(mods, m) & set(order[i + 1:])), m
