@@ -18,6 +18,7 @@ Generalized forces: ``tau = tau_ext - D qdot`` with the diagonal viscous damping
 from __future__ import annotations
 
 import hashlib
+import warnings
 from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Mapping
@@ -78,7 +79,7 @@ def _float_or_none(x):
 class Chain:
     """A kinematic tree of rigid bodies (see module docstring).
 
-    Build with :meth:`from_dh` or :meth:`from_urdf` (or :func:`build_tree`).  Then:
+    Build with :func:`mbs.chain_from_dh` or :func:`mbs.chain_from_urdf` (or :func:`build_tree`).  Then:
 
     - :meth:`symbolic` -- sympy model (M, K, P, gravity torque, Coriolis, EOM, H, dH/dt)
     - :meth:`numeric`  -- generic-scalar recursive algorithms (crba, rnea, aba-like solve)
@@ -207,16 +208,23 @@ class Chain:
                 "Give the link a mass or an inertia, or lock the joint.")
 
     # ------------------------------------------------------------------ constructors
+    # The parsers are functions of their own modules, which import this one:
+    # mbs.chain_from_dh (mbs.dh) and mbs.chain_from_urdf (mbs.urdf). These two old
+    # spellings stay for a while; they are the only imports from here into the parsers.
     @classmethod
     def from_dh(cls, rows, convention="standard", **kwargs) -> "Chain":
-        """Chain from a Denavit-Hartenberg table; see :func:`mbs.dh.chain_from_dh`."""
-        from .dh import chain_from_dh  # (import here: mbs.dh imports this module)
+        """Deprecated: use :func:`mbs.chain_from_dh` (same arguments)."""
+        warnings.warn("Chain.from_dh is deprecated: use mbs.chain_from_dh(rows, ...) (mbs.dh), "
+                      "same arguments", DeprecationWarning, stacklevel=2)
+        from .dh import chain_from_dh  # (import here: deprecated shim; mbs.dh imports this module)
         return chain_from_dh(rows, convention=convention, **kwargs)
 
     @classmethod
     def from_urdf(cls, path_or_xml, **kwargs) -> "Chain":
-        """Chain from a URDF file path or XML string; see :func:`mbs.urdf.chain_from_urdf`."""
-        from .urdf import chain_from_urdf  # (import here: mbs.urdf imports this module)
+        """Deprecated: use :func:`mbs.chain_from_urdf` (same arguments)."""
+        warnings.warn("Chain.from_urdf is deprecated: use mbs.chain_from_urdf(path_or_xml, ...) (mbs.urdf), "
+                      "same arguments", DeprecationWarning, stacklevel=2)
+        from .urdf import chain_from_urdf  # (import here: deprecated shim; mbs.urdf imports this module)
         return chain_from_urdf(path_or_xml, **kwargs)
 
     # ------------------------------------------------------------------ identity

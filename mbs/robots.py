@@ -10,7 +10,7 @@ import importlib.metadata as md
 from functools import lru_cache
 from pathlib import Path
 
-from .chain import Chain
+from .urdf import chain_from_urdf
 from .errors import ModelError
 
 _PREFIX = "cmeel.prefix/share/example-robot-data/robots/"
@@ -70,11 +70,11 @@ def urdf_path(name: str) -> Path:
 
 
 def load(name: str, **kwargs):
-    """``Chain.from_urdf(urdf_path(name))``; for "panda" the fingers are locked at 0
+    """``chain_from_urdf(urdf_path(name))``; for "panda" the fingers are locked at 0
     unless ``lock`` is given."""
     if name == "panda" and "lock" not in kwargs:
         kwargs["lock"] = {j: 0.0 for j in PANDA_FINGERS}
-    return Chain.from_urdf(urdf_path(name), **kwargs)
+    return chain_from_urdf(urdf_path(name), **kwargs)
 
 
 #: names users type for the ready models (also the example-robot-data short names)
@@ -179,7 +179,7 @@ def load_model(spec: str):
     if p.suffix.lower() in (".urdf", ".xml") or p.is_file():
         if not p.is_file():
             raise ModelError(f"URDF file {spec!r} not found")
-        return Chain.from_urdf(p)
+        return chain_from_urdf(p)
     if not regs:
         raise ModelError(f"unknown model {spec!r}: {_NOT_INSTALLED}")
     raise ModelError(f"unknown model {spec!r}; give a name ({', '.join(model_names())}), "

@@ -25,7 +25,6 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
-import yourdfpy
 
 from . import spatial as sp3
 from .chain import IDENTITY, RawJoint, build_tree
@@ -107,6 +106,8 @@ def load_urdf(path_or_xml):
     else:
         xml = str(path_or_xml)
     _prevalidate(xml)
+    import yourdfpy  # (import here: yourdfpy, ~1.2 s, only when a URDF is parsed; import mbs stays fast)
+
     log = logging.getLogger("yourdfpy")
     old = log.level
     log.setLevel(logging.CRITICAL)
@@ -196,7 +197,7 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
         if j.mimic is not None:
             raise UnsupportedJointError(
                 f"{where}: mimic joints (mimicking {j.mimic.joint!r}) are not supported; "
-                f"lock it, e.g. Chain.from_urdf(path, lock={{{j.name!r}: 0.0, ...}})")
+                f"lock it, e.g. chain_from_urdf(path, lock={{{j.name!r}: 0.0, ...}})")
         damping = 0.0
         if j.dynamics is not None and j.dynamics.damping is not None:
             try:

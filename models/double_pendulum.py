@@ -31,7 +31,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from mbs import Chain
+from mbs import chain_from_dh, chain_from_urdf
 from mbs.scalar import cos, sin, square
 from verified.exact import enclose_fraction, enclose_pi_multiple
 from verified.graph import trace
@@ -128,7 +128,7 @@ def initial_point():
 def dh_chain(m1=M1, m2=M2, l1=L1, l2=L2, g=G):
     """Standard-DH chain: a_i = l_i, point masses at the link ends, gravity (g, 0, 0)
     (base x axis pointing down), q = (x1, x2)."""
-    return Chain.from_dh([dict(joint="R", a=l1, mass=m1), dict(joint="R", a=l2, mass=m2)],
+    return chain_from_dh([dict(joint="R", a=l1, mass=m1), dict(joint="R", a=l2, mass=m2)],
                          gravity=(g, 0.0, 0.0), name="double_pendulum_dh")
 
 
@@ -162,7 +162,7 @@ def urdf_xml(m1=M1, m2=M2, l1=L1, l2=L2):
 
 def urdf_chain(m1=M1, m2=M2, l1=L1, l2=L2, g=G):
     """The double pendulum from a small URDF (joints about -y, masses along -z)."""
-    return Chain.from_urdf(urdf_xml(m1, m2, l1, l2), gravity=(0.0, 0.0, -g))
+    return chain_from_urdf(urdf_xml(m1, m2, l1, l2), gravity=(0.0, 0.0, -g))
 
 
 def rhs_graph():

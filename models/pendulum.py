@@ -15,7 +15,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from mbs import Chain
+from mbs import chain_from_dh
 from verified.exact import enclose_fraction
 
 from .double_pendulum import _cos, _sin, _sq
@@ -58,5 +58,5 @@ def sympy_model(m=M, l=L, g=G):
 def chain(m=M, l=L, g=G):
     """The pendulum as a one-link DH chain: a = l, point mass at the tip, gravity along
     +x of the base frame (so q is the angle from the downward vertical)."""
-    return Chain.from_dh([dict(joint="R", a=l, mass=m)], gravity=(g, 0.0, 0.0),
+    return chain_from_dh([dict(joint="R", a=l, mass=m)], gravity=(g, 0.0, 0.0),
                          name="pendulum")

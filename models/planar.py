@@ -6,7 +6,7 @@ inertia m l^2 / 12 about the axes normal to the rod), or a point mass at its end
 """
 from __future__ import annotations
 
-from mbs import Chain
+from mbs import Chain, chain_from_dh
 
 
 def _list(v, n, what):
@@ -37,5 +37,5 @@ def planar_chain(n, lengths=1.0, masses=1.0, *, point_masses=False, damping=0.0,
             # modified DH: row i carries a_{i-1}; link i's frame sits at joint i
             rows.append(dict(joint="R", a=ls[i - 1] if i else 0.0, mass=m, com=com_mod,
                              inertia=inertia, damping=ds[i]))
-    return Chain.from_dh(rows, convention=convention, gravity=(0.0, -g, 0.0),
+    return chain_from_dh(rows, convention=convention, gravity=(0.0, -g, 0.0),
                          name=name or f"planar{n}_{convention}")

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 
-from mbs import Chain
+from mbs import Chain, chain_from_dh
 from mbs.dh import Tx, Rx, chain_product
 from mbs.inertia import RigidInertia, inertia_from_6
 
@@ -69,5 +69,5 @@ def modified_rows():
 def puma560(convention="standard", g=9.81) -> Chain:
     """The Puma 560 as a DH chain in the given convention."""
     rows = standard_rows() if convention == "standard" else modified_rows()
-    return Chain.from_dh(rows, convention=convention, gravity=(0.0, 0.0, -g),
+    return chain_from_dh(rows, convention=convention, gravity=(0.0, 0.0, -g),
                          name=f"puma560_{convention}")

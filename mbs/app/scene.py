@@ -118,7 +118,8 @@ from verified.energy_rate import MODEL_RATES
 from verified.exact import enclose_fraction, enclose_pi_multiple
 from verified.interval import Interval
 
-from ..chain import Chain
+from ..dh import chain_from_dh
+from ..urdf import chain_from_urdf
 from ..control import ControlError, parse_control
 from ..errors import ModelError
 from ..modes import MODES, get_mode
@@ -414,7 +415,7 @@ def _build_model(scene: Scene):
         return spec["name"]
     try:
         if "urdf" in spec:
-            chain = Chain.from_urdf(spec["urdf"], lock=spec.get("lock"),
+            chain = chain_from_urdf(spec["urdf"], lock=spec.get("lock"),
                                     **({"gravity": spec["gravity"]} if "gravity" in spec else {}))
             return chain
         import sympy  # (import here: sympy only for DH-table models)
@@ -433,7 +434,7 @@ def _build_model(scene: Scene):
         kw = {"convention": spec.get("convention", "standard")}
         if "gravity" in spec:
             kw["gravity"] = tuple(spec["gravity"])
-        chain = Chain.from_dh(rows, **kw)
+        chain = chain_from_dh(rows, **kw)
         points = {symbols[k]: v for k, v in scene.point_params().items() if k in symbols}
         if points:
             chain = chain.subs(points)

@@ -7,7 +7,7 @@ import pytest
 import sympy
 
 import mbs
-from mbs import Chain, RigidInertia, robots
+from mbs import Chain, RigidInertia, robots, chain_from_dh, chain_from_urdf
 from mbs.check import compare_with_pinocchio, max_error
 
 TREE_URDF = """<?xml version="1.0"?>
@@ -45,7 +45,7 @@ TREE_URDF = """<?xml version="1.0"?>
 
 @pytest.fixture(scope="module")
 def tree():
-    return Chain.from_urdf(TREE_URDF)
+    return chain_from_urdf(TREE_URDF)
 
 
 def test_tree_structure(tree):
@@ -68,8 +68,8 @@ def test_tree_matches_pinocchio(tree):
 def test_xml_string_and_path_agree(tmp_path, tree):
     p = tmp_path / "t.urdf"
     p.write_text(TREE_URDF)
-    assert Chain.from_urdf(p).fingerprint() == tree.fingerprint()
-    assert Chain.from_urdf(str(p)).fingerprint() == tree.fingerprint()
+    assert chain_from_urdf(p).fingerprint() == tree.fingerprint()
+    assert chain_from_urdf(str(p)).fingerprint() == tree.fingerprint()
 
 
 def test_merge_two_point_masses_closed_form():
@@ -91,8 +91,8 @@ def test_inertial_rpy_is_honoured():
         <inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="0.5"/></inertial></link>
         <joint name="j" type="revolute"><parent link="b"/><child link="l"/><axis xyz="1 0 0"/></joint>
         </robot>"""
-    c1 = Chain.from_urdf(xml("0 0 1.5707963267948966", "0.1", "0.5"))
-    c2 = Chain.from_urdf(xml("0 0 0", "0.5", "0.1"))
+    c1 = chain_from_urdf(xml("0 0 1.5707963267948966", "0.1", "0.5"))
+    c2 = chain_from_urdf(xml("0 0 0", "0.5", "0.1"))
     assert np.allclose(np.array(c1.bodies[0].inertia.inertia, float),
                        np.array(c2.bodies[0].inertia.inertia, float), atol=1e-15)
     assert c1.numeric().mass_matrix([0.0])[0, 0] == pytest.approx(0.5)
@@ -108,7 +108,7 @@ def test_ur5_pi_half_is_snapped():
 
 
 def test_panda_lock_and_select():
-    full = Chain.from_urdf(robots.urdf_path("panda"), lock={"panda_finger_joint2": 0.0})
+    full = chain_from_urdf(robots.urdf_path("panda"), lock={"panda_finger_joint2": 0.0})
     assert full.n == 8 and full.joint_names[-1] == "panda_finger_joint1"
     arm = full.lock({"panda_finger_joint1": 0.0})
     ref = robots.load("panda")
@@ -131,7 +131,7 @@ def test_subtree(tree):
 
 
 def test_lock_matches_pinocchio_reduced_model(tree):
-    locked = Chain.from_urdf(TREE_URDF, lock={"left_shoulder": 0.4, "right_slide": -0.1})
+    locked = chain_from_urdf(TREE_URDF, lock={"left_shoulder": 0.4, "right_slide": -0.1})
     assert locked.joint_names == ["yaw", "wrist"]
     rep = compare_with_pinocchio(locked, n_states=4, symbolic=False)
     assert max_error(rep) <= 1e-10, rep
@@ -142,7 +142,7 @@ def test_lock_matches_pinocchio_reduced_model(tree):
 
 
 def test_continuous_joint_urdf_matches_pinocchio():
-    c = Chain.from_urdf(robots.urdf_path("double_pendulum_continuous"))
+    c = chain_from_urdf(robots.urdf_path("double_pendulum_continuous"))
     assert max_error(compare_with_pinocchio(c, n_states=4, symbolic=False)) <= 1e-10
 
 
@@ -157,7 +157,7 @@ def test_robot_locator():
 
 
 def test_dh_standard_pendulum_frames():
-    c = Chain.from_dh([dict(joint="R", a=2.0, alpha=math.pi / 2, mass=1.0)])
+    c = chain_from_dh([dict(joint="R", a=2.0, alpha=math.pi / 2, mass=1.0)])
     R, p = c.numeric().frame_placement("link1", [math.pi / 2])
     assert np.allclose(np.array(p, float), [0, 2, 0], atol=1e-15)
     # alpha = pi/2 snapped: exact rotation entries
@@ -168,7 +168,7 @@ def test_dh_tuple_rows_and_prismatic():
     rows = [("R", 0.0, 0.3, 0.0, math.pi / 2, 2.0, (0, 0, 0.1), (0.01, 0.01, 0.01)),
             ("P", 0.0, 0.2, 0.0, 0.0, 1.0, (0, 0, -0.1), (0.02, 0.02, 0.01), 0.5)]
     for conv in ("standard", "modified"):
-        c = Chain.from_dh(rows, convention=conv)
+        c = chain_from_dh(rows, convention=conv)
         assert [b.joint.kind for b in c.bodies] == ["revolute", "prismatic"]
         assert c.damping == [0.0, 0.5]
         assert max_error(compare_with_pinocchio(c, n_states=4)) <= 1e-10
@@ -177,7 +177,7 @@ def test_dh_tuple_rows_and_prismatic():
 def test_symbolic_dh_parameters():
     """A 2-link planar chain with symbolic lengths and point masses: closed-form M."""
     l1, l2, m1, m2 = sympy.symbols("l1 l2 m1 m2", positive=True)
-    c = Chain.from_dh([dict(joint="R", a=l1, mass=m1), dict(joint="R", a=l2, mass=m2)],
+    c = chain_from_dh([dict(joint="R", a=l1, mass=m1), dict(joint="R", a=l2, mass=m2)],
                       gravity=(0, -9.81, 0))
     s = c.symbolic()
     q2 = s.q[1]
@@ -191,11 +191,11 @@ def test_symbolic_dh_parameters():
 
 
 def test_fingerprint_changes_with_content():
-    a = Chain.from_dh([dict(joint="R", a=1.0, mass=1.0)])
-    b = Chain.from_dh([dict(joint="R", a=1.0, mass=1.0 + 1e-12)])
-    c = Chain.from_dh([dict(joint="R", a=1.0, mass=1.0)], gravity=(0, 0, -9.8))
+    a = chain_from_dh([dict(joint="R", a=1.0, mass=1.0)])
+    b = chain_from_dh([dict(joint="R", a=1.0, mass=1.0 + 1e-12)])
+    c = chain_from_dh([dict(joint="R", a=1.0, mass=1.0)], gravity=(0, 0, -9.8))
     assert len({a.fingerprint(), b.fingerprint(), c.fingerprint()}) == 3
-    assert a.fingerprint() == Chain.from_dh([dict(joint="R", a=1.0, mass=1.0)]).fingerprint()
+    assert a.fingerprint() == chain_from_dh([dict(joint="R", a=1.0, mass=1.0)]).fingerprint()
 
 
 def _h(R=np.eye(3), p=(0, 0, 0)):
@@ -240,7 +240,7 @@ def test_dh_forward_kinematics_textbook(convention):
         rows.append(dict(joint="R" if i != 2 else "P", theta=rng.uniform(-3, 3), d=rng.uniform(-1, 1),
                          a=rng.uniform(-1, 1), alpha=rng.uniform(-3, 3), mass=1.0,
                          inertia=(0.1, 0.1, 0.1)))
-    c = Chain.from_dh(rows, convention=convention)
+    c = chain_from_dh(rows, convention=convention)
     num = c.numeric()
     q = rng.uniform(-2, 2, 5)
     for i, H in enumerate(_textbook_frames(rows, q, convention)):
@@ -249,7 +249,7 @@ def test_dh_forward_kinematics_textbook(convention):
         assert np.allclose(np.array(p, float), H[:3, 3], atol=1e-13)
     # the centre of mass given in DH frame i ends up where the textbook frame puts it
     rows2 = [dict(r, com=(0.1, -0.2, 0.3)) for r in rows]
-    c2 = Chain.from_dh(rows2, convention=convention)
+    c2 = chain_from_dh(rows2, convention=convention)
     P = c2.numeric().potential_energy(q)
     expected = 0.0
     for H in _textbook_frames(rows, q, convention):
@@ -302,6 +302,18 @@ def random_urdf(draw):
           suppress_health_check=[HealthCheck.too_slow])
 @given(xml=random_urdf())
 def test_random_urdf_trees_match_pinocchio(xml):
-    chain = Chain.from_urdf(xml)
+    chain = chain_from_urdf(xml)
     rep = compare_with_pinocchio(chain, n_states=3, seed=0)
     assert max_error(rep) <= 1e-9, rep
+
+
+def test_chain_constructors_are_deprecated_spellings_of_the_parser_functions():
+    """Issue 15: the parsers are functions (mbs.chain_from_dh, mbs.chain_from_urdf) and
+    mbs.chain does not import them; Chain.from_dh/from_urdf still work, with a warning."""
+    rows = [dict(joint="R", a=1.0, mass=1.0)]
+    with pytest.warns(DeprecationWarning, match="mbs.chain_from_dh"):
+        old = Chain.from_dh(rows, convention="modified")
+    assert old.fingerprint() == mbs.chain_from_dh(rows, convention="modified").fingerprint()
+    with pytest.warns(DeprecationWarning, match="mbs.chain_from_urdf"):
+        old = Chain.from_urdf(TREE_URDF, lock={"left_shoulder": 0.4})
+    assert old.fingerprint() == mbs.chain_from_urdf(TREE_URDF, lock={"left_shoulder": 0.4}).fingerprint()

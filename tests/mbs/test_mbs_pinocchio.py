@@ -118,7 +118,7 @@ _row = st.fixed_dictionaries({
 @given(rows=st.lists(_row, min_size=1, max_size=4), convention=st.sampled_from(["standard", "modified"]),
        gravity=st.tuples(_num, _num, st.floats(-10.0, 10.0)))
 def test_random_dh_chains_match_pinocchio(rows, convention, gravity):
-    chain = mbs.Chain.from_dh(rows, convention=convention, gravity=gravity)
+    chain = mbs.chain_from_dh(rows, convention=convention, gravity=gravity)
     rep = compare_with_pinocchio(chain, n_states=3, seed=0)
     assert max_error(rep) <= 1e-9, rep
 

@@ -11,7 +11,7 @@ every box it used or stops with a break-down naming the joint.
 import numpy as np
 import pytest
 
-from mbs import Chain, ModelError, SingularMassMatrixError
+from mbs import ModelError, SingularMassMatrixError, chain_from_dh, chain_from_urdf
 from mbs.numeric import ldl_solve
 from mbs.scalar import div
 from mbs.simulate import simulate
@@ -23,20 +23,20 @@ BOX = Interval(np.array([0.1, 0.2, 0.0, 0.0]), np.array([0.11, 0.21, 0.0, 0.0]))
 
 def m_zero():
     """Two joints about the base z axis, point masses on that axis: M(q) = 0."""
-    return Chain.from_dh([dict(joint="R", d=0.5, mass=1.0), dict(joint="R", d=0.5, mass=1.0)], name="m_zero")
+    return chain_from_dh([dict(joint="R", d=0.5, mass=1.0), dict(joint="R", d=0.5, mass=1.0)], name="m_zero")
 
 
 def m_diag():
     """Joint 1 swings two unit masses at distance 1 (gravity along -y); joint 2's mass is
     on its own axis: M(q) = diag(2, 0)."""
-    return Chain.from_dh([dict(joint="R", a=1.0, mass=1.0), dict(joint="R", d=0.5, mass=1.0)],
+    return chain_from_dh([dict(joint="R", a=1.0, mass=1.0), dict(joint="R", d=0.5, mass=1.0)],
                          gravity=(0.0, -9.81, 0.0), name="m_diag")
 
 
 def gimbal(gravity=(0.0, 0.0, -9.81)):
     """Joint 1 about z, joint 2 about a horizontal axis, a unit mass at distance 1 from
     joint 2: M(q) = diag(cos(q2)^2, 1), singular at q2 = pi/2 (mass on joint 1's axis)."""
-    return Chain.from_dh([dict(joint="R", alpha=np.pi / 2, mass=0.0), dict(joint="R", a=1.0, mass=1.0)],
+    return chain_from_dh([dict(joint="R", alpha=np.pi / 2, mass=0.0), dict(joint="R", a=1.0, mass=1.0)],
                          gravity=gravity, name="gimbal")
 
 
@@ -94,7 +94,7 @@ def test_float_acceleration_singular_configuration_in_a_batch():
 
 def test_coinciding_axes_name_the_dependent_joint():
     """Two joints about the same axis moving the same mass: M = [[1, 1], [1, 1]]."""
-    chain = Chain.from_dh([dict(joint="R", mass=0.0), dict(joint="R", a=1.0, mass=1.0)], name="coincident")
+    chain = chain_from_dh([dict(joint="R", mass=0.0), dict(joint="R", a=1.0, mass=1.0)], name="coincident")
     with pytest.raises(SingularMassMatrixError, match="joint 'joint2' adds no inertia of its own") as err:
         chain.numeric().acceleration(Q, np.zeros(2))
     assert err.value.joints == ("joint2",)
@@ -147,7 +147,7 @@ def test_simulate_m_diag_raises_model_error(mode):
 
 
 def test_simulate_urdf_with_masses_on_the_axes_raises():
-    chain = Chain.from_urdf(URDF_ON_AXIS)
+    chain = chain_from_urdf(URDF_ON_AXIS)
     with pytest.raises(SingularMassMatrixError) as err:
         simulate(chain, BOX, 0.01, mode="i")
     assert err.value.joints == ("j1", "j2")

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import sympy
 
-from mbs import Chain, cache
+from mbs import cache, chain_from_dh
 from models import pendulum, planar, robots
 
 
@@ -114,7 +114,7 @@ def test_canonical_equations_5_6(damped3):
 
 def test_coriolis_equals_christoffel_form():
     """c = Mdot qd - dK/dq (checks the Kane-style projection against differentiation)."""
-    c = Chain.from_dh([dict(joint="R", a=0.5, alpha=0.4, mass=1.0, com=(-0.2, 0.05, 0.01),
+    c = chain_from_dh([dict(joint="R", a=0.5, alpha=0.4, mass=1.0, com=(-0.2, 0.05, 0.01),
                             inertia=(0.01, 0.02, 0.015)),
                        dict(joint="P", theta=0.3, d=0.2, mass=0.7, com=(0.0, 0.1, -0.1),
                             inertia=(0.01, 0.01, 0.01)),
