@@ -9,16 +9,18 @@ Every timing is printed with the load averages of /proc/loadavg at that moment (
 jobs on the machine distort the ratios: read them next to the load). Sections:
 
 speedup   double pendulum (trace(dp.rhs, 4), box dp.initial_box()), x1(0) in N pieces,
-          T = 2: one in-process batch against a local Dask cluster of 2 workers (1 thread
-          each), interleaved, each pair --repeat times; worst ratio = max over states of
+          T = 2: one in-process batch (``workers=1``) against the default from Python
+          (``workers=None``: a local Dask cluster of every core, 1 thread each, here 2),
+          interleaved, each pair --repeat times; worst ratio = max over states of
           width(x(T)) / width of the true hull (0.14254, 0.04562, 0.36946, 0.18162: bench_solver.
           true_hull_widths(2.0), 2001 DOP853 solutions at 1e-12)
 mixed     per-chunk step sizes, one core: pieces of the paper's box together with pieces
           10x wider, T = 0.5: one batch (one step size for all) against the same boxes in
           two in-process chunks (narrow, wide)
 overhead  16 pieces, T = 2 (break-down at 0.80 s) and T = 0.5 (short runs), warm local
-          clusters, each call against the in-process batch measured just before it:
-          ``workers=2`` (the default plan: what a user gets), ``client=`` a cluster of 2
+          clusters, each call against the in-process batch (``workers=1``) measured just
+          before it: the default ``workers=None`` (16 boxes: one in-process batch after
+          the check), ``workers=2`` (the default plan: what a user gets), ``client=`` a cluster of 2
           with the default plan, and explicit ``chunks=1`` on a cluster of 1 and
           ``chunks=2`` on a cluster of 2 (what every call cost before the plan kept small
           batches in one chunk: Dask's own per-call cost)
@@ -28,6 +30,10 @@ rechunk   adaptive splitting concentrated in one chunk: 64 pieces of the paper's
           every set its splitting makes) against rechunk=True (a chunk that doubles its sets
           pauses and its sets become new chunks), interleaved; wall times, the pieces run, and
           the widths at T of the re-chunked run over the plain one (max and min over states)
+start     cluster start, fresh each time: local_client(2) (worker interpreters started as
+          ``python -m dask spec``, what workers=None / "auto" / 2 start) against
+          ``LocalCluster(2)`` (spawned workers, the previous local cluster), each until
+          every worker connected and then with the numba caches loaded in every worker
 scaling   local clusters of 1, 2, 4 workers (processes, 1 thread each) on the speedup run,
           and from the measured per-chunk costs and message sizes an estimate for 64
           workers and 65,536 pieces
@@ -74,24 +80,27 @@ def timed(fn):
 
 
 def section_speedup(ode, box, pieces, T, repeat, log):
-    from verified.parallel import local_client
+    from verified.parallel import default_workers, local_client
     from verified.solver import solve
-    log(f"\n## speedup: double pendulum, {pieces} pieces, T = {T}")
-    t, _ = timed(lambda: local_client(2))
-    log(f"local cluster of 2 workers started in {t:.1f} s (once per process; {load()})")
-    solve(ode, box, (0, 0.05), subdivision=[pieces, 1, 1, 1], workers=2)  # ship the graph, first steps
+    n = default_workers()
+    log(f"\n## speedup: double pendulum, {pieces} pieces, T = {T}: workers=1 against the default (None: "
+        f"{n} cores here)")
+    t, _ = timed(lambda: local_client(n))
+    log(f"local cluster of {n} workers started in {t:.1f} s (once per process; {load()})")
+    solve(ode, box, (0, 0.05), subdivision=[pieces, 1, 1, 1])  # ship the graph, first steps
     rows = []
     for r in range(repeat):
         l1 = load()
-        w1, s1 = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1]))
+        w1, s1 = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], workers=1))
         l2 = load()
-        w2, s2 = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], workers=2))
+        w2, s2 = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1]))
         q1, q2 = (worst_ratio(s1), worst_ratio(s2)) if T == 2 else (np.nan, np.nan)
         rows.append(dict(run=r + 1, one_batch_s=w1, two_workers_s=w2, speedup=w1 / w2, ratio_1=q1, ratio_2=q2,
                          ratio_diff=abs(q2 / q1 - 1), status=(s1.status, s2.status), steps=(s1.stats["steps"],
                          s2.stats["chunk_steps"]), load_1=l1, load_2=l2, chunk_wall_s=s2.stats["chunk_wall_s"],
                          received_bytes=s2.stats["received_bytes"], sent_bytes=s2.stats["sent_bytes"]))
-        log(f"run {r + 1}: one batch {w1:6.2f} s ({l1}) | 2 workers {w2:6.2f} s ({l2}) | speed-up {w1 / w2:.2f}x | "
+        log(f"run {r + 1}: one batch {w1:6.2f} s ({l1}) | default ({s2.stats['backend']}, "
+            f"{s2.stats['workers']} workers) {w2:6.2f} s ({l2}) | speed-up {w1 / w2:.2f}x | "
             f"worst ratio {q1:.5f} / {q2:.5f} (diff {100 * abs(q2 / q1 - 1):.3f}%) | {s1.status}/{s2.status}, "
             f"steps {s1.stats['steps']} / chunks {s2.stats['chunk_steps']}, chunk walls "
             f"{', '.join(f'{x:.2f}' for x in s2.stats['chunk_wall_s'])} s")
@@ -117,7 +126,7 @@ def section_mixed(ode, box, n_each, T, repeat, log):
     rows = []
     for r in range(repeat):
         l1 = load()
-        w1, s1 = timed(lambda: solve(ode, boxes, (0, T)))
+        w1, s1 = timed(lambda: solve(ode, boxes, (0, T), workers=1))
         l2 = load()
         w2, s2 = timed(lambda: solve(ode, boxes, (0, T), workers=1, chunks=2))
         wn = [np.asarray(s.hull[-1].width(), float) for s in (s1, s2)]
@@ -173,7 +182,8 @@ def section_overhead(ode, box, Ts, repeat, log):
     solve(ode, box, (0, 0.05), subdivision=sub, workers=2)
     solve(ode, box, (0, 0.05), subdivision=sub)
     # (label, keyword arguments of the parallel call)
-    cases = [("workers=2", dict(workers=2)),
+    cases = [("default (None)", dict()),
+             ("workers=2", dict(workers=2)),
              ("client 2w, default plan", dict(client=clients[2])),
              ("client 1w, chunks=1", dict(client=clients[1], chunks=1)),
              ("client 2w, chunks=2", dict(client=clients[2], chunks=2))]
@@ -184,18 +194,56 @@ def section_overhead(ode, box, Ts, repeat, log):
             out = dict(T=T, run=r + 1, load=load())
             msg = f"run {r + 1} ({out['load']})"
             for label, kw in cases:
-                w0, s0 = timed(lambda: solve(ode, box, (0, T), subdivision=sub))
+                w0, s0 = timed(lambda: solve(ode, box, (0, T), subdivision=sub, workers=1))
                 ww, sw = timed(lambda: solve(ode, box, (0, T), subdivision=sub, **kw))
-                out[label] = dict(inprocess_s=w0, parallel_s=ww, ratio=ww / w0, backend=sw.stats["backend"],
-                                  chunks=sw.stats["chunks"], setup_s=sw.stats.get("setup_s"),
+                backend, chunks = sw.stats.get("backend", "inprocess"), sw.stats.get("chunks", 1)
+                out[label] = dict(inprocess_s=w0, parallel_s=ww, ratio=ww / w0, backend=backend,
+                                  chunks=chunks, setup_s=sw.stats.get("setup_s"),
                                   status=(s0.status, sw.status), t_reached=(s0.t_reached, sw.t_reached))
                 msg += (f" | {label}: {1e3 * w0:.0f} / {1e3 * ww:.0f} ms = {ww / w0:.2f}x "
-                        f"({sw.stats['backend']}, {sw.stats['chunks']} chunk{'s' if sw.stats['chunks'] > 1 else ''})")
+                        f"({backend}, {chunks} chunk{'s' if chunks > 1 else ''})")
             rows.append(out)
             log(msg + f" | {s0.status} at {s0.t_reached:.3f} / {sw.status} at {sw.t_reached:.3f}")
         for label, _ in cases:
             q = [x[label]["ratio"] for x in rows if x["T"] == T]
             log(f"T = {T}, {label}: ratio median {np.median(q):.2f}x (min {min(q):.2f}x, max {max(q):.2f}x)")
+    return rows
+
+
+def section_start(repeat, log, workers=2):
+    """Fresh local clusters: local_client (worker interpreters) against LocalCluster
+    (spawned workers; this script has the main guard), until every worker connected,
+    then with the numba caches loaded in each (what local_client returns after)."""
+    from distributed import Client, LocalCluster
+
+    from verified import parallel
+    log(f"\n## cluster start: {workers} workers, fresh each time")
+    rows = []
+    for r in range(repeat):
+        parallel.close_local_clients()
+        l1 = load()
+        t = time.perf_counter()
+        cluster, client = parallel._start_local_cluster(workers)
+        t_up = time.perf_counter() - t
+        client.run(parallel._warm_kernels)
+        t_warm = time.perf_counter() - t
+        client.close()
+        cluster.close()
+        l2 = load()
+        t = time.perf_counter()
+        lc = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                          silence_logs=50)
+        lcl = Client(lc, set_as_default=False)
+        lcl.wait_for_workers(workers)
+        l_up = time.perf_counter() - t
+        lcl.run(parallel._warm_kernels)
+        l_warm = time.perf_counter() - t
+        lcl.close()
+        lc.close()
+        rows.append(dict(run=r + 1, subprocess_up_s=t_up, subprocess_warm_s=t_warm, localcluster_up_s=l_up,
+                         localcluster_warm_s=l_warm, load_1=l1, load_2=l2))
+        log(f"run {r + 1}: local_client workers up {t_up:.2f} s, warm {t_warm:.2f} s ({l1}) | LocalCluster up "
+            f"{l_up:.2f} s, warm {l_warm:.2f} s ({l2})")
     return rows
 
 
@@ -258,7 +306,7 @@ def estimate(scaling, pieces, log, target_pieces=65536, target_workers=64, bandw
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--only", default="speedup,mixed,rechunk,overhead,scaling")
+    ap.add_argument("--only", default="speedup,mixed,rechunk,overhead,start,scaling")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     ap.add_argument("--json", default=None, help="write the measurements here")
@@ -281,6 +329,8 @@ def main(argv=None):
         res["rechunk"] = section_rechunk(ode, box, n_rechunk, t_rechunk, args.repeat, log)
     if "overhead" in only:
         res["overhead"] = section_overhead(ode, box, (0.5,) if args.quick else (2.0, 0.5), args.repeat, log)
+    if "start" in only:
+        res["start"] = section_start(args.repeat, log)
     if "scaling" in only:
         res["scaling"] = section_scaling(ode, box, pieces, T, log)
         res["estimate"] = estimate(res["scaling"], pieces, log)
