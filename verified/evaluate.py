@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from . import interval as _interval
+from .forward_rules import RULES
 from .opcodes import Op
 
 if TYPE_CHECKING:  # (annotations only: verified.ir imports this module)
@@ -293,13 +294,15 @@ class DualDomain(Domain):
     Values are pairs ``(v, d)``: ``v`` a base value of the batch shape, ``d`` a base
     value of batch shape + ``(k,)`` holding the partial derivatives with respect to the
     ``k`` seeded variables, or ``None`` for zero (constants, unseeded leaves). The
-    derivative rules use only base-domain operations, so in an interval base domain
+    derivative rules are :data:`verified.forward_rules.RULES` (shared with
+    :func:`verified.graph_ops.forward_mode`); they use only base-domain operations, so in an interval base domain
     they enclose the derivative over the box (the chain rule evaluated in interval
     arithmetic).
     """
 
     def __init__(self, base: Domain):
         self.base = base
+        self._algebra = _DualAlgebra(base)
 
     def seed(self, value, index: int | None, k: int):
         """Dual value of a variable: derivative is unit vector ``index`` of length ``k`` (None: not seeded)."""
@@ -309,110 +312,100 @@ class DualDomain(Domain):
         e[index] = 1.0
         return (value, self.base.point(e))
 
-    # derivative helpers: None means zero
-
     def _scale(self, factor, d):
         """``factor * d`` with ``factor`` of the batch shape (broadcast over the last axis)."""
-        if d is None:
-            return None
-        return self.base.mul(self.base.expand(factor), d)
+        return self._algebra.d_scale(factor, d)
+
+    def _apply(self, op, a, b=None, k=None):
+        """Dual value of ``op`` by :data:`verified.forward_rules.RULES`; the factor only
+        when the derivative is nonzero."""
+        rule, A = RULES[op], self._algebra
+        u, du = a
+        w, dw = b if b is not None else (None, None)
+        v = rule.value(A, u, w, k)
+        if du is None and dw is None:
+            return (v, None)
+        f = rule.factor(A, u, v, k) if rule.factor is not None else None
+        return (v, rule.deriv(A, du, dw, u, w, v, f, k))
 
     def const(self, lo, hi, value):
         return (self.base.const(lo, hi, value), None)
 
     def add(self, a, b):
-        B = self.base
-        da, db = a[1], b[1]
-        d = db if da is None else da if db is None else B.add(da, db)
-        return (B.add(a[0], b[0]), d)
+        return self._apply(Op.ADD, a, b)
 
     def sub(self, a, b):
-        B = self.base
-        da, db = a[1], b[1]
-        if db is None:
-            d = da
-        elif da is None:
-            d = B.neg(db)
-        else:
-            d = B.sub(da, db)
-        return (B.sub(a[0], b[0]), d)
+        return self._apply(Op.SUB, a, b)
 
     def mul(self, a, b):
-        B = self.base
-        (av, da), (bv, db) = a, b
-        ta, tb = self._scale(bv, da), self._scale(av, db)
-        d = tb if ta is None else ta if tb is None else B.add(ta, tb)
-        return (B.mul(av, bv), d)
+        return self._apply(Op.MUL, a, b)
 
     def div(self, a, b):
-        # q = a/b, q' = (a' - q b') / b: needs q (already computed) and one division
-        B = self.base
-        (av, da), (bv, db) = a, b
-        q = B.div(av, bv)
-        if db is None:
-            d = None if da is None else B.div(da, B.expand(bv))
-        else:
-            qdb = self._scale(q, db)
-            num = B.neg(qdb) if da is None else B.sub(da, qdb)
-            d = B.div(num, B.expand(bv))
-        return (q, d)
+        return self._apply(Op.DIV, a, b)
 
     def neg(self, a):
-        B = self.base
-        return (B.neg(a[0]), None if a[1] is None else B.neg(a[1]))
+        return self._apply(Op.NEG, a)
 
     def sqr(self, a):
-        B = self.base
-        return (B.sqr(a[0]), self._scale(B.mul(2.0, a[0]), a[1]) if a[1] is not None else None)
+        return self._apply(Op.SQR, a)
 
     def pow(self, a, k):
-        B = self.base
-        v = B.pow(a[0], k)
-        if a[1] is None:
-            return (v, None)
-        lower = a[0] if k == 2 else B.sqr(a[0]) if k == 3 else B.pow(a[0], k - 1)
-        return (v, self._scale(B.mul(float(k), lower), a[1]))
+        return self._apply(Op.POW, a, k=k)
 
     def sqrt(self, a):
-        B = self.base
-        s = B.sqrt(a[0])
-        if a[1] is None:
-            return (s, None)
-        return (s, B.div(a[1], B.expand(B.mul(2.0, s))))
+        return self._apply(Op.SQRT, a)
 
     def exp(self, a):
-        e = self.base.exp(a[0])
-        return (e, self._scale(e, a[1]))
+        return self._apply(Op.EXP, a)
 
     def log(self, a):
-        B = self.base
-        return (B.log(a[0]), None if a[1] is None else B.div(a[1], B.expand(a[0])))
+        return self._apply(Op.LOG, a)
 
     def sin(self, a):
-        B = self.base
-        return (B.sin(a[0]), None if a[1] is None else self._scale(B.cos(a[0]), a[1]))
+        return self._apply(Op.SIN, a)
 
     def cos(self, a):
-        B = self.base
-        return (B.cos(a[0]), None if a[1] is None else self._scale(B.neg(B.sin(a[0])), a[1]))
+        return self._apply(Op.COS, a)
 
     def tan(self, a):
-        B = self.base
-        t = B.tan(a[0])
-        # tan' = 1 + tan^2 (reuses t; sound in interval arithmetic)
-        return (t, None if a[1] is None else self._scale(B.add(1.0, B.sqr(t)), a[1]))
+        return self._apply(Op.TAN, a)
 
     def atan(self, a):
-        B = self.base
-        v = B.atan(a[0])
-        if a[1] is None:
-            return (v, None)
-        return (v, B.div(a[1], B.expand(B.add(1.0, B.sqr(a[0])))))
+        return self._apply(Op.ATAN, a)
 
     def mid(self, a):
-        # a frozen point: derivative 0 (exact where mid is used as the graph op
-        # promises, in value-invariant preconditioners)
-        return (self.base.mid(a[0]), None)
+        return self._apply(Op.MID, a)
+
+
+class _DualAlgebra:
+    """The algebra of :mod:`verified.forward_rules` over a base domain: values are base
+    values of the batch shape, derivatives base values with a trailing axis of
+    directions (None: zero); value operations are the base domain's."""
+
+    def __init__(self, base: Domain):
+        self.base = base
+        for name in ("add", "sub", "mul", "div", "neg", "sqr", "pow", "sqrt", "exp", "log",
+                     "sin", "cos", "tan", "atan", "mid"):
+            setattr(self, name, getattr(base, name))
+
+    def num(self, c):
+        return float(c)
+
+    def d_add(self, p, q):
+        return q if p is None else p if q is None else self.base.add(p, q)
+
+    def d_sub(self, p, q):
+        return p if q is None else self.base.neg(q) if p is None else self.base.sub(p, q)
+
+    def d_neg(self, p):
+        return None if p is None else self.base.neg(p)
+
+    def d_scale(self, f, p):
+        """``f * p`` with ``f`` of the batch shape (broadcast over the last axis)."""
+        return None if p is None else self.base.mul(self.base.expand(f), p)
+
+    def d_div(self, p, x):
+        return None if p is None else self.base.div(p, self.base.expand(x))
 
 
 # --------------------------------------------------------------------------- entry points

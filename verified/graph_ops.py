@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
+from .forward_rules import RULES
 from .graph import Graph, GraphBuilder, Op
 
 __all__ = ["embed", "forward_mode", "rate_along", "augment_with_rate", "negated", "difference"]
@@ -48,28 +49,48 @@ def embed(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: Sequence
     return [ids[o] for o in graph.outputs]
 
 
+class _BuilderAlgebra:
+    """The algebra of :mod:`verified.forward_rules` on node ids of a builder: values and
+    derivatives (one direction each) are nodes, ``None`` a structural zero."""
+
+    def __init__(self, b: GraphBuilder):
+        self.b = b
+        for name in ("add", "sub", "mul", "div", "neg", "sqr", "pow", "sqrt", "exp", "log",
+                     "sin", "cos", "tan", "atan", "mid"):
+            setattr(self, name, getattr(b, name))
+
+    def num(self, c):
+        return self.b.const(c)
+
+    def d_add(self, p, q):
+        return q if p is None else p if q is None else self.b.add(p, q)
+
+    def d_sub(self, p, q):
+        return p if q is None else self.b.neg(q) if p is None else self.b.sub(p, q)
+
+    def d_neg(self, p):
+        return None if p is None else self.b.neg(p)
+
+    def d_scale(self, f, p):
+        return None if p is None else self.b.mul(f, p)
+
+    def d_div(self, p, x):
+        return None if p is None else self.b.div(p, x)
+
+
 def forward_mode(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: Sequence[int],
                  seeds: Sequence[Sequence[int | None]]):
     """Values and directional derivatives of ``graph``'s outputs, built into ``b``.
 
     ``seeds[i][k]`` is the node id of the derivative of input ``i`` in direction ``k``
     (``None`` = structurally zero). Returns ``(values, derivatives)``: the output node
-    ids and, per output, a list of ``k`` node ids or ``None`` (zero).
+    ids and, per output, a list of ``k`` node ids or ``None`` (zero). The rules are
+    :data:`verified.forward_rules.RULES` (shared with :class:`verified.evaluate.DualDomain`).
     """
     n_dir = len(seeds[0]) if seeds else 0
+    A = _BuilderAlgebra(b)
     val: list[int] = []
     der: list[list[int | None]] = []
-
-    def dsum(x, y):
-        if x is None:
-            return y
-        if y is None:
-            return x
-        return b.add(x, y)
-
-    def dscale(factor, d):
-        return None if d is None else b.mul(factor, d)
-
     for node in graph.nodes:
         op, args, data = node.op, node.args, node.data
         if op == Op.CONST:
@@ -79,66 +100,14 @@ def forward_mode(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: S
         elif op == Op.PARAM:
             v, d = params[data], [None] * n_dir
         else:
-            u, du = val[args[0]], der[args[0]]
-            if op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV):
-                w, dw = val[args[1]], der[args[1]]
-            if op == Op.ADD:
-                v = b.add(u, w)
-                d = [dsum(p, q) for p, q in zip(du, dw)]
-            elif op == Op.SUB:
-                v = b.sub(u, w)
-                d = [p if q is None else (b.neg(q) if p is None else b.sub(p, q)) for p, q in zip(du, dw)]
-            elif op == Op.MUL:
-                v = b.mul(u, w)
-                d = [dsum(dscale(w, p), dscale(u, q)) for p, q in zip(du, dw)]
-            elif op == Op.DIV:
-                v = b.div(u, w)
-                d = []  # (u / w)' = (u' - v w') / w
-                for p, q in zip(du, dw):
-                    num = p if q is None else (b.neg(b.mul(v, q)) if p is None else b.sub(p, b.mul(v, q)))
-                    d.append(None if num is None else b.div(num, w))
-            elif op == Op.NEG:
-                v = b.neg(u)
-                d = [None if p is None else b.neg(p) for p in du]
-            elif op == Op.SQR:
-                v = b.sqr(u)
-                two_u = b.mul(b.const(2), u)
-                d = [dscale(two_u, p) for p in du]
-            elif op == Op.POW:
-                v = b.pow(u, data)
-                factor = b.mul(b.const(data), b.pow(u, data - 1))
-                d = [dscale(factor, p) for p in du]
-            elif op == Op.SQRT:
-                v = b.sqrt(u)
-                d = [None if p is None else b.div(p, b.mul(b.const(2), v)) for p in du]
-            elif op == Op.EXP:
-                v = b.exp(u)
-                d = [dscale(v, p) for p in du]
-            elif op == Op.LOG:
-                v = b.log(u)
-                d = [None if p is None else b.div(p, u) for p in du]
-            elif op == Op.SIN:
-                v = b.sin(u)
-                c = b.cos(u)
-                d = [dscale(c, p) for p in du]
-            elif op == Op.COS:
-                v = b.cos(u)
-                ms = b.neg(b.sin(u))
-                d = [dscale(ms, p) for p in du]
-            elif op == Op.TAN:
-                v = b.tan(u)
-                sec2 = b.add(b.const(1), b.sqr(v))
-                d = [dscale(sec2, p) for p in du]
-            elif op == Op.ATAN:
-                v = b.atan(u)
-                den = b.add(b.const(1), b.sqr(u))
-                d = [None if p is None else b.div(p, den) for p in du]
-            elif op == Op.MID:
-                # a frozen point (a preconditioner): exact derivatives of the
-                # value-invariant expressions it is used in treat it as constant
-                v, d = b.mid(u), [None] * n_dir
-            else:  # pragma: no cover
+            rule = RULES.get(op)
+            if rule is None:  # pragma: no cover
                 raise NotImplementedError(f"no derivative rule for {op.name}")
+            u, du = val[args[0]], der[args[0]]
+            w, dw = (val[args[1]], der[args[1]]) if len(args) == 2 else (None, [None] * n_dir)
+            v = rule.value(A, u, w, data)
+            f = rule.factor(A, u, v, data) if rule.factor is not None else None
+            d = [rule.deriv(A, p, q, u, w, v, f, data) for p, q in zip(du, dw)]
         val.append(v)
         der.append(d)
     return [val[o] for o in graph.outputs], [der[o] for o in graph.outputs]
