@@ -7,6 +7,7 @@ example-robot-data 6.x is a cmeel package: its files live under
 from __future__ import annotations
 
 import importlib.metadata as md
+from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
 
@@ -82,13 +83,6 @@ ALIASES = {"panda": "panda_arm", "franka": "panda_arm", "ur5_robot": "ur5",
            "double_pendulum": "double_pendulum_urdf"}
 ERD_PREFIX = "example-robot-data:"
 
-#: the paper's models (sec. 5.1, 5.2): the names of ``models.registry.SYSTEMS``, System
-#: factories (:class:`models.paper.PaperModel`): a DH chain in modes i/ii, the
-#: hand-written eqs. (18)/(19), (22)/(24) in mode iii. Names only (re-exported by
-#: :mod:`mbs.simulate`, read by :mod:`mbs.app.scene`); tests/mbs/test_modes.py checks
-#: that they are the registry's keys
-PAPER_MODELS = ("pendulum_paper", "double_pendulum_paper")
-
 #: the entry-point group through which an installed distribution offers ready models.
 #: The modeling core never imports :mod:`models`: this project's pyproject.toml declares
 #: ``[project.entry-points."mbs.models"] registry = "models.registry"``, and each entry
@@ -146,6 +140,46 @@ def system_entry(name):
     if not isinstance(name, str):
         return None
     return next((r.SYSTEMS[name] for r in _installed() if name in r.SYSTEMS), None)
+
+
+def system_names() -> tuple:
+    """The names of the registries' System factories (``models.registry.SYSTEMS``: the
+    paper's models, sec. 5.1, 5.2, :class:`models.paper.PaperModel`: a DH chain in modes
+    i/ii, the hand-written eqs. (18)/(19), (22)/(24) in mode iii), in registry order;
+    () when no registry is installed."""
+    return tuple(dict.fromkeys(n for r in _installed() for n in r.SYSTEMS))
+
+
+class _SystemNames(Sequence):
+    """:func:`system_names` as a read-only tuple-like constant, read from the registries
+    when first used (not at import: the registries import mbs)."""
+
+    def __getitem__(self, i):
+        return system_names()[i]
+
+    def __len__(self):
+        return len(system_names())
+
+    def __eq__(self, other):
+        return tuple(self) == (tuple(other) if isinstance(other, _SystemNames) else other)
+
+    def __hash__(self):
+        return hash(tuple(self))
+
+    def __add__(self, other):
+        return tuple(self) + other
+
+    def __radd__(self, other):
+        return other + tuple(self)
+
+    def __repr__(self):
+        return repr(tuple(self))
+
+
+#: the paper's models: :func:`system_names`, the names of the registries' System
+#: factories (re-exported by :mod:`mbs.simulate`); kept as a name for code that reads it
+#: as a constant (``name in PAPER_MODELS``, ``tuple(PAPER_MODELS)``)
+PAPER_MODELS = _SystemNames()
 
 
 def model_names() -> list:

@@ -36,7 +36,8 @@ FACTORIES = {
 }
 NAMES = tuple(FACTORIES)
 
-#: the paper's models (sec. 5.1, 5.2); their names are :data:`mbs.robots.PAPER_MODELS`
+#: the paper's models (sec. 5.1, 5.2): System factories; mbs.robots.system_names() (and
+#: PAPER_MODELS) read the names from here
 SYSTEMS = {m.name: m for m in (paper.PENDULUM, paper.DOUBLE_PENDULUM)}
 
 

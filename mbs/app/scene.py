@@ -123,7 +123,7 @@ from ..urdf import chain_from_urdf
 from ..control import ControlError, parse_control
 from ..errors import ModelError
 from ..modes import MODES, get_mode
-from ..robots import ALIASES, ERD_PREFIX, PAPER_MODELS, urdf_path
+from ..robots import ALIASES, ERD_PREFIX, PAPER_MODELS, system_names, urdf_path
 from ..simulate import output_times as _times
 from ..uncertain import PHYSICAL_KEYS, _PAYLOAD_KEYS
 
@@ -470,7 +470,7 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
                          f"{', '.join(kinds) or 'none'})")
     spec = dict(model)
     if "name" in model:
-        known = tuple(NAMES) + PAPER_MODELS + tuple(sorted(set(ALIASES) - set(NAMES)))
+        known = tuple(NAMES) + system_names() + tuple(sorted(set(ALIASES) - set(NAMES)))
         if model["name"] not in known:
             nm = model["name"]
             hint = (f" (a URDF file or an example-robot-data model goes in urdf = {nm!r})"
@@ -661,7 +661,7 @@ def _parameters(table: dict, spec: dict, where: str):
         allowed = None
         if "urdf" in spec:
             allowed = ()
-        elif spec.get("name") in PAPER_MODELS:
+        elif spec.get("name") in system_names():
             allowed = tuple(SYSTEMS[spec["name"]].param_names)
         elif "name" in spec:
             allowed = ()

@@ -50,3 +50,12 @@ def test_simulate_takes_a_mode_and_records_its_name():
     b = simulate("pendulum_paper", box, 0.1, mode="ii", progress=False)
     assert isinstance(MODE_II, Mode) and a.mode == "ii" == b.mode
     assert bool(np.all(a.hull[-1].equals(b.hull[-1]))) and a.stats["tests"] == b.stats["tests"]
+
+
+def test_paper_model_names_come_from_the_registries():
+    """Issue 15: the names are read from the registries of the entry-point group
+    (mbs.robots.registries()), not written down a second time."""
+    import mbs.robots
+    names = tuple(n for r in mbs.robots.registries() for n in r.SYSTEMS)
+    assert mbs.robots.system_names() == names == tuple(mbs.robots.PAPER_MODELS)
+    assert "pendulum_paper" in mbs.robots.PAPER_MODELS and "ur5" not in mbs.robots.PAPER_MODELS
