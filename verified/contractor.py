@@ -36,6 +36,7 @@ import numpy as np
 from . import interval as iv
 from . import linalg
 from .evaluate import IntervalDomain, eval_interval, jacobian_interval
+from .exact import pi_multiple_enclosure
 from .graph import Graph, GraphBuilder, Op
 from .graph_ops import embed
 from .interval import Interval
@@ -50,8 +51,8 @@ __all__ = [
 ]
 
 _INF = np.inf
-# float pi is below the true pi (3.14159265358979311... < 3.14159265358979323...)
-_PI = Interval._from_bounds(np.array(np.pi), np.array(np.nextafter(np.pi, np.inf)))
+# [float pi, next double]: float pi is below the true pi (3.14159265358979311... < 3.14159265358979323...)
+_PI = Interval._from_bounds(*(np.array(t) for t in pi_multiple_enclosure(0, 1)[:2]))
 # Candidate margins (relative) tried from tight to loose by the verified inverse cuts.
 _MARGINS = (0.0, 2.0**-52, 2.0**-50, 2.0**-46, 2.0**-40, 2.0**-30, 2.0**-20, 2.0**-10)
 _SHAVE_PIECES = 3  # monotone pieces a periodic projection walks in from each end

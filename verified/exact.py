@@ -6,7 +6,10 @@ between the doubles either side of its nearest one. Every module that turns an e
 number into floats calls these functions instead of repeating the rule:
 
 - :mod:`verified.interval` (``Fraction``, ``Decimal`` and big-int operands),
-- :mod:`verified.graph` (constant nodes, :func:`verified.graph.enclose_rational`),
+- :mod:`verified.ir` (constant nodes, :func:`verified.graph.enclose_rational`),
+- :mod:`verified.graph_sympy` (sympy numbers: multiples of pi by :func:`pi_multiple_enclosure`,
+  other constants such as ``E`` by :func:`enclose_approximation` of a 40-digit evalf),
+- :mod:`verified.contractor` (pi for the periodic projections),
 - :mod:`verified.stepper` and :mod:`verified.solver` (the exact step times and the gap
   to the next output time),
 - :mod:`mbs.app.scene` (numbers and ``pi`` expressions in scene files),
@@ -20,10 +23,10 @@ from __future__ import annotations
 import math
 from fractions import Fraction
 
-__all__ = ["enclose_fraction", "enclose_pi_multiple"]
+__all__ = ["enclose_fraction", "enclose_pi_multiple", "pi_multiple_enclosure", "enclose_approximation"]
 
-#: working precision (bits) of the ``a + b pi`` evaluation: the 200-bit value is within
-#: 2^-190 (relative) of the true one, far below half an ulp of a double
+#: working precision (bits) of the ``a + b pi`` evaluation, raised only when 200 bits
+#: cannot tell on which side of its nearest double the number lies
 PI_PRECISION_BITS = 200
 
 
@@ -42,18 +45,84 @@ def enclose_fraction(q: Fraction | int) -> tuple[float, float]:
     return lo, hi
 
 
+def _mpf_fraction(v) -> Fraction:
+    """The exact rational value of an mpmath mpf."""
+    man, exp = v.man_exp
+    r = Fraction(man) * Fraction(2) ** exp
+    return -r if v < 0 else r
+
+
+def _pi_multiple_nearest(a: Fraction, b: Fraction) -> tuple[float, int]:
+    """``(f, side)`` for ``x = a + b pi``, ``b != 0``: ``f`` the double nearest to ``x``
+    (nearest to an evaluation within ``tol`` of ``x``) and ``side`` the sign of ``x - f``
+    (``x`` is irrational, so it is never ``f``). The evaluation runs at
+    :data:`PI_PRECISION_BITS` and, only if that cannot tell the side, at more bits."""
+    import mpmath  # (import here: sympy's dependency; intervals do without it)
+
+    bits = PI_PRECISION_BITS
+    while True:
+        with mpmath.workprec(bits):
+            v = mpmath.mpf(a.numerator) / a.denominator + mpmath.mpf(b.numerator) / b.denominator * mpmath.pi
+        r = _mpf_fraction(v)
+        # five roundings (a, b, pi, the product, the sum), each within 2^-bits of its
+        # result: |x - r| <= (2|a| + 16|b|) 2^-bits, whatever the cancellation in a + b pi
+        tol = (2 * abs(a) + 16 * abs(b)) / Fraction(2) ** bits
+        f = float(r)
+        if not math.isfinite(f):
+            raise OverflowError(f"{a} + {b} pi is outside the double range")
+        gap = r - Fraction(f)
+        if abs(gap) > tol:
+            return f, (1 if gap > 0 else -1)
+        bits *= 2
+        if bits > 1 << 16:  # pragma: no cover - would need a + b pi within 2^-65000 of a double
+            raise ArithmeticError(f"cannot place {a} + {b} pi beside a double")
+
+
 def enclose_pi_multiple(a: Fraction, b: Fraction) -> tuple[float, float]:
     """``(lo, hi)`` doubles around ``a + b pi`` (``a``, ``b`` rational).
 
     ``b == 0``: :func:`enclose_fraction` of ``a``. Otherwise the value is irrational,
-    so it is never a double: the nearest double to a 200-bit evaluation and one ulp
-    either side enclose it (the evaluation error is far below half an ulp)."""
+    so it is never a double: the nearest double and one ulp either side enclose it
+    (two ulps wide; :func:`pi_multiple_enclosure` gives the one-ulp enclosure)."""
     a, b = Fraction(a), Fraction(b)
     if b == 0:
         return enclose_fraction(a)
-    import mpmath  # sympy's dependency; imported here so that intervals do without it
-
-    with mpmath.workprec(PI_PRECISION_BITS):
-        v = mpmath.mpf(a.numerator) / a.denominator + mpmath.mpf(b.numerator) / b.denominator * mpmath.pi
-        f = float(v)
+    f, _ = _pi_multiple_nearest(a, b)
     return math.nextafter(f, -math.inf), math.nextafter(f, math.inf)
+
+
+def pi_multiple_enclosure(a: Fraction, b: Fraction) -> tuple[float, float, float]:
+    """``(lo, hi, value)``: the tightest doubles ``lo <= a + b pi <= hi`` and ``value``
+    the nearest double (a constant node's enclosure, as :func:`enclose_approximation`
+    gives). ``b != 0``: one ulp wide, ``value`` one of the bounds; ``b == 0``: the
+    enclosure of the rational ``a``. E.g. pi itself: ``(math.pi, nextafter(math.pi,
+    inf), math.pi)``, float pi being below pi."""
+    a, b = Fraction(a), Fraction(b)
+    if b == 0:
+        lo, hi = enclose_fraction(a)
+        return lo, hi, float(a)
+    f, side = _pi_multiple_nearest(a, b)
+    if side > 0:
+        return f, math.nextafter(f, math.inf), f
+    return math.nextafter(f, -math.inf), f, f
+
+
+def enclose_approximation(r: Fraction, rel_err: Fraction) -> tuple[float, float, float]:
+    """Enclosure ``(lo, hi, value)`` of an exact real known as ``r`` with ``|exact - r| <= rel_err*|r|``.
+
+    ``rel_err`` must be far below double precision (e.g. 1e-35). The result has width
+    at most one or two ulps: the nearest double to ``r`` is one bound whenever the exact
+    value is provably on one side of it.
+    """
+    if r == 0:
+        raise ValueError("cannot enclose a value approximated by 0 with a relative error bound")
+    f = float(r)
+    if not math.isfinite(f):
+        raise ValueError(f"constant {float(r)!r} is outside the double range")
+    tol = abs(r) * rel_err
+    exact_f = Fraction(f)
+    if exact_f < r - tol:  # exact value > f
+        return f, math.nextafter(f, math.inf), f
+    if exact_f > r + tol:  # exact value < f
+        return math.nextafter(f, -math.inf), f, f
+    return math.nextafter(f, -math.inf), math.nextafter(f, math.inf), f

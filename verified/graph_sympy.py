@@ -10,8 +10,9 @@
   ``pow(sqrt(x), k)``.
 * ``sin cos tan atan exp log``.
 * Numbers: ``Integer``/``Rational``/``Float`` are exact rationals, enclosed outward
-  (exact when a double); ``pi``, ``E`` and other ``NumberSymbol`` are evaluated at 40
-  digits and enclosed by stepping outward.
+  (exact when a double); rational multiples of ``pi`` are enclosed by
+  :func:`verified.exact.pi_multiple_enclosure`; ``E`` and other ``NumberSymbol`` are
+  evaluated at 40 digits and enclosed by stepping outward.
 
 Anything else raises ``NotImplementedError`` (unsupported operation) or ``ValueError``
 (symbol that is neither an input nor a parameter), naming the subexpression.
@@ -24,7 +25,8 @@ from typing import Sequence
 import sympy
 
 from .evaluate import to_sympy
-from .ir import Graph, GraphBuilder, enclose_approximation, enclose_rational
+from .exact import enclose_approximation, pi_multiple_enclosure
+from .ir import Graph, GraphBuilder, enclose_rational
 
 __all__ = ["from_sympy", "graph_to_sympy", "sympy_constant_enclosure", "sympy_number_node"]
 
@@ -37,7 +39,9 @@ def sympy_constant_enclosure(c) -> tuple[float, float, float]:
     """``(lo, hi, value)`` with ``lo <= c <= hi`` for a real sympy number atom.
 
     Rationals and Floats are exact rationals (a sympy Float is a binary number);
-    NumberSymbols (pi, E, ...) go through a 40-digit evalf.
+    rational multiples of pi are enclosed by :func:`verified.exact.pi_multiple_enclosure`
+    (the tightest doubles); other NumberSymbols (E, ...) and products go through a
+    40-digit evalf.
     """
     if isinstance(c, (sympy.Rational, sympy.Float)):  # Integer is a Rational
         if isinstance(c, sympy.Float) and not c.is_finite:
@@ -45,6 +49,9 @@ def sympy_constant_enclosure(c) -> tuple[float, float, float]:
         p, q = sympy.Rational(c).as_numer_denom()
         return enclose_rational(Fraction(int(p), int(q)))
     if _is_constant_product(c) and c.is_real:
+        q = c / sympy.pi
+        if q.is_Rational:  # a rational multiple of pi: exactly, by verified.exact
+            return pi_multiple_enclosure(0, Fraction(int(q.p), int(q.q)))
         approx = sympy.Rational(c.evalf(_DIGITS))
         p, q = approx.as_numer_denom()
         return enclose_approximation(Fraction(int(p), int(q)), _TRUSTED_REL_ERR)

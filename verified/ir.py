@@ -24,7 +24,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from . import evaluate as _evaluate
-from .exact import enclose_fraction
+from .exact import enclose_approximation, enclose_fraction
 from .opcodes import _ARITY, _BY_NAME, LEAF_OPS, Node, Op
 
 __all__ = ["Graph", "GraphBuilder", "enclose_rational", "enclose_approximation"]
@@ -34,14 +34,6 @@ FORMAT_VERSION = 1
 
 
 # --------------------------------------------------------------------------- constants
-
-
-def _next_down(f: float) -> float:
-    return float(np.nextafter(f, -np.inf))
-
-
-def _next_up(f: float) -> float:
-    return float(np.nextafter(f, np.inf))
 
 
 def enclose_rational(q: Fraction | int) -> tuple[float, float, float]:
@@ -63,27 +55,6 @@ def enclose_rational(q: Fraction | int) -> tuple[float, float, float]:
     if not (math.isfinite(f) and math.isfinite(lo) and math.isfinite(hi)):
         raise ValueError(f"constant {q} is outside the double range")
     return lo, hi, f
-
-
-def enclose_approximation(r: Fraction, rel_err: Fraction) -> tuple[float, float, float]:
-    """Enclosure ``(lo, hi, value)`` of an exact real known as ``r`` with ``|exact - r| <= rel_err*|r|``.
-
-    ``rel_err`` must be far below double precision (e.g. 1e-35). The result has width
-    at most one or two ulps: the nearest double to ``r`` is one bound whenever the exact
-    value is provably on one side of it.
-    """
-    if r == 0:
-        raise ValueError("cannot enclose a value approximated by 0 with a relative error bound")
-    f = float(r)
-    if not math.isfinite(f):
-        raise ValueError(f"constant {float(r)!r} is outside the double range")
-    tol = abs(r) * rel_err
-    exact_f = Fraction(f)
-    if exact_f < r - tol:  # exact value > f
-        return f, _next_up(f), f
-    if exact_f > r + tol:  # exact value < f
-        return _next_down(f), f, f
-    return _next_down(f), _next_up(f), f
 
 
 def _check_enclosure(lo: float, hi: float, value: float) -> tuple[float, float, float]:

@@ -632,3 +632,24 @@ def test_gradient_graph_and_params_to_inputs():
     y = params_to_inputs(g)
     assert y.n_inputs == 3 and y.n_params == 0
     assert eval_float(y, np.c_[x, p])[0, 0] == eval_float(g, x, p)[0, 0]
+
+
+@pytest.mark.parametrize("a, b", [(Fraction(0), Fraction(1)), (Fraction(0), Fraction(-3, 4)), (Fraction(1, 3), Fraction(2)),
+                                  (Fraction(-355, 113), Fraction(1)),
+                                  # within 2^-260 of -pi: cancels more than the first 200 bits
+                                  (Fraction(-1455086307567065297120939771110919450613573509313569719835088604471755577864741,
+                                            2**260), Fraction(1))])
+def test_pi_multiples_are_enclosed_by_verified_exact(arb, a, b):
+    """Issue 15: multiples of pi have one home, verified.exact; the one-ulp enclosure
+    (constant nodes, the contractor's pi) and the two-ulp one (scenes, models) both
+    contain a + b pi, also when a + b pi cancels beyond the first working precision."""
+    from verified.contractor import _PI
+    from verified.exact import enclose_pi_multiple, pi_multiple_enclosure
+    exact = arb(a.numerator) / a.denominator + arb(b.numerator) / b.denominator * arb.pi()
+    lo, hi, value = pi_multiple_enclosure(a, b)
+    _assert_encloses(arb, lo, hi, exact)
+    assert np.nextafter(lo, np.inf) == hi and value in (lo, hi)
+    _assert_encloses(arb, *enclose_pi_multiple(a, b), exact)
+    assert (float(_PI.lo), float(_PI.hi)) == pi_multiple_enclosure(0, 1)[:2] == (math.pi, np.nextafter(math.pi, np.inf))
+    if a == 0:
+        assert _const_of(from_sympy(sp.Rational(b.numerator, b.denominator) * sp.pi, [])) == (lo, hi, value)
