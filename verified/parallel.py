@@ -984,6 +984,20 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
         # and 1.52-1.66x (T = 0.5) of one in-process batch (bench_parallel overhead, two
         # runs, other jobs on the machine) to this batch itself
         backend, n_workers = "inprocess", 1
+    cluster_start_s = None
+    if backend == "dask-local" and workers is None:
+        # the default must not fail a run that this process can do alone (a cluster that
+        # cannot start: no `python -m dask` for this interpreter, no free port, ...):
+        # warn and run it here as one batch
+        fresh, t_start = n_workers not in _LOCAL, time.perf_counter()
+        try:
+            local_client(n_workers)
+            cluster_start_s = time.perf_counter() - t_start if fresh else None
+        except WorkerStartError as exc:
+            warnings.warn(f"{exc}; workers=None runs in this process", RuntimeWarning, stacklevel=3)
+            backend, n_workers = "inprocess", 1
+            ranges = [(0, nb)] if chunks is None else plan_chunks(nb, 1, chunks)
+            rechunk_on = adaptive and consistency is None and bool(rechunk)
     if backend == "inprocess" and len(ranges) == 1 and not rechunk_on:  # one batch: exactly solve's own result
         sol = solve(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
                     hooks=list(hooks_in), workers=1, **kwargs)
@@ -1033,6 +1047,8 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
                 c = local_client(n_workers)
                 if fresh:
                     stats_extra["cluster_start_s"] = time.perf_counter() - setup_t
+            if cluster_start_s is not None:
+                stats_extra["cluster_start_s"] = cluster_start_s
             interrupted, sizes = _run_on_dask(c, graph, arithmetic, pieces, base, consistency, hooks, board)
             stats_extra.update(sizes)
         finally:

@@ -463,12 +463,16 @@ def solve(
     TypeError
         when ``ode`` is not a Graph or VerifiedODE.
     """
-    if workers is None and client is None and chunks is None and start is None:
-        from .parallel import auto_workers  # None ("every core when worthwhile"): decided there
-        workers = auto_workers(ode, x0, subdivision)
+    if workers is None and client is None and chunks is None:
+        # None: every core when worthwhile (verified.parallel.auto_workers), else one batch here
+        if start is not None:
+            workers = 1
+        else:
+            from .parallel import auto_workers
+            if auto_workers(ode, x0, subdivision) is None:
+                workers = 1
     one_batch = client is None and chunks is None and not rechunk and (
-        workers is None or (isinstance(workers, (int, np.integer)) and not isinstance(workers, (bool, np.bool_))
-                            and workers == 1))
+        isinstance(workers, (int, np.integer)) and not isinstance(workers, (bool, np.bool_)) and workers == 1)
     if not one_batch:  # chunked: verified/parallel.py
         if start is not None:
             raise ValueError("start= continues one batch: it cannot be combined with workers, client or chunks")

@@ -349,6 +349,21 @@ def test_default_workers_on_a_small_batch_stays_in_process(ode, box, single, mon
     assert auto(ode, box, [n, 1, 1, 1]) is None
 
 
+def test_default_workers_fall_back_to_one_batch_when_no_cluster_starts(ode, box, monkeypatch):
+    """workers=None must not fail a run one process can do: a local cluster that cannot
+    start is a warning and one in-process batch; an explicit workers=2 raises."""
+    def broken(workers):
+        raise parallel.WorkerStartError("could not start 2 local Dask worker processes (test)")
+    monkeypatch.setattr(parallel, "local_client", broken)
+    monkeypatch.setattr(parallel, "default_workers", lambda: 2)
+    n = parallel.AUTO_MIN_PIECES
+    with pytest.warns(RuntimeWarning, match="workers=None runs in this process"):
+        sol = solve(ode, box, (0.0, 0.01), subdivision=[n, 1, 1, 1])
+    assert sol.stats["backend"] == "inprocess" and sol.stats["chunks"] == 1 and sol.status == "completed"
+    with pytest.raises(parallel.WorkerStartError):
+        solve(ode, box, (0.0, 0.01), subdivision=[n, 1, 1, 1], workers=2)
+
+
 def test_cli_workers_1_is_one_in_process_batch():
     """--workers 1 (and run_scene's workers=None) pass workers=1 to simulate: its default,
     None, would be every core."""
