@@ -34,6 +34,8 @@ start     cluster start, fresh each time: local_client(2) (worker interpreters s
           ``python -m dask spec``, what workers=None / "auto" / 2 start) against
           ``LocalCluster(2)`` (spawned workers, the previous local cluster), each until
           every worker connected and then with the numba caches loaded in every worker
+cluster   the speedup run on both warm local clusters of 2 workers, interleaved:
+          local_client against LocalCluster (not in the default list)
 scaling   local clusters of 1, 2, 4 workers (processes, 1 thread each) on the speedup run,
           and from the measured per-chunk costs and message sizes an estimate for 64
           workers and 65,536 pieces
@@ -247,6 +249,43 @@ def section_start(repeat, log, workers=2):
     return rows
 
 
+def section_cluster(ode, box, pieces, T, repeat, log, workers=2):
+    """The same chunked run on both local clusters, interleaved: local_client (worker
+    interpreters under nannies) against LocalCluster (spawned workers), warm."""
+    from distributed import Client, LocalCluster
+
+    from verified import parallel
+    from verified.solver import solve
+    log(f"\n## cluster: {pieces} pieces, T = {T}, {workers} workers: local_client against LocalCluster, warm")
+    ours = parallel.local_client(workers)
+    lc = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                      silence_logs=50)
+    theirs = Client(lc, set_as_default=False)
+    theirs.wait_for_workers(workers)
+    theirs.run(parallel._warm_kernels)
+    sub = [pieces, 1, 1, 1]
+    for c in (ours, theirs):
+        solve(ode, box, (0, 0.05), subdivision=sub, client=c)  # graph shipped, first steps
+    rows = []
+    try:
+        for r in range(repeat):
+            l1 = load()
+            w1, s1 = timed(lambda: solve(ode, box, (0, T), subdivision=sub, client=ours))
+            l2 = load()
+            w2, s2 = timed(lambda: solve(ode, box, (0, T), subdivision=sub, client=theirs))
+            rows.append(dict(run=r + 1, local_client_s=w1, localcluster_s=w2, ratio=w1 / w2,
+                             chunk_wall_s=(s1.stats["chunk_wall_s"], s2.stats["chunk_wall_s"]),
+                             status=(s1.status, s2.status), load_1=l1, load_2=l2))
+            log(f"run {r + 1}: local_client {w1:6.2f} s ({l1}), chunk walls "
+                f"{', '.join(f'{x:.2f}' for x in s1.stats['chunk_wall_s'])} s | LocalCluster {w2:6.2f} s ({l2}), "
+                f"chunk walls {', '.join(f'{x:.2f}' for x in s2.stats['chunk_wall_s'])} s | ratio {w1 / w2:.2f} | "
+                f"{s1.status}/{s2.status}")
+    finally:
+        theirs.close()
+        lc.close()
+    return rows
+
+
 def section_scaling(ode, box, pieces, T, log, workers=(1, 2, 4)):
     from verified.parallel import close_local_clients, local_client
     from verified.solver import solve
@@ -331,6 +370,8 @@ def main(argv=None):
         res["overhead"] = section_overhead(ode, box, (0.5,) if args.quick else (2.0, 0.5), args.repeat, log)
     if "start" in only:
         res["start"] = section_start(args.repeat, log)
+    if "cluster" in only:
+        res["cluster"] = section_cluster(ode, box, pieces, T, args.repeat, log)
     if "scaling" in only:
         res["scaling"] = section_scaling(ode, box, pieces, T, log)
         res["estimate"] = estimate(res["scaling"], pieces, log)
