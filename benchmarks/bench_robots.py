@@ -44,6 +44,9 @@ Cases (issue 17's targets table):
    advanced by composition (``set_step="composition"``, order 12, tol 1e-10,
    ``error_basis="auto"``, max_width 1e6): 1 piece to T = 3 and T = 10, 4x4 to T = 10,
    16x16 to T = 3, against case 6's oracle (500 random points, 250 per edge).
+10. ``arm3_pieces``: case 1's 3-link arm +- 0.01 to T = 2 with case 8's composition
+   (degree 3), the q box split into 3 x 3 x 3 pieces, each a chunk of its own (own step
+   sizes) on 2 local Dask workers (``PIECES_WORKERS``; wall cap ``PIECES_CAP`` = 1800 s).
 
 Oracle: trajectories from all corners of the box (over its wide components), random
 points and the centre (the pendulum: also 250 points per edge), integrated together as
@@ -123,7 +126,10 @@ STEPS_8 = {"mean_value": dict(set_step="mean_value"),
            "degree 4": dict(set_step="composition", model_degree=4)}
 
 CASES = {1: "arm3", 2: "ur5", 3: "panda", 4: "chains", 5: "dp", 6: "pendulum", 7: "qdd", 8: "composition",
-         9: "pendulum_composition"}
+         9: "pendulum_composition", 10: "arm3_pieces"}
+#: case 10: local Dask workers (the 27 pieces' chunks), and its own wall cap (s)
+PIECES_WORKERS = 2
+PIECES_CAP = 1800.0
 Q0_ARM3 = (0.5, -0.3, 0.2)
 Q0_UR5 = (0.0, -1.0, 1.0, -0.5, 0.5, 0.0)
 Q0_PANDA = (0.0, -math.pi / 4, 0.0, -3 * math.pi / 4, 0.0, math.pi / 2, math.pi / 4)
@@ -867,6 +873,34 @@ class Bench:
                 "20.3 / 54.9 (ratio 4.39); T = 10 breaks down at 3.67 s (1 piece) and 4.12 s (4x4).\n\n"
                 + md_table(["grid", "T", "reached", "ratio @ t", "widths q / qd", "wall s", "steps", "sound"],
                            rows))
+
+    # 10 ------------------------------------------------------------------------
+    def arm3_pieces(self):
+        """The 3-link arm +- 0.01 (case 1's target) as a 3 x 3 x 3 grid of q pieces, each
+        a chunk of its own (own step sizes) on ``PIECES_WORKERS`` local Dask workers,
+        second-order sets by composition as case 8 (degree 3): the one box breaks down at
+        0.955 s, a +- 0.0033 piece reaches T = 2 (the pool of symbols)."""
+        from models.planar import planar_chain
+        chain = planar_chain(3)
+        quick = self.quick
+        eps, T, k = (1e-3, 0.2, 2) if quick else (0.01, 2.0, 3)
+        lo, hi = chain_box(Q0_ARM3, eps)
+        names = chain_names(chain)
+        oracle = Oracle(pinocchio_rhs(chain), sample_points(lo, hi, 40 if quick else 60), T, names)
+        opts = dict(order=8, tol=1e-10, error_basis="auto", set_order=2, params_per_state=12,
+                    set_step="composition", subdivision=[k, k, k, 1, 1, 1], chunks=k ** 3,
+                    workers=1 if quick else PIECES_WORKERS, cap=PIECES_CAP)
+        sol, wall = run_chain_solver(chain, lo, hi, T, "taylor_model", opts, self.cap)
+        r = measure("arm3_pieces", "degree 3", setting_label(opts), T, sol, wall, oracle, names)
+        self.log(r)
+        self.results["arm3_pieces"] = [(f"3-link arm, eps {eps:g}, {k}^3 pieces", {"interval": [], "affine": [r]})]
+        row = [f"3-link arm, eps {eps:g}", f"{T:g}", f"{k}x{k}x{k}", str(opts["workers"]), r.reached(),
+               r.ratio_cell(), f"{wall:.1f}", str(sol.stats.get("steps")), "SOUND" if r.sound else "**UNSOUND**"]
+        return ("### 10. The 3-link arm +- 0.01 in pieces, each a chunk of its own\n\n"
+                "`solve(..., set_order=2, set_step=\"composition\", arithmetic=\"taylor_model\", error_basis=\"auto\", "
+                f"order=8, tol=1e-10, params_per_state=12, subdivision=[{k}, {k}, {k}, 1, 1, 1], chunks={k ** 3}, "
+                f"workers=...)`; wall cap {PIECES_CAP:g} s. Steps are summed over the chunks.\n\n"
+                + md_table(["case", "T", "pieces", "workers", "reached", "ratio @ t", "wall s", "steps", "sound"], [row]))
 
     def runs(self):
         """Every Run measured (for tests)."""
