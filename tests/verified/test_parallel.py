@@ -659,6 +659,7 @@ def _check_rechunked(sol, plain, oracle):
     assert np.all(np.abs(w2 / w1 - 1) < 0.03)
 
 
+@pytest.mark.slow  # (with its fixtures ~5 s: the default run stays under its 3-minute budget)
 def test_rechunked_run_contains_samples(ode, mixed, mixed_oracle, mixed_plain, monkeypatch):
     sol = _rechunked(ode, mixed, monkeypatch, rechunk=True)
     _check_rechunked(sol, mixed_plain, mixed_oracle)
@@ -673,6 +674,7 @@ def test_rechunked_run_contains_samples(ode, mixed, mixed_oracle, mixed_plain, m
     assert sol.stats["splits"] > 0 and sol.stats["final_boxes"] >= sol.boxes[-1].shape[0]
 
 
+@pytest.mark.slow  # (with its fixtures ~5 s: the default run stays under its 3-minute budget)
 def test_a_rechunking_that_drops_a_set_is_caught(ode, mixed, mixed_oracle, mixed_plain, monkeypatch):
     cut = parallel._Pieces._cut
 
