@@ -105,6 +105,14 @@ class RunControl(Protocol):
         """A stepper of this run's kind (order, arithmetic, parameters, error basis)
         for another graph over the same inputs, e.g. the negated ODE."""
 
+    def resume_point(self):
+        """Where the run stands after this step, as ``solve(start=...)`` continues from
+        it: a :class:`verified.solver.Start` with the sets, their exact time and the
+        wrapping control's step limit (re-chunking in :mod:`verified.parallel`)."""
+
+    def landed_on_last_output(self, step) -> bool:
+        """Whether ``step`` landed on the run's last output time (the run ends with it)."""
+
 
 @runtime_checkable
 class SolverHook(Protocol):

@@ -423,12 +423,10 @@ class _Pause(Hook):
         self.start = None
 
     def after_step(self, step, sets, run):
-        if run.sets.n_sets < self.at or (step.landed and run.next_out + 1 >= run.outs.size):
+        if sets.n_sets < self.at or run.landed_on_last_output(step):
             return None
-        wrap = getattr(run, "wrap", None)
-        self.start = Start(sets=run.sets, t_exact=run.t_exact,
-                           h_limit=math.inf if wrap is None else float(wrap.h_limit))
-        run.stop(f"paused at {run.sets.n_sets} sets to be cut into new chunks", "stopped")
+        self.start = run.resume_point()
+        run.stop(f"paused at {sets.n_sets} sets to be cut into new chunks", "stopped")
         return None
 
 

@@ -28,6 +28,7 @@ and merging follow. See ``docs/architecture.md``.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -208,6 +209,13 @@ class Solution:
         symbols of its own (the ``n`` states), where the stepper keeps one (the
         composition step, ``set_step="composition"``; None elsewhere, and ``[]`` when
         the run kept none): :mod:`mbs.frames` encloses the frames over the tube in it.
+    chunks : list of dict or None
+        A chunked run (:mod:`verified.parallel`: ``workers``, ``client`` or ``chunks``):
+        per initial chunk its boxes ``(start, stop)``, status, ``t_reached``, steps,
+        tube and, with re-chunking, its ``pieces``; None for one in-process batch.
+    pieces : list of dict or None
+        A chunk's run that was re-chunked: each piece's parent, start time and status
+        (:func:`verified.parallel.solve_parallel`); None otherwise.
     """
 
     t: np.ndarray
@@ -224,6 +232,8 @@ class Solution:
     consistency: object = None
     views: list = field(default_factory=list)
     tube_views: list = field(default_factory=list)
+    chunks: list | None = None
+    pieces: list | None = None
 
     @property
     def success(self) -> bool:
@@ -549,7 +559,7 @@ def solve(
                         model_degree=model_degree, model_caps=model_caps)
 
     run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper, None if start is None else start.t_exact)
-    run.wrap = wrap  # (read by verified.parallel's pause hook: a piece continues with this limit)
+    run.wrap = wrap  # (RunControl.resume_point: a run continued from here keeps this limit)
     steps = 0
     try:
         while run.next_out < outs.size:
@@ -702,6 +712,14 @@ class _Run:
     def stop(self, reason: str, status: str = "stopped") -> None:
         if not self.status:  # the first reason wins
             self.status, self.reason = status, reason
+
+    def resume_point(self) -> Start:
+        return Start(sets=self.sets, t_exact=self.t_exact,
+                     h_limit=math.inf if getattr(self, "wrap", None) is None else float(self.wrap.h_limit))
+
+    def landed_on_last_output(self, step) -> bool:
+        # (hooks run before the landed output is recorded: next_out still points at it)
+        return bool(step.landed) and self.next_out + 1 >= self.outs.size
 
     def rollback(self):
         if self.step is None or self.step.landed or len(self.recent) < 2:
