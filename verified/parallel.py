@@ -3,7 +3,8 @@
 The initial boxes of a run (after ``subdivision``) are independent: the union of
 their solutions is the reachable set. :func:`solve_parallel` (what
 ``solve(..., workers=, client=, chunks=)`` delegates to) partitions them into
-contiguous *chunks*, runs each chunk as its own :func:`verified.solver.solve` --
+contiguous *chunks*, runs each chunk as its own one-batch solve
+(:func:`verified.batch.solve_batch`, what ``solve(..., workers=1)`` runs) --
 with its own step sizes, wrapping control and (with ``adaptive``) its own splitting
 -- and merges the chunk Solutions into one :class:`~verified.solver.Solution`.
 
@@ -115,14 +116,18 @@ from __future__ import annotations
 
 import atexit
 import copy
+import ctypes
 import hashlib
+import importlib
 import inspect
+import json
 import logging
 import math
 import os
 import pickle
 import queue
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -136,9 +141,9 @@ import numpy as np
 from .graph import trace
 from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate, hull, stack
-# (solver imports this module only inside solve(), when workers or a client are asked for)
-from .solver import Solution, Start, VerifiedODE, solve
-from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+from .batch import VerifiedODE, solve_batch
+from .solution import Solution, Start
+from .solver_args import _subdivision, check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "auto_workers", "subprocess_workers_supported", "SchedulerError",
@@ -185,7 +190,7 @@ RECHUNK_GROWTH = 2
 #: may lower it
 RECHUNK_MIN_SETS = MIN_CHUNK_BOXES
 #: solve's default max_boxes (each initial chunk's budget of sets)
-_MAX_BOXES = inspect.signature(solve).parameters["max_boxes"].default
+_MAX_BOXES = inspect.signature(solve_batch).parameters["max_boxes"].default
 _STATUS_RANK = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
 
 
@@ -198,8 +203,10 @@ class WorkerStartError(RuntimeError):
 
 
 def dask_available() -> bool:
+    """Whether dask.distributed (an optional extra) can be imported: imported here, not
+    only found, so that an installation that fails to import counts as missing."""
     try:
-        import distributed  # noqa: F401
+        importlib.import_module("distributed")
     except ImportError:
         return False
     return True
@@ -217,7 +224,7 @@ def _in_dask_worker() -> bool:
     if "distributed" not in sys.modules:
         return False
     try:
-        from distributed import get_worker
+        from distributed import get_worker  # (the optional extra, already in sys.modules here)
         get_worker()
     except ValueError:
         return False
@@ -227,7 +234,6 @@ def _in_dask_worker() -> bool:
 def _box_count(ode, x0, subdivision) -> int:
     """The number of initial boxes ``solve`` would run (0 when the arguments are bad:
     solve's own checks report them)."""
-    from .solver_args import _subdivision
     try:
         graph = ode.graph if isinstance(ode, VerifiedODE) else ode
         n = int(graph.n_inputs)
@@ -301,7 +307,6 @@ def _tune_malloc():
         return
     _MALLOC_TUNED = True
     try:
-        import ctypes
         libc = ctypes.CDLL("libc.so.6")
         libc.mallopt(-1, 256 * 2**20)  # M_TRIM_THRESHOLD
         libc.mallopt(-3, 32 * 2**20)   # M_MMAP_THRESHOLD
@@ -331,7 +336,7 @@ def _warm_kernels() -> float:
     t = time.perf_counter()
     g = trace(lambda x, p: [x[1], -np.sin(x[0])], 2)
     for arithmetic in ("interval", "affine"):
-        solve(g, Interval([0.1, 0.0], [0.11, 0.01]), (0.0, 0.02), arithmetic=arithmetic, h_max=0.01, workers=1)
+        solve_batch(g, Interval([0.1, 0.0], [0.11, 0.01]), (0.0, 0.02), arithmetic=arithmetic, h_max=0.01)
     return time.perf_counter() - t
 
 
@@ -361,7 +366,7 @@ class _Report(Hook):
         if now - self._last >= self.every:
             self._last = now
             try:
-                from distributed import get_worker
+                from distributed import get_worker  # (the optional extra, loaded on a Dask worker)
                 get_worker().log_event(self.topic, {"i": self.index, "t": float(step.t)})
             except Exception:  # noqa: BLE001 - progress is best effort
                 pass
@@ -667,7 +672,7 @@ def _worker_env() -> dict:
     ``sys.path`` (a spawned process got it; a fresh interpreter needs it on
     ``PYTHONPATH``: the script's folder, a path added at run time) and Dask
     configuration (also what was set at run time with ``dask.config.set``)."""
-    import dask.config
+    import dask.config  # (optional extra, only to start local workers)
     env = dict(os.environ)
     path = [os.getcwd() if p == "" else p for p in sys.path]
     env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(path))
@@ -682,9 +687,8 @@ def _subprocess_worker_class():
     """:class:`distributed.deploy.subprocess.SubprocessWorker` started as its own session
     (Ctrl-C in a terminal reaches the whole foreground process group: the workers would
     shut down with this process's KeyboardInterrupt) with :func:`_worker_env`."""
+    # (asyncio: ~60 ms to import, only for this class; distributed: the optional extra)
     import asyncio
-    import json
-    import subprocess
 
     from distributed.deploy.subprocess import SubprocessWorker
 
@@ -714,6 +718,7 @@ def _start_local_cluster(workers: int):
     dies (a killed worker's chunk is retried by the scheduler). The workers are their
     own session (a terminal's Ctrl-C does not stop them) and leave when this process
     does: a worker that loses the scheduler closes, and its nanny with it."""
+    # (dask.distributed: an optional extra, imported only when a cluster is asked for)
     from distributed import Client, Scheduler, SpecCluster
     from distributed.worker_memory import parse_memory_limit
 
@@ -771,7 +776,7 @@ def local_client(workers: int):
             raise WorkerStartError(f"could not start {workers} local Dask worker processes ({why}); pass "
                                    "workers=1 to run in this process") from None
     else:  # pragma: no cover - Windows
-        from distributed import Client, LocalCluster
+        from distributed import Client, LocalCluster  # (optional extra, only for a cluster)
         try:
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
                                    silence_logs=logging.ERROR)
@@ -822,7 +827,7 @@ def connect(address: str, timeout: float | None = None):
     if not isinstance(address, str) or "://" not in address and ":" not in address:
         raise ValueError(f"scheduler address must look like tcp://host:port, got {address!r}")
     try:
-        from distributed import Client
+        from distributed import Client  # (optional extra: its absence is the error below)
     except ImportError:
         raise SchedulerError(f"cannot use the Dask scheduler at {address}: dask.distributed is not installed "
                              "(pip install 'mbs-verified[parallel]')") from None
@@ -863,7 +868,7 @@ def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> fl
                                                  "wrap_target")}
     t0, t1 = kwargs["t_span"]
     try:
-        solve(ode, Interval(box_lo, box_hi), (t0, t1), params=params, max_steps=1, workers=1, **kw)
+        solve_batch(ode, Interval(box_lo, box_hi), (t0, t1), params=params, max_steps=1, **kw)
     except Exception:  # noqa: BLE001 - the chunk itself will report a real problem
         pass
     return time.perf_counter() - t
@@ -876,8 +881,8 @@ def _solve_piece(ode, piece: _Piece, kwargs: dict, extra_hooks=()):
     pause = _Pause(piece.pause_at) if piece.pause_at is not None else None
     kw["hooks"] = list(kw.get("hooks") or ()) + list(extra_hooks) + ([pause] if pause is not None else [])
     kw["max_boxes"] = piece.max_boxes
-    sol = solve(ode, Interval(piece.lo, piece.hi), kw.pop("t_span"), params=piece.params, start=piece.start,
-                workers=1, **kw)  # (one batch: never a cluster of its own)
+    sol = solve_batch(ode, Interval(piece.lo, piece.hi), kw.pop("t_span"), params=piece.params, start=piece.start,
+                      **kw)  # (one batch: never a cluster of its own)
     paused = pause.start if pause is not None and sol.status == "stopped" else None
     return sol, paused
 
@@ -997,8 +1002,8 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
             ranges = [(0, nb)] if chunks is None else plan_chunks(nb, 1, chunks)
             rechunk_on = adaptive and consistency is None and bool(rechunk)
     if backend == "inprocess" and len(ranges) == 1 and not rechunk_on:  # one batch: exactly solve's own result
-        sol = solve(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
-                    hooks=list(hooks_in), workers=1, **kwargs)
+        sol = solve_batch(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
+                          hooks=list(hooks_in), **kwargs)
         sol.stats.update(chunks=1, workers=1, backend="inprocess")
         return sol
     base = dict(kwargs, t_span=(t0, t1))
@@ -1298,6 +1303,7 @@ def _merge_records(records):
         return None
     if len(records) == 1:
         return records[0]
+    # (only with a consistency test: verified.consistency costs ~0.2 s to import)
     from .consistency import ConsistencyRecord
     tests = sorted((t for r in records for t in r.tests), key=lambda t: t.t)
     series = [r for r in records if len(r.ra_t)]

@@ -1,6 +1,8 @@
 """Issue 15: no import cycles. The graph modules import in one direction,
 opcodes -> evaluate -> ir -> tracer, graph_sympy -> graph (the public front), and
-no module of mbs/, models/ or verified/ takes part in a cycle of module-level imports."""
+no module of mbs/, models/ or verified/ takes part in a cycle of module-level imports; the
+solver imports the chunked execution and the one-batch driver in one direction, also with
+the imports inside functions, solution -> batch -> parallel -> solver."""
 import ast
 from pathlib import Path
 
@@ -36,14 +38,15 @@ def _targets(mods, cur, node):
             yield n
 
 
-def _module_level_imports(mods, name):
-    """Imports executed when the module is imported: not inside functions, not under
+def _module_level_imports(mods, name, in_functions=False):
+    """Imports executed when the module is imported: not inside functions (with
+    ``in_functions``: those too, run when the function is), not under
     ``if TYPE_CHECKING``."""
     out = set()
 
     def walk(node):
         for ch in ast.iter_child_nodes(node):
-            if isinstance(ch, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            if not in_functions and isinstance(ch, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
                 continue
             if isinstance(ch, ast.If) and "TYPE_CHECKING" in ast.unparse(ch.test):
                 continue
@@ -81,3 +84,22 @@ def test_graph_modules_import_downward():
              "verified.graph"]
     for i, m in enumerate(order):
         assert not (_module_level_imports(mods, m) & set(order[i + 1:])), m
+
+
+def test_solver_parallel_and_the_driver_import_one_way_also_inside_functions():
+    """``verified.solver.solve`` dispatches to ``verified.parallel``, which runs its chunks
+    with ``verified.batch`` (the one-batch driver); ``Solution`` and ``Start`` are in
+    ``verified.solution``. No import of a lower one reaches a higher one, not even one
+    inside a function (run when it is called), directly or through other modules."""
+    mods = _modules()
+    edges = {m: _module_level_imports(mods, m, in_functions=True) for m in mods}
+    order = ["verified.solution", "verified.batch", "verified.parallel", "verified.solver"]
+    for i, m in enumerate(order):
+        assert not (edges[m] & set(order[i + 1:])), m
+        seen, todo = set(), list(edges[m])
+        while todo:
+            t = todo.pop()
+            if t not in seen:
+                seen.add(t)
+                todo.extend(edges[t])
+        assert not (seen & set(order[i:])), (m, sorted(seen & set(order[i:])))

@@ -212,19 +212,19 @@ def test_absorbing_the_error_part_is_exact():
 def test_absorption_happens_and_stays_sound():
     """Double pendulum quarter box, T = 0.8: the error part is absorbed at least once and
     DOP853 trajectories stay inside."""
-    import verified.solver as vs
+    import verified.batch as vb  # (the one-batch driver solve runs)
     lo, hi = dp.initial_box()
     c = 0.5 * (lo + hi)
     lo, hi = c - 0.25 * (c - lo), c + 0.25 * (hi - c)
     seen = {}
-    real = vs._stepper
+    real = vb._stepper
 
     def spy(*args, **kwargs):
         st = real(*args, **kwargs)
         seen["stepper"] = st
         return st
     import unittest.mock as um
-    with um.patch.object(vs, "_stepper", spy):
+    with um.patch.object(vb, "_stepper", spy):
         sol = solve(trace(dp.rhs, 4), Interval(lo, hi), (0.0, 0.8), t_eval=np.linspace(0, 0.8, 9), set_order=2)
     assert sol.success, sol
     assert seen["stepper"].absorbed >= 1
@@ -236,19 +236,19 @@ def test_params_per_state_argument_and_cap():
     """``params_per_state`` reaches both steppers; bad values are a one-line error."""
     import unittest.mock as um
 
-    import verified.solver as vs
+    import verified.batch as vb  # (the one-batch driver solve runs)
     g = trace(pd.rhs, 2)
     lo, hi = pd.initial_box()
     for bad in (0, -1, 2.5, True, "8"):
         with pytest.raises(ValueError, match="params_per_state must be an int >= 1"):
             solve(g, Interval(lo, hi), (0.0, 0.1), params_per_state=bad)
     seen = []
-    real = vs._stepper
+    real = vb._stepper
 
     def spy(*args, **kwargs):
         seen.append(real(*args, **kwargs))
         return seen[-1]
-    with um.patch.object(vs, "_stepper", spy):
+    with um.patch.object(vb, "_stepper", spy):
         solve(g, Interval(lo, hi), (0.0, 0.05), set_order=2, params_per_state=6)
         solve(g, Interval(lo, hi), (0.0, 0.05), absorb=True, params_per_state=3)
         solve(g, Interval(lo, hi), (0.0, 0.05), set_order=2)

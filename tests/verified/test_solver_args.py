@@ -10,7 +10,7 @@ ignored and ``subdivision=[4, 4]`` for 4 states leaked a numpy broadcast error).
 import numpy as np
 import pytest
 
-import verified.solver as solver_mod
+import verified.batch as batch_mod  # (the one-batch driver: where solve prepares and steps)
 from verified.graph import trace
 from verified.interval import Interval, empty
 from verified.solver import solve
@@ -37,8 +37,8 @@ def no_work(monkeypatch):
     def stepped(*a, **k):
         raise AssertionError("integration started before the arguments were checked")
 
-    monkeypatch.setattr(solver_mod, "TaylorODE", prepared)
-    monkeypatch.setattr(solver_mod, "_stepper", stepped)
+    monkeypatch.setattr(batch_mod, "TaylorODE", prepared)
+    monkeypatch.setattr(batch_mod, "_stepper", stepped)
 
 
 def _refused(match, call, exc=ValueError):

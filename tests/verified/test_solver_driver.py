@@ -275,13 +275,13 @@ def test_stop_after_wall_zero_stops_after_the_first_step_and_huge_never(ode, box
 
 
 def test_bad_hooks_are_refused_in_one_line_before_any_work(box, monkeypatch):
-    import verified.solver as solver_mod
+    import verified.batch as batch_mod  # (the one-batch driver solve runs)
 
     def no_work(*a, **k):
         raise AssertionError("work started before the hooks were checked")
 
-    monkeypatch.setattr(solver_mod, "TaylorODE", no_work)
-    monkeypatch.setattr(solver_mod, "_stepper", no_work)
+    monkeypatch.setattr(batch_mod, "TaylorODE", no_work)
+    monkeypatch.setattr(batch_mod, "_stepper", no_work)
     g = trace(pd.rhs, 2, input_names=NAMES)
     for bad in (object(), "hook", 3):
         with pytest.raises(ValueError) as info:
