@@ -181,6 +181,10 @@ MIN_CHUNK_BOXES = 64
 #: below, the default plan is one chunk, which runs in this process anyway (it was 32,
 #: with the cluster's start of ~2-3 s once per process the reason)
 AUTO_MIN_PIECES = 2 * MIN_CHUNK_BOXES
+#: what ``workers=None`` means: True, every core when worthwhile (:func:`auto_workers`);
+#: False, one in-process batch (the benchmarks that time one core against one core,
+#: against CAPD or earlier runs, set it; an explicit ``workers=`` is unaffected)
+DEFAULT_PARALLEL = True
 #: re-chunking (``rechunk``): a piece pauses once it holds this many times as many sets
 #: as it started with (and at least this many times the plan's mean chunk size and
 #: ``RECHUNK_MIN_SETS``), and its sets are cut into pieces of about the larger of the two
@@ -252,6 +256,8 @@ def auto_workers(ode, x0, subdivision=None):
     dask.distributed installed (an optional extra), workers that do not re-run the
     calling script (POSIX, :func:`subprocess_workers_supported`) and not already on a
     Dask worker (a chunk, or a user's task, runs in its process)."""
+    if not DEFAULT_PARALLEL:
+        return None
     n = default_workers()
     if n < 2:
         return None

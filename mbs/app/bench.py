@@ -81,6 +81,9 @@ def run_case(name, model, x0, t_end, *, samples=64, output_dt=None, note="", **k
     row = dict(case=name, note=note, t_end=t_end, status="crash", t_reached=0.0, reason="", wall_s=0.0,
                widths=None, worst_ratio=None, escaped=0, checked=0, nan=False, max_boxes=None)
     t0 = time.perf_counter()
+    # one in-process batch unless the case says otherwise: a work-precision row must not
+    # change machines (a local cluster from 128 pieces on) between piece counts
+    kw.setdefault("workers", 1)
     try:
         sol = _simulate()(model, x0, t_end, output_dt=output_dt, **kw)
         row["wall_s"] = time.perf_counter() - t0

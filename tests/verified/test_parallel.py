@@ -345,6 +345,9 @@ def test_default_workers_on_a_small_batch_stays_in_process(ode, box, single, mon
         with monkeypatch.context() as m:
             m.setattr(parallel, name, lambda value=value: value)
             assert auto(ode, box, [n, 1, 1, 1]) is None
+    with monkeypatch.context() as m:  # (the benchmarks' switch: one core against one core)
+        m.setattr(parallel, "DEFAULT_PARALLEL", False)
+        assert auto(ode, box, [n, 1, 1, 1]) is None
     monkeypatch.setattr(parallel, "default_workers", lambda: 1)
     assert auto(ode, box, [n, 1, 1, 1]) is None
 
