@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from . import interval as _interval
-from .forward_rules import RULES
+from .forward_rules import RULES, Algebra
 from .opcodes import Op
 
 if TYPE_CHECKING:  # (annotations only: verified.ir imports this module)
@@ -377,28 +377,17 @@ class DualDomain(Domain):
         return self._apply(Op.MID, a)
 
 
-class _DualAlgebra:
+class _DualAlgebra(Algebra):
     """The algebra of :mod:`verified.forward_rules` over a base domain: values are base
     values of the batch shape, derivatives base values with a trailing axis of
     directions (None: zero); value operations are the base domain's."""
 
     def __init__(self, base: Domain):
+        super().__init__(base)
         self.base = base
-        for name in ("add", "sub", "mul", "div", "neg", "sqr", "pow", "sqrt", "exp", "log",
-                     "sin", "cos", "tan", "atan", "mid"):
-            setattr(self, name, getattr(base, name))
 
     def num(self, c):
         return float(c)
-
-    def d_add(self, p, q):
-        return q if p is None else p if q is None else self.base.add(p, q)
-
-    def d_sub(self, p, q):
-        return p if q is None else self.base.neg(q) if p is None else self.base.sub(p, q)
-
-    def d_neg(self, p):
-        return None if p is None else self.base.neg(p)
 
     def d_scale(self, f, p):
         """``f * p`` with ``f`` of the batch shape (broadcast over the last axis)."""

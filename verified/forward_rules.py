@@ -36,7 +36,31 @@ from typing import Callable, NamedTuple
 
 from .opcodes import Op
 
-__all__ = ["Rule", "RULES"]
+__all__ = ["Rule", "RULES", "Algebra", "VALUE_OPS"]
+
+
+#: the value operations of the algebra (taken from the underlying domain or builder)
+VALUE_OPS = ("add", "sub", "mul", "div", "neg", "sqr", "pow", "sqrt", "exp", "log",
+             "sin", "cos", "tan", "atan", "mid")
+
+
+class Algebra:
+    """What both algebras share: the value operations of ``ops`` (a domain or a graph
+    builder) and the derivative sums with ``None`` as a structural zero. Subclasses
+    give ``num``, ``d_scale`` and ``d_div``."""
+
+    def __init__(self, ops):
+        for name in VALUE_OPS:
+            setattr(self, name, getattr(ops, name))
+
+    def d_add(self, p, q):
+        return q if p is None else p if q is None else self.add(p, q)
+
+    def d_sub(self, p, q):
+        return p if q is None else self.neg(q) if p is None else self.sub(p, q)
+
+    def d_neg(self, p):
+        return None if p is None else self.neg(p)
 
 
 class Rule(NamedTuple):

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from .forward_rules import RULES
+from .forward_rules import RULES, Algebra
 from .graph import Graph, GraphBuilder, Op
 
 __all__ = ["embed", "forward_mode", "rate_along", "augment_with_rate", "negated", "difference"]
@@ -49,27 +49,16 @@ def embed(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: Sequence
     return [ids[o] for o in graph.outputs]
 
 
-class _BuilderAlgebra:
+class _BuilderAlgebra(Algebra):
     """The algebra of :mod:`verified.forward_rules` on node ids of a builder: values and
     derivatives (one direction each) are nodes, ``None`` a structural zero."""
 
     def __init__(self, b: GraphBuilder):
+        super().__init__(b)
         self.b = b
-        for name in ("add", "sub", "mul", "div", "neg", "sqr", "pow", "sqrt", "exp", "log",
-                     "sin", "cos", "tan", "atan", "mid"):
-            setattr(self, name, getattr(b, name))
 
     def num(self, c):
         return self.b.const(c)
-
-    def d_add(self, p, q):
-        return q if p is None else p if q is None else self.b.add(p, q)
-
-    def d_sub(self, p, q):
-        return p if q is None else self.b.neg(q) if p is None else self.b.sub(p, q)
-
-    def d_neg(self, p):
-        return None if p is None else self.b.neg(p)
 
     def d_scale(self, f, p):
         return None if p is None else self.b.mul(f, p)
