@@ -237,8 +237,8 @@ def solve_batch(
         return _stepper(kind, VerifiedODE(graph, prob.arithmetic), order, setup.params, error_basis,
                         model_degree=model_degree, model_caps=model_caps)
 
-    run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper, None if start is None else start.t_exact)
-    run.wrap = wrap  # (RunControl.resume_point: a run continued from here keeps this limit)
+    run = _Run(setup, boxes[:, :setup.n_state], outs, make_stepper, None if start is None else start.t_exact,
+               wrap=wrap)
     steps = 0
     try:
         while run.next_out < outs.size:
@@ -362,7 +362,7 @@ class _Run:
     """The state of one integration: the sets, the exact time, what has been recorded,
     and the counters. It is the :class:`~verified.hooks.RunControl` the hooks get."""
 
-    def __init__(self, setup: RunSetup, initial: Interval, outs: np.ndarray, make_stepper, t_exact=None):
+    def __init__(self, setup: RunSetup, initial: Interval, outs: np.ndarray, make_stepper, t_exact=None, wrap=None):
         self.sets = setup.sets
         self.outs = outs  # (k,) output times, outs[0] = t0
         self.make_stepper = make_stepper
@@ -385,6 +385,7 @@ class _Run:
         self.evaluations = self.rejected = self.splits = self.merges = self.pruned = 0
         self.max_sets = self.sets.n_sets
         self.n_state = setup.n_state
+        self.wrap = wrap  # the wrapping control (resume_point: a run continued from here keeps its limit)
 
     # ------------------------------------------------------------------ RunControl
     def stop(self, reason: str, status: str = "stopped") -> None:
@@ -393,7 +394,7 @@ class _Run:
 
     def resume_point(self) -> Start:
         return Start(sets=self.sets, t_exact=self.t_exact,
-                     h_limit=math.inf if getattr(self, "wrap", None) is None else float(self.wrap.h_limit))
+                     h_limit=math.inf if self.wrap is None else float(self.wrap.h_limit))
 
     def landed_on_last_output(self, step) -> bool:
         # (hooks run before the landed output is recorded: next_out still points at it)
