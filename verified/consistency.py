@@ -293,6 +293,7 @@ class EnergyTest(Hook):
             decision = None  # (backing off: an RA peak, but the last tests pruned nothing)
             self.stats["tests_skipped"] += 1
         only = None
+        trigger = "RA maximum" if decision == "previous" else "interval"
         if decision == "previous":
             only = self._tracker.peaked  # the sets whose RA peaked (same order before and after the step)
             back = run.rollback() if not changed else None
@@ -313,10 +314,11 @@ class EnergyTest(Hook):
             pruned_before = self.stats["pruned_boxes"]
             if only is not None and only.shape == (sets.n_sets,) and not only.all():
                 # test only the sets whose RA peaked; the others continue unchanged
-                tested = self.apply(step.t, step.t_enclosure, sets.take(np.flatnonzero(only)), prev)
+                tested = self.apply(step.t, step.t_enclosure, sets.take(np.flatnonzero(only)), prev,
+                                    trigger=trigger)
                 sets = type(sets).concatenate([sets.take(np.flatnonzero(~only)), tested])
             else:
-                sets = self.apply(step.t, step.t_enclosure, sets, prev)
+                sets = self.apply(step.t, step.t_enclosure, sets, prev, trigger=trigger)
             self._test_wait.done(self.stats["pruned_boxes"] > pruned_before)
         else:
             self._tracker.tested(step.t)
@@ -407,7 +409,7 @@ class EnergyTest(Hook):
         return self._tracker.peaked
 
     # ------------------------------------------------------------------ branch and prune
-    def apply(self, t: float, t_iv: Interval, sets, previous=None):
+    def apply(self, t: float, t_iv: Interval, sets, previous=None, trigger: str = "interval"):
         """Branch and prune all sets at time ``t`` (enclosed by ``t_iv``); returns the
         surviving sets.
 
@@ -419,7 +421,8 @@ class EnergyTest(Hook):
         (:func:`verified.branch_prune.branch_and_prune`).
 
         ``previous``: ``(sets, h_step, make_stepper)`` of the step before, for the
-        backward test (or None)."""
+        backward test (or None). ``trigger``: why the test runs, kept in its
+        :class:`~verified.reduction_area.TestRecord` ("RA maximum" or "interval")."""
         w0 = time.perf_counter()
         nb0 = sets.n_sets
         res = branch_and_prune(self._lifted, sets, t_iv, strategy=self.split_strategy, test_splits=self.test_splits,
@@ -448,7 +451,7 @@ class EnergyTest(Hook):
             candidates=concatenate(tested_hulls, axis=0) if tested_hulls else empty,
             kept=np.concatenate(tested_kept) if tested_kept else np.zeros(0, bool),
             h_v=hv, sets_before=nb0, sets_after=out.n_sets,
-            backward_deleted=removed_back))
+            backward_deleted=removed_back, trigger=trigger))
         self.stats["test_s"] += time.perf_counter() - w1
         return out
 

@@ -40,6 +40,9 @@ class TestRecord:
     sets_after: int
     backward_deleted: int = 0
     backward_runs: int = 0
+    #: why the test ran: "RA maximum" (the first local maximum of RA(t) after the last
+    #: test, the paper's t*) or "interval" (``test_interval`` passed without one)
+    trigger: str = "interval"
 
 
 @dataclass

@@ -52,9 +52,16 @@ def fig_reduction_area(sol, path, title=None):
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     t = np.asarray(c.ra_t, float)
     ax1.plot(t, np.asarray(c.ra, float), color="black", lw=1.3, label=r"$\mathcal{RA}(t)$")
-    for j, rec in enumerate(c.tests):
-        ax1.axvline(rec.t, color="tab:red", ls=":", lw=1.0, label=r"test time $t^*$" if j == 0 else None)
-        ax2.axvline(rec.t, color="tab:red", ls=":", lw=1.0)
+    # a test at RA's first local maximum (the paper's t*) and one due by test_interval
+    # (RA still rising) look alike in the record; the figure tells them apart
+    styles = {"RA maximum": (dict(color="tab:red", ls=":", lw=1.0), r"test at a maximum of $\mathcal{RA}$ ($t^*$)"),
+              "interval": (dict(color="0.45", ls="--", lw=0.8), "test due by test_interval (no maximum yet)")}
+    labelled = set()
+    for rec in c.tests:
+        style, label = styles.get(getattr(rec, "trigger", "interval"), styles["interval"])
+        ax1.axvline(rec.t, label=None if label in labelled else label, **style)
+        ax2.axvline(rec.t, **style)
+        labelled.add(label)
     ax1.set_ylabel(r"$\mathcal{RA}(t)$ [J]")
     ax1.legend(loc="best")
     ax1.set_title(title or r"Reduction area (eq. 16) of the set with the largest one: "

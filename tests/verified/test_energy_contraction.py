@@ -204,10 +204,32 @@ def test_ra_is_per_set_and_has_a_first_local_maximum_on_the_pendulum():
     assert rec.tests, "no test ran"
     t_star = rec.tests[0].t
     assert t_star < 1.0  # a local maximum, not the interval cap
+    assert rec.tests[0].trigger == "RA maximum"
     k = int(np.searchsorted(rec.ra_t, t_star))
     assert rec.ra[k] >= rec.ra[max(k - 1, 0)] and rec.ra[k] > rec.ra[k + 1]
     # RA of one set never exceeds the width of that set's H_H (eq. (16))
     assert np.all(rec.ra <= rec.h_h_set.width() * (1 + 1e-12) + 1e-300)
+
+
+def test_each_test_records_why_it_ran():
+    """A test at a local maximum of RA says "RA maximum", one that ran because
+    test_interval passed says "interval" (Fig. 2 draws them apart). One box, no
+    contraction: RA peaks at the first step, is 0 from 0.24 s, so both kinds occur."""
+    rhs, H = _pendulum()
+    lo, hi = pd.initial_box()
+    test = EnergyTest(H, "derive", contract="off", test_interval=0.1, test_splits=4)
+    sol = solve(rhs, Interval(lo, hi), (0.0, 0.6), t_eval=[0.6], consistency=test, order=12, tol=1e-10)
+    rec = sol.consistency
+    assert {r.trigger for r in rec.tests} == {"RA maximum", "interval"}
+    last = 0.0
+    for r in rec.tests:
+        k = int(np.argmin(np.abs(rec.ra_t - r.t)))
+        assert abs(rec.ra_t[k] - r.t) < 1e-12
+        if r.trigger == "RA maximum":
+            assert rec.ra[k] > 0 and (k + 1 == rec.ra.size or rec.ra[k] > rec.ra[k + 1])
+        else:
+            assert r.t - last >= test.test_interval * (1 - 1e-12)
+        last = r.t
 
 
 # ----------------------------------------------------------------------------- declared claims
