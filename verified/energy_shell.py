@@ -18,7 +18,9 @@ pieces, T = 3): cut 0.5 widths 36.2 / 21.9, 178 / 14.8, 17.8 / 34.0; cut 0.7 29.
 no state of the shell holds no true state and is dropped. The result is bounded and
 sound where the plain run breaks down "too wide": the paper's pendulum over the top
 (one box) keeps ``|qd| <= 6.5`` instead of growing to widths of 5000
-(docs/energy_contraction.md).
+(docs/energy_contraction.md). First- and second-order sets (``set_order=2``, both
+``set_step``s) are held alike: a reset set is the contracted box, a fresh set of the
+batch's kind with as many parameters as the others (the new ones 0).
 
 Soundness rests on ``hmax``: the caller states that ``H`` never rises above it along
 the solutions from the initial set (:func:`max_energy` gives the bound for a
@@ -37,9 +39,14 @@ from .evaluate import eval_interval
 from .graph import Graph
 from .hooks import Hook, RunSetup
 from .interval import Interval
+from .quadratic import QuadraticSets
 from .sets import DoubletonSets
 
 __all__ = ["EnergyShellHook", "max_energy"]
+
+# the set types a reset can rebuild from a box (``from_boxes``, ``with_params``,
+# ``replaced``); a fresh box set is exact for any of them
+_SET_TYPES = (DoubletonSets, QuadraticSets)
 
 
 class _Contracted(NamedTuple):
@@ -93,8 +100,9 @@ class EnergyShellHook(Hook):
         if setup.n_state < nq2:
             raise ValueError(f"the energy shell needs the first {nq2} states to be (q, qd); "
                              f"the ODE has {setup.n_state}")
-        if not isinstance(setup.sets, DoubletonSets) or type(setup.sets) is not DoubletonSets:
-            raise ValueError("the energy shell works on first-order sets (set_order=1)")
+        if type(setup.sets) not in _SET_TYPES:
+            raise ValueError("the energy shell works on first- and second-order sets (set_order=1 or 2), "
+                             f"not on {type(setup.sets).__name__}")
         res = self._contract(setup.sets.hull()[:, :nq2])
         if res.empty.any():
             raise ValueError(f"an initial box lies outside the energy shell H <= {self.hmax!r}: "
@@ -105,7 +113,7 @@ class EnergyShellHook(Hook):
         return self.shell.contract(boxes, self.hmax, params=self.params, pieces=self.pieces)
 
     def after_step(self, step, sets, run):
-        if type(sets) is not DoubletonSets:
+        if type(sets) not in _SET_TYPES:
             return None
         nq2 = 2 * self.shell.nq
         hull = sets.hull()
@@ -142,7 +150,7 @@ class EnergyShellHook(Hook):
             lo, hi = hull.lo[idx].copy(), hull.hi[idx].copy()  # (k, N): other states keep their hull
             lo[:, :nq2], hi[:, :nq2] = res.lo[idx], res.hi[idx]
             box = Interval(lo, hi)
-            fresh = DoubletonSets.from_boxes(box).with_params(sets.C.shape[2])
+            fresh = type(sets).from_boxes(box).with_params(sets.C.shape[2])
             out = out.replaced(idx, fresh)
             self.resets += idx.size
         if not keep.all():

@@ -284,6 +284,31 @@ class QuadraticSets:
     def take(self, index) -> "QuadraticSets":
         return QuadraticSets(self.c[index], self.C[index], self.r0[index], self.S[index], self.Q[index], self.r[index])
 
+    def with_params(self, m: int) -> "QuadraticSets":
+        """The same sets with ``m`` parameters (>= the current number): zero columns of
+        ``C``, zero rows and columns of ``S`` and ``r0 = 0`` appended (the same sets;
+        a fresh set can then join a batch whose errors were absorbed)."""
+        nb, n, m0 = self.C.shape
+        if m == m0:
+            return self
+        if m < m0:
+            raise ValueError(f"with_params: {m} parameters, fewer than the sets' {m0}")
+        C = np.concatenate([self.C, np.zeros((nb, n, m - m0))], axis=2)
+        S = np.zeros((nb, n, m, m))
+        S[:, :, :m0, :m0] = self.S
+        r0 = concatenate([self.r0, point(np.zeros((nb, m - m0)))], axis=1)
+        return QuadraticSets(c=self.c, C=C, r0=r0, S=S, Q=self.Q, r=self.r)
+
+    def replaced(self, idx: np.ndarray, part: "QuadraticSets") -> "QuadraticSets":
+        """The same batch with the sets at ``idx`` replaced by ``part`` (as many sets,
+        the same parameter count), the order kept (the energy shell)."""
+        c, C, S, Q = self.c.copy(), self.C.copy(), self.S.copy(), self.Q.copy()
+        r0, r = self.r0.copy(), self.r.copy()
+        c[idx], C[idx], S[idx], Q[idx] = part.c, part.C, part.S, part.Q
+        r0.lo[idx], r0.hi[idx] = part.r0.lo, part.r0.hi
+        r.lo[idx], r.hi[idx] = part.r.lo, part.r.hi
+        return QuadraticSets(c=c, C=C, r0=r0, S=S, Q=Q, r=r)
+
     def linear_width(self) -> np.ndarray:
         """Width of the part carried without wrapping, ``C r0 + q(r0)``, shape (B, n)."""
         return (linalg.matvec(self.C, self.r0) + self.q_range()).width()

@@ -30,10 +30,13 @@ def _hmax(lo, hi):
     return max_energy(trace(lambda x, p: [pd.hamiltonian(x)], 2), Interval(lo, hi))
 
 
-def _run(hooks, T=T):
+def _run(hooks, T=T, **kw):
     lo, hi = pd.initial_box()
     return solve(trace(pd.rhs, 2), Interval(lo, hi), (0.0, T), t_eval=np.linspace(0, T, 13), error_basis="auto",
-                 max_width=1e6, hooks=hooks)
+                 max_width=1e6, hooks=hooks, **kw)
+
+
+SECOND_ORDER = dict(set_order=2, set_step="composition", arithmetic="taylor_model", order=12, tol=1e-10)
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +66,60 @@ def test_pendulum_over_the_top_held_in_the_shell(samples):
     vmax = np.sqrt(2 * _hmax(lo, hi))
     assert held.hull[-1].width()[1] <= 2 * vmax * 1.01 / hook.cut  # (reset once cut below hook.cut)
     assert held.hull[-1].width()[1] < 0.5 * plain.hull[-1].width()[1]
+
+
+@pytest.mark.slow  # 4 s
+def test_second_order_sets_are_held_in_the_shell(samples):
+    """Second-order sets by composition: reset sets become fresh second-order sets
+    with the batch's parameter count; every sampled trajectory stays inside (outputs
+    and tube), and qd is narrower than without the shell."""
+    lo, hi = pd.initial_box()
+    hook = EnergyShellHook(_shell(), _hmax(lo, hi))
+    held = _run([hook], **SECOND_ORDER)
+    plain = _run([], **SECOND_ORDER)
+    assert held.status == "completed", held
+    assert held.stats["shell_resets"] >= 1
+    assert misses(held, samples, per_step=2) == []
+    assert held.hull[-1].width()[1] < 0.7 * plain.hull[-1].width()[1]
+
+
+@pytest.mark.slow  # 4 s
+def test_oracle_bites_when_a_second_order_reset_keeps_too_little(samples, monkeypatch):
+    """A reset that keeps the middle 80 % of the contracted box's parameters must
+    lose sampled trajectories."""
+    from verified.quadratic import QuadraticSets
+    real = QuadraticSets.replaced
+
+    def shrunk(self, idx, part):
+        return real(self, idx, QuadraticSets(c=part.c, C=part.C, r0=part.r0 * 0.8, S=part.S, Q=part.Q, r=part.r))
+    monkeypatch.setattr(QuadraticSets, "replaced", shrunk)
+    lo, hi = pd.initial_box()
+    held = _run([EnergyShellHook(_shell(), _hmax(lo, hi))], **SECOND_ORDER)
+    assert misses(held, samples, per_step=2) != []
+
+
+def test_quadratic_sets_with_params_and_replaced_are_exact():
+    from verified.quadratic import QuadraticSets
+    rng = np.random.default_rng(3)
+    lo = rng.normal(size=(3, 2))
+    sets = QuadraticSets.from_boxes(Interval(lo, lo + 0.5))
+    sets = QuadraticSets(c=sets.c, C=sets.C, r0=sets.r0, S=rng.normal(size=(3, 2, 2, 2)) * 0.01, Q=sets.Q,
+                         r=sets.r)
+    wide = sets.with_params(5)
+    assert wide.C.shape == (3, 2, 5) and wide.S.shape == (3, 2, 5, 5) and wide.r0.shape == (3, 5)
+    # the same sets: the hull may only gain the rounding of the added zero terms
+    assert (wide.hull().lo <= sets.hull().lo).all() and (wide.hull().hi >= sets.hull().hi).all()
+    assert np.allclose(wide.hull().lo, sets.hull().lo, rtol=1e-14, atol=0)
+    assert np.allclose(wide.hull().hi, sets.hull().hi, rtol=1e-14, atol=0)
+    box = Interval(np.array([[10.0, 20.0]]), np.array([[11.0, 22.0]]))
+    out = wide.replaced(np.array([1]), QuadraticSets.from_boxes(box).with_params(5))
+    h = out.hull()
+    assert (h.lo[1] <= box.lo[0]).all() and (h.hi[1] >= box.hi[0]).all()
+    assert np.allclose(h.lo[1], box.lo[0]) and np.allclose(h.hi[1], box.hi[0])
+    for k in (0, 2):  # the others untouched
+        assert np.array_equal(h.lo[k], wide.hull().lo[k]) and np.array_equal(h.hi[k], wide.hull().hi[k])
+    with pytest.raises(ValueError, match="fewer"):
+        wide.with_params(2)
 
 
 @pytest.mark.slow  # 3 s: the default run stays under 3 minutes
@@ -123,7 +180,5 @@ def test_bad_shell_arguments():
         EnergyShellHook("shell", 30.0)
     with pytest.raises(ValueError, match="outside the energy shell"):
         _run([EnergyShellHook(sh, 10.0)], T=0.1)  # the box's energy is 19.6-20.7 J
-    with pytest.raises(ValueError, match="set_order=1"):
-        solve(trace(pd.rhs, 2), Interval(lo, hi), (0.0, 0.1), set_order=2, hooks=[EnergyShellHook(sh, 30.0)])
     with pytest.raises(ValueError, match="one value"):
         max_energy(trace(pd.rhs, 2), Interval(lo, hi))
