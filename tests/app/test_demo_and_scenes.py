@@ -41,3 +41,20 @@ def test_shipped_scene_reaches_its_end_time(name, tmp_path):
     report = run_scene(scene, tmp_path, samples=16, figures=False, progress=False)
     _assert_reaches(report["solution"], scene.t_end, f"scene {name} (mode {scene.mode})")
     assert report["checked"] >= 16 and report["escaped"] == 0
+
+
+@pytest.mark.slow
+def test_the_swinging_pendulum_tests_at_a_maximum_of_ra(tmp_path):
+    """Fig. 2 as the paper draws it: RA(t) rises to a first local maximum and the test
+    runs there (not because test_interval passed)."""
+    import numpy as np
+    report = run_scene(load_scene("pendulum_swinging"), tmp_path, samples=8, figures=False, progress=False)
+    rec = report["solution"].consistency
+    first = rec.tests[0]
+    assert first.trigger == "RA maximum" and first.t < 1.0
+    # a local maximum of the recorded RA at or just before t* (one step after it when
+    # the step cannot be rolled back)
+    k = int(np.argmin(np.abs(rec.ra_t - first.t)))
+    ra = rec.ra
+    peaks = [j for j in range(1, k + 1) if ra[j] > 0 and ra[j] >= ra[j - 1] and ra[j] > ra[j + 1]]
+    assert peaks and k - peaks[0] <= 1
