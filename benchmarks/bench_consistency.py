@@ -13,9 +13,10 @@ Tables:
 5. the pendulum of sec. 5.1: RA(t), t*, and the parts kept at t*;
 6. the damped URDF double pendulum (example-robot-data) with an uncertain angle;
 7. work-precision (issue 13): the same solver without the test, with the energy
-   contraction, with contraction + pruning, with pruning only, over piece counts
+   contraction, with contraction + pruning, with the energy shell, over piece counts;
+   on the pendulum also second-order sets by composition without the energy
    (work_precision.png, work_precision.json in ``--out DIR``, default the current
-   working directory; the docs' copies: ``--out docs``);
+   working directory; the docs' copies: ``--out docs``; ~30 min);
 8. long horizon (issue 13): the double pendulum to T = 5 with the test, second-order
    sets by composition, box (25) in 48 pieces along x1 (~20 min).
 Ratios are measured side by side in one run (the machine is shared and noisy).
@@ -214,31 +215,58 @@ def _test_for(system, **kw):
     return EnergyTest(system.energy, system.energy_rate, **kw)  # "derive", "zero" or a graph (verified.energy_rate)
 
 
+def _shell_hook(mod, system, lo, hi):
+    """The energy shell of item 1 (``verified.energy_shell``): ``M(q)``, ``V(q)`` of the
+    model's chain (the same physics as eq. 18 / 22, checked against Pinocchio), ``hmax``
+    the interval bound of ``H`` over the initial box (both pendulums are conservative)."""
+    from verified.contractor import EnergyShell
+    from verified.energy_shell import EnergyShellHook, max_energy
+    num = (pd.chain() if mod is pd else dp.dh_chain()).numeric()
+    hmax = max_energy(system.energy, Interval(lo, hi))
+    return EnergyShellHook(EnergyShell(num.mass_matrix_graph(), num.potential_graph()), hmax)
+
+
+# (name, EnergyTest keywords or None, energy shell)
+_VARIANTS = [("no test", None, False), ("contraction", dict(contract="step", prune=False), False),
+             ("contraction + prune", dict(contract="step"), False), ("energy shell", None, True),
+             ("prune only", dict(contract="off"), False)]
+# the best solver without the energy on the pendulum, so that the shell is compared
+# with it too: second-order sets by composition (issue 17), without and with the shell
+_SECOND_ORDER = ("no test, second order",
+                 dict(set_order=2, set_step="composition", arithmetic="taylor_model", order=12, tol=1e-10))
+# branch and prune multiplies the sets: the test's variants (and the second-order run,
+# 94 s at 16 x 16) stop at 16 x 16 on the pendulum (16 x 16 with pruning took ~160 s)
+_LARGEST_TESTED_GRID = 16
+# and each run with the test stops after this wall time (status "stopped"): on the
+# pendulum with "auto" the 4 x 4 grid with pruning ran > 10 min
+_TEST_WALL_CAP = 300.0
+
+
 def work_precision(out_json="work_precision.json", plot="work_precision.png", quick=False,
                    full_variants=False, out="."):
     """Worst ratio (widest state / sampled true hull) against wall time over piece
-    counts, the same solver with and without the test: mode (iii)'s graphs (eq. 22 / 18)
-    without a test, with the energy contraction every step only, and with contraction +
-    branch and prune at the per-set RA maxima (modes ii/iii's default). ``out_json`` and
-    ``plot`` are relative to the directory ``out`` (None: not written)."""
+    counts, the same solver with and without the energy: mode (iii)'s graphs (eq. 22 /
+    18) without a test, with the energy contraction every step only, with contraction +
+    branch and prune at the per-set RA maxima (modes ii/iii's default), and with the
+    energy shell ``H(x) <= hmax`` (item 1, ``simulate(energy_shell=True)``) and no test.
+    ``out_json`` and ``plot`` are relative to the directory ``out`` (None: not written)."""
     import json
     from mbs.simulate import system_for
+    from verified.hooks import StopAfterWall
     from verified.policies import BlockBasis
     from verified.solver import solve
+    # pendulum: "auto" (with "qr" no run without the shell reaches T = 3 below 64 x 64)
     cases = [("double pendulum T=1", "double_pendulum_paper", 1.0, [16, 64, 256], "auto"),
              ("double pendulum T=2", "double_pendulum_paper", 2.0, [64, 256], "qr"),
-             ("pendulum T=3", "pendulum_paper", 3.0, [4, 8, 16], "qr")]
+             ("pendulum T=3", "pendulum_paper", 3.0, [1, 4, 16, 64], "auto")]
     if quick:
         cases = [("double pendulum T=0.5", "double_pendulum_paper", 0.5, [4, 16], "auto")]
     # the test's runs keep h out of the states' error basis (BlockBasis): with one QR
     # basis over (x, h), h's error was rotated into the states' directions and the
     # test made the enclosures wider than without it
-    variants = [("no test", None), ("contraction", dict(contract="step", prune=False)),
-                ("contraction + prune", dict(contract="step")), ("prune only", dict(contract="off"))]
-    if not full_variants:
-        variants = variants[:3]
+    variants = _VARIANTS if full_variants else _VARIANTS[:4]
     results = []
-    print("\n## 7. Work-precision: the same solver (mode iii graphs) with and without the test")
+    print("\n## 7. Work-precision: the same solver (mode iii graphs) with and without the energy")
     print(f"{'case':<22} {'pieces':>6} {'variant':<22} {'status':<10} {'t':>6} {'ratio':>8} {'wall_s':>7}")
     for label, model, T, piece_list, basis in cases:
         mod = pd if model == "pendulum_paper" else dp
@@ -250,16 +278,23 @@ def work_precision(out_json="work_precision.json", plot="work_precision.png", qu
         system = system_for(model, "iii")
         for pieces in piece_list:
             sub = [pieces, 1, 1, 1] if n == 4 else [pieces, pieces]
-            for vname, kw in variants:
+            for vname, kw, shell in variants:
+                if kw is not None and n == 2 and pieces > _LARGEST_TESTED_GRID:
+                    continue
                 test = None if kw is None else _test_for(system, **kw)
                 eb = basis if kw is None else BlockBasis(basis, n)
+                hooks = [_shell_hook(mod, system, lo, hi)] if shell else []
+                if kw is not None:
+                    hooks.append(StopAfterWall(_TEST_WALL_CAP))
                 s = solve(system.rhs, Interval(lo, hi), (0, T), t_eval=[T], subdivision=sub, consistency=test,
-                          error_basis=eb)
-                ratio = float(np.max(s.hull[-1].width() / true_w)) if s.success else float("nan")
-                results.append(dict(case=label, pieces=pieces, variant=vname, status=s.status,
-                                    t_reached=s.t_reached, ratio=ratio, wall_s=s.stats["wall_s"]))
-                print(f"{label:<22} {pieces:>6} {vname:<22} {s.status:<10} {s.t_reached:6.3f} {ratio:8.4f} "
-                      f"{s.stats['wall_s']:7.2f}", flush=True)
+                          error_basis=eb, hooks=hooks)
+                _record(results, label, pieces, vname, s, true_w, shell)
+            if n == 2 and not quick and pieces <= _LARGEST_TESTED_GRID:
+                for vname, shell in ((_SECOND_ORDER[0], False), ("energy shell, second order", True)):
+                    hooks = [_shell_hook(mod, system, lo, hi)] if shell else []
+                    s = solve(system.rhs, Interval(lo, hi), (0, T), t_eval=[T], subdivision=sub, error_basis=basis,
+                              hooks=hooks, **_SECOND_ORDER[1])
+                    _record(results, label, pieces, vname, s, true_w, shell)
     if out_json or plot:
         os.makedirs(out, exist_ok=True)
     if out_json:
@@ -268,6 +303,15 @@ def work_precision(out_json="work_precision.json", plot="work_precision.png", qu
     if plot:
         _plot_work_precision(results, os.path.join(out, plot))
     return results
+
+
+def _record(results, label, pieces, vname, s, true_w, shell):
+    """One work-precision row: appended to ``results`` and printed."""
+    ratio = float(np.max(s.hull[-1].width() / true_w)) if s.success else float("nan")
+    results.append(dict(case=label, pieces=pieces, variant=vname, status=s.status, t_reached=s.t_reached,
+                        ratio=ratio, wall_s=s.stats["wall_s"], shell_resets=s.stats.get("shell_resets")))
+    print(f"{label:<22} {pieces:>6} {vname:<22} {s.status:<10} {s.t_reached:6.3f} {ratio:8.4f} "
+          f"{s.stats['wall_s']:7.2f}" + (f"  resets {s.stats.get('shell_resets', 0)}" if shell else ""), flush=True)
 
 
 def _grid_hull(f, lo, hi, T, k=41):
@@ -287,8 +331,9 @@ def _plot_work_precision(results, path):
     for ax, case in zip(axes[0], cases):
         rows = [r for r in results if r["case"] == case]
         done = any(np.isfinite(r["ratio"]) for r in rows)
-        for variant, mk in (("no test", "o-"), ("contraction", "s-"), ("contraction + prune", "^-"),
-                            ("prune only", "v--")):
+        for variant, mk in (("no test", "o-"), ("no test, second order", "o--"), ("contraction", "s-"),
+                            ("contraction + prune", "^-"), ("energy shell", "D-"),
+                            ("energy shell, second order", "D--"), ("prune only", "v--")):
             pts = [(r["wall_s"], r["ratio"] if done else r["t_reached"], r["pieces"]) for r in rows
                    if r["variant"] == variant and (np.isfinite(r["ratio"]) or not done)]
             if not pts:
