@@ -17,3 +17,16 @@ def test_quick_consistency_benchmark(capsys):
     assert "## 1. Double pendulum" in out and "## 5. Pendulum" in out
     assert "largest width deviation (ii) vs (iii)" in out
     assert "first test t* =" in out
+
+
+@pytest.mark.slow
+def test_quick_work_precision_has_every_variant():
+    """Section 7's quick case: every variant (no test, contraction, contraction + prune,
+    energy shell) completes, and no enclosure is narrower than the sampled hull."""
+    import bench_consistency
+
+    rows = bench_consistency.work_precision(quick=True, out_json=None, plot=None)
+    assert {r["variant"] for r in rows} == {"no test", "contraction", "contraction + prune", "energy shell"}
+    assert all(r["status"] == "completed" for r in rows)
+    assert all(r["ratio"] >= 0.999 for r in rows)
+    assert all(r["shell_resets"] is not None for r in rows if r["variant"] == "energy shell")
