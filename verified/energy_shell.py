@@ -103,10 +103,20 @@ class EnergyShellHook(Hook):
         if type(setup.sets) not in _SET_TYPES:
             raise ValueError("the energy shell works on first- and second-order sets (set_order=1 or 2), "
                              f"not on {type(setup.sets).__name__}")
-        res = self._contract(setup.sets.hull()[:, :nq2])
+        boxes = setup.sets.hull()[:, :nq2]
+        res = self._contract(boxes)
         if res.empty.any():
             raise ValueError(f"an initial box lies outside the energy shell H <= {self.hmax!r}: "
                              "hmax is not an upper bound of the initial energy")
+        # the contraction never removes a state with H <= hmax, so a box it narrows holds
+        # a state above hmax: the claim is wrong (typically hmax taken from an energy
+        # whose potential has another zero than the shell's V)
+        cut = (res.boxes.lo > boxes.lo) | (res.boxes.hi < boxes.hi)
+        if cut.any():
+            k = int(np.flatnonzero(cut.any(axis=1))[0])
+            raise ValueError(f"the energy shell H <= {self.hmax!r} cuts initial box {k}: hmax is below the "
+                             "initial energy 1/2 qd^T M qd + V(q) (is it the bound of an H with the same "
+                             "potential V?)")
         return None
 
     def _contract(self, boxes: Interval):

@@ -180,5 +180,14 @@ def test_bad_shell_arguments():
         EnergyShellHook("shell", 30.0)
     with pytest.raises(ValueError, match="outside the energy shell"):
         _run([EnergyShellHook(sh, 10.0)], T=0.1)  # the box's energy is 19.6-20.7 J
+    # between the box's smallest and largest energy (19.57 / 20.70 J): the shell cuts
+    # the box's q (to q <= 2.14) instead of emptying it -- the run would lose true states
+    with pytest.raises(ValueError, match="cuts initial box 0"):
+        _run([EnergyShellHook(sh, 19.9)], T=0.1)
+    # the same mistake from a shell whose V has another zero than the H that hmax came
+    # from (0.8 J here; the chain's pivot zero against eq. (19)'s bottom zero is 9.81 J)
+    V_shifted = trace(lambda q, p: [pd.M * pd.G * pd.L * (1.0 - np.cos(q[0])) + 0.8], 1)
+    with pytest.raises(ValueError, match="cuts initial box 0"):
+        _run([EnergyShellHook(EnergyShell(sh.M_graph, V_shifted), _hmax(lo, hi))], T=0.1)
     with pytest.raises(ValueError, match="one value"):
         max_energy(trace(pd.rhs, 2), Interval(lo, hi))
