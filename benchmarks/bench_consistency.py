@@ -16,7 +16,7 @@ Tables:
    contraction, with contraction + pruning, with the energy shell, over piece counts;
    on the pendulum also second-order sets by composition without the energy
    (work_precision.png, work_precision.json in ``--out DIR``, default the current
-   working directory; the docs' copies: ``--out docs``; ~30 min);
+   working directory; the docs' copies: ``--out docs``; 16 min);
 8. long horizon (issue 13): the double pendulum to T = 5 with the test, second-order
    sets by composition, box (25) in 48 pieces along x1 (~20 min).
 Ratios are measured side by side in one run (the machine is shared and noisy).
