@@ -27,6 +27,7 @@ import argparse
 import os
 import sys
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -215,29 +216,38 @@ def _test_for(system, **kw):
     return EnergyTest(system.energy, system.energy_rate, **kw)  # "derive", "zero" or a graph (verified.energy_rate)
 
 
-def _shell_hook(mod, lo, hi):
-    """The energy shell of item 1 (``verified.energy_shell``) as ``simulate(...,
-    energy_shell=True)`` builds it: ``M(q)``, ``V(q)`` of the model's chain (the same
+def _shell(mod, lo, hi):
+    """``(EnergyShell, hmax)`` of item 1 (``verified.energy_shell``) as ``simulate(...,
+    energy_shell=True)`` builds them: ``M(q)``, ``V(q)`` of the model's chain (the same
     physics as eq. 18 / 22, checked against Pinocchio) and ``hmax`` the interval bound of
     the chain's own ``H`` over the initial box (both pendulums are conservative). (The
     chain's potential has its zero at the pivot, eq. (19)'s at the bottom: ``hmax`` of
     eq. (19) with the chain's ``V`` made a shell 9.81 J too high, sound but loose.)"""
     from verified.contractor import EnergyShell
-    from verified.energy_shell import EnergyShellHook, max_energy
+    from verified.energy_shell import max_energy
     num = (pd.chain() if mod is pd else dp.dh_chain()).numeric()
-    hmax = max_energy(num.energy_graph(), Interval(lo, hi))
-    return EnergyShellHook(EnergyShell(num.mass_matrix_graph(), num.potential_graph()), hmax)
+    return EnergyShell(num.mass_matrix_graph(), num.potential_graph()), max_energy(num.energy_graph(), Interval(lo, hi))
 
 
-# (name, EnergyTest keywords or None, energy shell)
-_VARIANTS = [("no test", None, False), ("contraction", dict(contract="step", prune=False), False),
-             ("contraction + prune", dict(contract="step"), False), ("energy shell", None, True),
-             ("prune only", dict(contract="off"), False)]
+class _Variant(NamedTuple):
+    name: str
+    test: dict | None  # EnergyTest keywords, or None: no test
+    shell: bool  # the energy shell as a hook
+    solver: dict  # solve() keywords beyond the case's
+    pendulum_only: bool = False
+
+
 # the best solver without the energy on the pendulum, so that the shell is compared
 # with it too: second-order sets by composition (issue 17), without and with the shell
-_SECOND_ORDER = ("no test, second order",
-                 dict(set_order=2, set_step="composition", arithmetic="taylor_model", order=12, tol=1e-10))
-# branch and prune multiplies the sets: the test's variants (and the second-order run,
+_SECOND_ORDER = dict(set_order=2, set_step="composition", arithmetic="taylor_model", order=12, tol=1e-10)
+_VARIANTS = [_Variant("no test", None, False, {}),
+             _Variant("contraction", dict(contract="step", prune=False), False, {}),
+             _Variant("contraction + prune", dict(contract="step"), False, {}),
+             _Variant("energy shell", None, True, {}),
+             _Variant("prune only", dict(contract="off"), False, {}),  # (full_variants only)
+             _Variant("no test, second order", None, False, _SECOND_ORDER, pendulum_only=True),
+             _Variant("energy shell, second order", None, True, _SECOND_ORDER, pendulum_only=True)]
+# branch and prune multiplies the sets: the test's variants (and the second-order runs,
 # 94 s at 16 x 16) stop at 16 x 16 on the pendulum (16 x 16 with pruning took ~160 s)
 _LARGEST_TESTED_GRID = 16
 # and each run with the test stops after this wall time (status "stopped"): on the
@@ -256,6 +266,7 @@ def work_precision(out_json="work_precision.json", plot="work_precision.png", qu
     ``out_json`` and ``plot`` are relative to the directory ``out`` (None: not written)."""
     import json
     from mbs.simulate import system_for
+    from verified.energy_shell import EnergyShellHook
     from verified.hooks import StopAfterWall
     from verified.policies import BlockBasis
     from verified.solver import solve
@@ -268,7 +279,7 @@ def work_precision(out_json="work_precision.json", plot="work_precision.png", qu
     # the test's runs keep h out of the states' error basis (BlockBasis): with one QR
     # basis over (x, h), h's error was rotated into the states' directions and the
     # test made the enclosures wider than without it
-    variants = _VARIANTS if full_variants else _VARIANTS[:4]
+    variants = [v for v in _VARIANTS if full_variants or v.name != "prune only"]
     results = []
     print("\n## 7. Work-precision: the same solver (mode iii graphs) with and without the energy")
     print(f"{'case':<22} {'pieces':>6} {'variant':<22} {'status':<10} {'t':>6} {'ratio':>8} {'wall_s':>7}")
@@ -280,25 +291,21 @@ def work_precision(out_json="work_precision.json", plot="work_precision.png", qu
         true_w = sampled_hull(f, lo, hi, np.array([T]), n=201 if not quick else 51)[-1] if n == 4 else \
             _grid_hull(f, lo, hi, T)
         system = system_for(model, "iii")
+        shell = _shell(mod, lo, hi) if any(v.shell for v in variants) else None
         for pieces in piece_list:
             sub = [pieces, 1, 1, 1] if n == 4 else [pieces, pieces]
-            for vname, kw, shell in variants:
-                if kw is not None and n == 2 and pieces > _LARGEST_TESTED_GRID:
+            for v in variants:
+                if v.pendulum_only and n != 2:
                     continue
-                test = None if kw is None else _test_for(system, **kw)
-                eb = basis if kw is None else BlockBasis(basis, n)
-                hooks = [_shell_hook(mod, lo, hi)] if shell else []
-                if kw is not None:
+                if (v.test is not None or v.solver) and n == 2 and pieces > _LARGEST_TESTED_GRID:
+                    continue
+                hooks = [EnergyShellHook(*shell)] if v.shell else []  # (a hook counts its own resets)
+                if v.test is not None:
                     hooks.append(StopAfterWall(_TEST_WALL_CAP))
-                s = solve(system.rhs, Interval(lo, hi), (0, T), t_eval=[T], subdivision=sub, consistency=test,
-                          error_basis=eb, hooks=hooks)
-                _record(results, label, pieces, vname, s, true_w, shell)
-            if n == 2 and not quick and pieces <= _LARGEST_TESTED_GRID:
-                for vname, shell in ((_SECOND_ORDER[0], False), ("energy shell, second order", True)):
-                    hooks = [_shell_hook(mod, lo, hi)] if shell else []
-                    s = solve(system.rhs, Interval(lo, hi), (0, T), t_eval=[T], subdivision=sub, error_basis=basis,
-                              hooks=hooks, **_SECOND_ORDER[1])
-                    _record(results, label, pieces, vname, s, true_w, shell)
+                s = solve(system.rhs, Interval(lo, hi), (0, T), t_eval=[T], subdivision=sub,
+                          consistency=None if v.test is None else _test_for(system, **v.test),
+                          error_basis=basis if v.test is None else BlockBasis(basis, n), hooks=hooks, **v.solver)
+                _record(results, label, pieces, v.name, s, true_w, v.shell)
     if out_json or plot:
         os.makedirs(out, exist_ok=True)
     if out_json:
