@@ -218,15 +218,11 @@ def _test_for(system, **kw):
 
 def _shell(mod, lo, hi):
     """``(EnergyShell, hmax)`` of item 1 (``verified.energy_shell``) as ``simulate(...,
-    energy_shell=True)`` builds them: ``M(q)``, ``V(q)`` of the model's chain (the same
-    physics as eq. 18 / 22, checked against Pinocchio) and ``hmax`` the interval bound of
-    the chain's own ``H`` over the initial box (both pendulums are conservative). (The
-    chain's potential has its zero at the pivot, eq. (19)'s at the bottom: ``hmax`` of
-    eq. (19) with the chain's ``V`` made a shell 9.81 J too high, sound but loose.)"""
-    from verified.contractor import EnergyShell
-    from verified.energy_shell import max_energy
-    num = (pd.chain() if mod is pd else dp.dh_chain()).numeric()
-    return EnergyShell(num.mass_matrix_graph(), num.potential_graph()), max_energy(num.energy_graph(), Interval(lo, hi))
+    energy_shell=True)`` builds them (:func:`mbs.simulate.energy_shell_of`), from the
+    model's chain: the same physics as eq. 18 / 22, checked against Pinocchio; both
+    pendulums are conservative."""
+    from mbs.simulate import energy_shell_of
+    return energy_shell_of((pd.chain() if mod is pd else dp.dh_chain()).numeric(), Interval(lo, hi))
 
 
 class _Variant(NamedTuple):

@@ -520,9 +520,17 @@ def _energy_shell_hook(masses, loop, box: Interval):
                          "not a bare System (its M(q) and P(q) are unknown)")
     if masses.cparams is not None:
         raise ValueError("energy_shell=True does not take uncertain parameters yet")
-    num = masses.num
-    hmax = max_energy(num.energy_graph(), box)  # (n,) or (B, n)
-    return EnergyShellHook(EnergyShell(num.mass_matrix_graph(), num.potential_graph()), hmax)
+    return EnergyShellHook(*energy_shell_of(masses.num, box))
+
+
+def energy_shell_of(num, box: Interval):
+    """``(EnergyShell, hmax)`` of a passive chain's numeric model ``num``
+    (:class:`mbs.numeric.NumericModel`) over the initial ``box`` ((n,) or (B, n)):
+    ``M(q)``, ``P(q)`` and ``hmax`` the interval bound of the model's own ``H = K + P``.
+    ``hmax`` must come from the same ``P`` as the shell: an energy whose potential has
+    another zero (eq. (19) against the chain's pivot zero) shifts the shell by that much."""
+    hmax = max_energy(num.energy_graph(), box)
+    return EnergyShell(num.mass_matrix_graph(), num.potential_graph()), hmax
 
 
 class _CtrlC:

@@ -58,7 +58,7 @@ def fig_reduction_area(sol, path, title=None):
               "interval": (dict(color="0.45", ls="--", lw=0.8), "test due by test_interval (no maximum yet)")}
     labelled = set()
     for rec in c.tests:
-        style, label = styles.get(getattr(rec, "trigger", "interval"), styles["interval"])
+        style, label = styles[rec.trigger]
         ax1.axvline(rec.t, label=None if label in labelled else label, **style)
         ax2.axvline(rec.t, **style)
         labelled.add(label)
