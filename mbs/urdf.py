@@ -4,6 +4,15 @@ Supported: ``revolute``, ``continuous`` (its angle is the coordinate, like revol
 without limits) and ``prismatic`` joints; ``fixed`` joints are merged into the parent
 body (mass, centre of mass and inertia combined).  Inertial origins (xyz and rpy) are
 honoured.  ``<dynamics damping>`` becomes viscous damping, tau = -D qdot.
+``<dynamics friction>`` (Coulomb friction) is not modeled: a model whose kept joints
+have a nonzero one gets one ``UserWarning`` naming them, and its enclosures are those of
+the model without Coulomb friction (only the viscous damping).
+
+Link inertias must be physical: positive semi-definite, with principal moments that
+satisfy the triangle inequality I1 + I2 >= I3 (within ``mbs.inertia.TRIANGLE_TOL`` = 1e-3
+of the trace; zero inertias, thin rods and flat plates pass).  Others (ixx = iyy = 0.01,
+izz = 1; the placeholder ixx = ixy = ... = izz = 1e-6 some files carry) are refused with
+a one-line :class:`ModelError` naming the link.
 
 Refused with :class:`mbs.errors.UnsupportedJointError` (unless locked, see ``lock``):
 ``floating`` and ``planar`` joints (multi-dof; not supported) and ``mimic`` joints (the
@@ -21,6 +30,7 @@ from __future__ import annotations
 import io
 import logging
 import os
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -164,11 +174,12 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
         T = _placement(ine.origin, where + " inertial origin")
         ri = RigidInertia(_to_float(ine.mass), (0, 0, 0),
                           tuple(tuple(_to_float(v) for v in row) for row in I))
-        ri.validate(where)
+        ri.validate(where, triangle=True)
         inertias[l.name] = ri.transformed(T) if T is not IDENTITY else \
             RigidInertia(ri.mass, T[1], ri.inertia)
 
     raw = []
+    friction = {}  # kept joints with Coulomb friction (not modeled: one warning below)
     for j in joints:
         where = f"joint {j.name!r}"
         kind = j.type
@@ -206,6 +217,13 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
                 raise ModelError(f"{where}: damping {j.dynamics.damping!r} is not a number") from None
             if not np.isfinite(damping) or damping < 0:
                 raise ModelError(f"{where}: damping {damping} must be finite and >= 0")
+        if j.dynamics is not None and j.dynamics.friction is not None:
+            try:
+                fr = float(j.dynamics.friction)
+            except (TypeError, ValueError):
+                raise ModelError(f"{where}: friction {j.dynamics.friction!r} is not a number") from None
+            if fr != 0.0:
+                friction[j.name] = fr
         raw.append(RawJoint(j.name, "prismatic" if kind == "prismatic" else "revolute",
                             j.parent, j.child, T, _axis(j, where), damping))
 
@@ -214,8 +232,15 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
     if len(roots) != 1:
         raise ModelError(f"malformed URDF: expected exactly one root link, found {roots}")
     src = {"kind": "urdf", "xml": xml, "locked": {k: float(v) for k, v in lock.items()}}
-    return build_tree(roots[0], inertias, raw, gravity=gravity,
-                      name=name or robot.robot.name or "urdf", source=src)
+    chain = build_tree(roots[0], inertias, raw, gravity=gravity,
+                       name=name or robot.robot.name or "urdf", source=src)
+    if friction:  # once per model, after it was built (a refused model says only why)
+        listed = ", ".join(f"{k!r} ({v:g})" for k, v in friction.items())
+        warnings.warn(
+            f"URDF {chain.name!r}: Coulomb friction (<dynamics friction>) of joint(s) {listed} "
+            "is not modeled, only the viscous damping: the model and its enclosures are "
+            "those without Coulomb friction", UserWarning, stacklevel=2)
+    return chain
 
 
 def _axis(j, where):

@@ -18,7 +18,7 @@ TREE_URDF = """<?xml version="1.0"?>
   <joint name="weld" type="fixed"><parent link="world"/><child link="base"/>
       <origin xyz="0 0 0.2" rpy="0 0 0.3"/></joint>
   <link name="trunk"><inertial><origin xyz="0 0.02 0.3" rpy="0.3 -0.2 0.7"/><mass value="1.5"/>
-      <inertia ixx="0.05" ixy="0.001" ixz="-0.002" iyy="0.04" iyz="0.003" izz="0.01"/></inertial></link>
+      <inertia ixx="0.05" ixy="0.001" ixz="-0.002" iyy="0.04" iyz="0.003" izz="0.015"/></inertial></link>
   <joint name="yaw" type="continuous"><parent link="base"/><child link="trunk"/>
       <origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/><dynamics damping="0.2"/></joint>
   <link name="head"><inertial><origin xyz="0.01 0 0.05" rpy="0 0.4 0"/><mass value="0.7"/>
