@@ -38,7 +38,8 @@ from .policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapCon
 from .set_kinds import SetKind, set_kind, set_kind_names
 from .sets import DoubletonSets, SetView, set_view
 from .solution import Solution, Start
-from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+from .solver_args import (check_arithmetic, check_graph, check_model_cap, check_params, check_params_per_state,
+                          check_settings, initial_boxes)
 from .taylor import TaylorODE
 from .taylor_model import TaylorModelODE
 from .variational import params_as_states, second_variational_graph, variational_graph
@@ -194,10 +195,7 @@ def solve_batch(
     model_caps = _check_model_caps(model_caps, set_step)
     if not isinstance(absorb, (bool, np.bool_)):
         raise ValueError(f"absorb must be True or False, got {absorb!r}")
-    if params_per_state is not None and (isinstance(params_per_state, (bool, np.bool_))
-                                         or not isinstance(params_per_state, (int, np.integer))
-                                         or params_per_state < 1):
-        raise ValueError(f"params_per_state must be an int >= 1 or None, got {params_per_state!r}")
+    params_per_state = check_params_per_state(params_per_state)
     if absorb and (set_order != 1 or adaptive or consistency is not None):
         # (a consistency test's contraction works on sets with one parameter per state;
         # adaptive splitting would split along absorbed errors without end)
@@ -429,7 +427,8 @@ class _Run:
                 X = X[feasible]
                 self.pruned += int((~feasible).sum())
         if not (np.isfinite(X.lo).all() and np.isfinite(X.hi).all()):
-            self.stop("enclosure is not finite (division by an interval containing zero?)", "breakdown")
+            self.stop("enclosure is not finite (an operation overflowed, or divided by an interval containing zero)",
+                      "breakdown")
             return None
         if (X[:, :n_steer].width() > max_width).any():  # not states a hook appended (h)
             self.stop(f"enclosure too wide (a component exceeds width {max_width:g})", "breakdown")
@@ -545,6 +544,5 @@ def _check_model_caps(model_caps, set_step):
     for k, v in model_caps.items():
         if k not in MODEL_CAPS:
             raise ValueError(f"model_caps: unknown key {k!r} (known: {', '.join(MODEL_CAPS)})")
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise ValueError(f"model_caps[{k!r}] must be an int >= 0, got {v!r}")
+        check_model_cap(k, v)
     return dict(model_caps)

@@ -134,7 +134,10 @@ class LohnerStepper:
         """Step size that makes the order-K term of every box about ``tol`` (x 0.9),
         judged on the first ``components`` states (default: all)."""
         mags = np.maximum(cX[:, self.order, :components].mag(), 1e-300)
-        return float(0.9 * np.min((tol / mags) ** (1.0 / self.order)))
+        # a huge tol over a tiny term overflows to inf: no bound from the error, the
+        # step control's h_max then decides (not worth a RuntimeWarning to the user)
+        with np.errstate(over="ignore"):
+            return float(0.9 * np.min((tol / mags) ** (1.0 / self.order)))
 
     def set_jacobian(self, sets, X: Interval, h) -> Interval:
         """Enclosure (B, n, n) of the Jacobian of the Taylor polynomial map on every

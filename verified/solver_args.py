@@ -18,7 +18,8 @@ from .graph import Graph
 from .interval import Interval, _as_interval, concatenate
 
 __all__ = ["check_graph", "check_settings", "initial_boxes", "check_params", "check_arithmetic",
-           "ERROR_BASES", "ARITHMETICS"]
+           "check_params_per_state", "check_model_cap", "ERROR_BASES", "ARITHMETICS", "MAX_ORDER", "MAX_STEPS",
+           "MAX_BOXES"]
 
 ERROR_BASES = ("qr", "auto")
 ARITHMETICS = ("interval", "affine", "taylor_model")
@@ -58,11 +59,27 @@ def _positive(name: str, value, *, allow_inf: bool = False, or_none: bool = Fals
     return v
 
 
-def _count(name: str, value, minimum: int) -> int:
+#: upper bounds of the size arguments: beyond them a run does not fail, it runs for hours
+#: or exhausts memory before its first step (``order=10**6`` ran past 120 s on a 2-state
+#: oscillator). Taylor coefficients of order > 60 underflow the step's h^k for any step
+#: the solver takes; 10^8 steps are days of work; each box holds n x n float matrices.
+MAX_ORDER = 60
+MAX_STEPS = 10**8
+MAX_BOXES = 2**21
+#: parameters per state a set may carry (``params_per_state``): a second-order set's cost
+#: grows with the square of its parameter count
+MAX_PARAMS_PER_STATE = 64
+#: symbols given quadratic/cubic/quartic/star monomials or claimed by the remainder pool
+#: (``model_caps``): the monomial count grows with the cap to the power of the degree
+MAX_MODEL_CAP = {"quadratic": 512, "cubic": 96, "quartic": 48, "star": 512, "pool": 4096}
+
+
+def _count(name: str, value, minimum: int, maximum: int | None = None) -> int:
+    want = f"an integer >= {minimum}" if maximum is None else f"an integer in [{minimum}, {maximum}]"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+        raise ValueError(f"{name} must be {want}, got {value!r}")
+    if value < minimum or (maximum is not None and value > maximum):
+        raise ValueError(f"{name} must be {want}, got {value!r}")
     return int(value)
 
 
@@ -100,7 +117,7 @@ def check_settings(*, t_span, t_eval, order, tol, h_max, h_min, max_steps, max_w
     outs = np.unique(np.concatenate([[t0], outs]))
 
     # order 1 would leave the variational (Jacobian) series of the Lohner step empty
-    _count("order", order, 2)
+    _count("order", order, 2, MAX_ORDER)
     _positive("tol", tol)
     # h_min = 0 would let the step-size halving reach a step of length 0
     h_min = _positive("h_min", h_min)
@@ -110,8 +127,8 @@ def check_settings(*, t_span, t_eval, order, tol, h_max, h_min, max_steps, max_w
         h_max = _positive("h_max", h_max, allow_inf=True, or_none=True)
         if not h_min < h_max:
             raise ValueError(f"h_min must be smaller than h_max, got h_min={h_min!r} and h_max={h_max!r}")
-    _count("max_steps", max_steps, 1)
-    _count("max_boxes", max_boxes, 1)
+    _count("max_steps", max_steps, 1, MAX_STEPS)
+    _count("max_boxes", max_boxes, 1, MAX_BOXES)
     _positive("max_width", max_width, allow_inf=True)
     if not isinstance(adaptive, (bool, np.bool_)):
         raise ValueError(f"adaptive must be True or False, got {adaptive!r}")
@@ -206,7 +223,20 @@ def _refuse_bounds_pair(x0, n: int) -> None:
 
 
 #: initial boxes at most (after subdivision): [1000] * 4 used to die in a MemoryError
-MAX_INITIAL_BOXES = 2**21
+MAX_INITIAL_BOXES = MAX_BOXES
+
+
+def check_params_per_state(params_per_state) -> int | None:
+    """``params_per_state`` of :func:`~verified.solver.solve`: None or an int in
+    [1, MAX_PARAMS_PER_STATE]."""
+    if params_per_state is None:
+        return None
+    return _count("params_per_state", params_per_state, 1, MAX_PARAMS_PER_STATE)
+
+
+def check_model_cap(key: str, value) -> int:
+    """One entry of ``model_caps``: an int in [0, MAX_MODEL_CAP[key]]."""
+    return _count(f"model_caps[{key!r}]", value, 0, MAX_MODEL_CAP[key])
 
 
 def check_params(params, graph: Graph, nb: int, subdivision):

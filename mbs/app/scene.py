@@ -117,6 +117,7 @@ from models.registry import NAMES, SYSTEMS
 from verified.energy_rate import MODEL_RATES
 from verified.exact import enclose_fraction, enclose_pi_multiple
 from verified.interval import Interval
+from verified.solver_args import MAX_ORDER
 
 from ..dh import chain_from_dh
 from ..urdf import chain_from_urdf
@@ -558,8 +559,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         raise SceneError(f"{where} error_basis: {solver['error_basis']!r} is not 'qr' or 'auto'")
     if "arithmetic" in solver and solver["arithmetic"] not in ("interval", "affine", "taylor_model"):
         raise SceneError(f"{where} arithmetic: {solver['arithmetic']!r} is not 'interval', 'affine' or 'taylor_model'")
-    if "order" in solver and solver["order"] < 2:
-        raise SceneError(f"{where} order: must be >= 2")
+    if "order" in solver and not 2 <= solver["order"] <= MAX_ORDER:
+        raise SceneError(f"{where} order: must be in [2, {MAX_ORDER}], got {solver['order']}")
     if "set_order" in solver and solver["set_order"] not in (1, 2):
         raise SceneError(f"{where} set_order: {solver['set_order']!r} is not 1 or 2")
     if "set_step" in solver and solver["set_step"] not in ("mean_value", "composition"):

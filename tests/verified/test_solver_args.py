@@ -68,10 +68,15 @@ SETTINGS = [
     ("order", dict(order=0)),
     ("order", dict(order=2.5)),
     ("order", dict(order=True)),
+    ("order", dict(order=10**6)),      # (issue 39) accepted before and ran past 120 s
+    ("order", dict(order=61)),
     ("max_steps", dict(max_steps=0)),
     ("max_steps", dict(max_steps=-3)),
     ("max_steps", dict(max_steps=10.5)),
+    ("max_steps", dict(max_steps=10**12)),
     ("max_boxes", dict(max_boxes=0)),
+    ("max_boxes", dict(max_boxes=2**40)),
+    ("params_per_state", dict(params_per_state=10**6, set_order=2)),
     ("max_width", dict(max_width=0.0)),
     ("max_width", dict(max_width=NAN)),
     ("t_span", dict(t_span=(1.0, 0.0))),
@@ -107,6 +112,7 @@ SETTINGS = [
     ("model_caps", dict(model_caps=[32, 16], set_order=2, set_step="composition")),
     ("model_caps", dict(model_caps={"pool": -4}, set_order=2, set_step="composition")),
     ("model_caps", dict(model_caps={"pool": 2.5}, set_order=2, set_step="composition")),
+    ("model_caps", dict(model_caps={"cubic": 10**4}, set_order=2, set_step="composition")),
 ]
 
 
@@ -115,6 +121,16 @@ def test_bad_setting_is_refused_up_front(no_work, name, kwargs):
     kw = dict(kwargs)
     t_span = kw.pop("t_span", (0.0, 1.0))
     _refused(rf"^{name}\b", lambda: solve(_oscillator(), BOX2, t_span, **kw))
+
+
+def test_size_limits_are_named_and_the_limit_itself_is_accepted(no_work):
+    """A size argument past its bound names the bound (issue 39: ``order=10**6`` hung)."""
+    from verified.solver_args import MAX_ORDER
+    msg = _refused("order", lambda: solve(_oscillator(), BOX2, (0.0, 1.0), order=MAX_ORDER + 1))
+    assert f"[2, {MAX_ORDER}]" in msg and str(MAX_ORDER + 1) in msg
+    # the bound itself passes the checks (and reaches the preparation no_work refuses)
+    with pytest.raises(AssertionError, match="prepared"):
+        solve(_oscillator(), BOX2, (0.0, 1.0), order=MAX_ORDER)
 
 
 def test_subdivision_of_wrong_length_names_the_expected_length(no_work):
@@ -221,3 +237,31 @@ def test_model_caps_reach_the_composition_stepper(monkeypatch):
     sol = solve(_oscillator(), BOX2, (0.0, 0.1), set_order=2, set_step="composition", arithmetic="taylor_model",
                 model_caps={"pool": 0})
     assert sol.status == "completed" and seen["pool"] == 0
+
+
+# (issue 39, item 4) numpy RuntimeWarnings must not leak to the user: a setting or a box
+# at the edge of the floats is a result or an error in words
+_METHODS = [dict(), dict(set_order=2), dict(set_order=2, set_step="composition"), dict(arithmetic="affine"),
+            dict(arithmetic="taylor_model"), dict(error_basis="auto")]
+
+
+@pytest.mark.parametrize("kw", _METHODS, ids=lambda kw: ",".join(f"{k}={v}" for k, v in kw.items()) or "default")
+def test_huge_tol_completes_without_a_runtime_warning(kw):
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # before the fix: "overflow encountered in divide" (lohner.suggest_step)
+        sol = solve(_oscillator(), BOX2, (0.0, 1.0), tol=1e300, **kw)
+    assert sol.status == "completed"
+
+
+@pytest.mark.parametrize("big", [1e150, 1e300, 1.7e308])
+@pytest.mark.parametrize("max_width", [1e3, INF])
+def test_huge_box_breaks_down_in_words_without_a_runtime_warning(big, max_width):
+    import warnings
+    g = trace(lambda x, p: [x[1], -x[0] - 2 * x[1] * x[0] * x[0]], 2)
+    for kw in _METHODS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            sol = solve(g, Interval([-big, -big], [big, big]), (0.0, 1.0), max_width=max_width, **kw)
+        assert sol.status == "breakdown" and sol.t_reached == 0.0, (kw, sol.status)
+        assert any(w in sol.reason for w in ("overflow", "too wide", "unbounded")), (kw, sol.reason)
