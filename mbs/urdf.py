@@ -160,6 +160,9 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
         raise ModelError(f"cannot lock unknown joint(s) {sorted(unknown)}; joints are {jn}")
 
     inertias = {}
+    # the base link is fixed to the world: its inertia never enters the dynamics, so a
+    # placeholder tensor there (anymal, go1, hyq ship one) is no reason to refuse the model
+    children = {j.child for j in joints}
     for l in links:
         where = f"link {l.name!r}"
         ine = l.inertial
@@ -174,7 +177,7 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
         T = _placement(ine.origin, where + " inertial origin")
         ri = RigidInertia(_to_float(ine.mass), (0, 0, 0),
                           tuple(tuple(_to_float(v) for v in row) for row in I))
-        ri.validate(where, triangle=True)
+        ri.validate(where, triangle=l.name in children)
         inertias[l.name] = ri.transformed(T) if T is not IDENTITY else \
             RigidInertia(ri.mass, T[1], ri.inertia)
 

@@ -152,3 +152,15 @@ def test_dh_chains_keep_accepting_corkes_puma():
     from models.puma560 import puma560
     for convention in ("standard", "modified"):
         assert puma560(convention).n == 6
+
+
+def test_base_link_inertia_is_not_checked():
+    """The base link is fixed to the world: its tensor never enters the dynamics, so a
+    placeholder there (anymal, go1, hyq ship one) does not refuse the model; the same
+    tensor on a moving link does."""
+    bad = '<inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="1"/></inertial>'
+    xml = urdf().replace('<link name="base"/>', f'<link name="base">{bad}</link>')
+    chain, _ = load(xml)
+    assert chain is not None
+    with pytest.raises(ModelError, match="link 'arm'"):
+        load(urdf(ixx="0.01", iyy="0.01", izz="1"))
