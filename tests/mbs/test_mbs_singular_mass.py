@@ -168,7 +168,27 @@ def test_break_down_names_the_joint():
     sol = simulate(gimbal(), box, 0.01, mode="i")
     assert sol.status == "breakdown"
     assert "not proven positive definite" in sol.reason and "joint 'joint1'" in sol.reason
+    # (issue 39, item 2) the cause is measured: here the model, at a configuration in the box
+    assert "the model: M(q) is singular or nearly so at q = [0, 1.5708]" in sol.reason
     assert "\n" not in sol.reason
+
+
+def test_wide_box_blames_the_set_not_the_model():
+    """(issue 39, item 2) A box too wide for one piece, on a chain whose M(q) is positive
+    definite everywhere: the hint names the set's width and what helps (subdivision),
+    not the model's inertia (the old hint asked 'do the links this joint moves have
+    inertia about its axis?')."""
+    from mbs.simulate import _pivot_diagnosis
+    chain = chain_from_dh([dict(joint="R", a=1.0, mass=1.0), dict(joint="R", a=1.0, mass=1.0)], name="planar2")
+    num = chain.numeric()
+    lo, hi = np.array([-3.0, -3.0]), np.array([3.0, 3.0])
+    msg = _pivot_diagnosis(num, lo, hi, chain.joint_names, 1)
+    assert "the set, not the model" in msg and "subdivision" in msg and "6 wide" in msg, msg
+    assert "inertia about" not in msg
+    # the same check finds the model's singular configuration of the gimbal
+    g = gimbal()
+    msg = _pivot_diagnosis(g.numeric(), np.array([0.0, 1.0]), np.array([0.0, 2.0]), g.joint_names, 0)
+    assert "the model" in msg and "joint 'joint1'" in msg, msg
 
 
 def test_a_completed_run_must_prove_every_box():
