@@ -20,6 +20,7 @@ Imports: this module sits below :mod:`verified.parallel` and :mod:`verified.solv
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import replace
@@ -36,8 +37,9 @@ from .linalg import SingularMatrixError
 from .lohner import LohnerStepper
 from .policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
 from .set_kinds import SetKind, set_kind, set_kind_names
+from .quadratic import QuadraticSets
 from .sets import DoubletonSets, SetView, set_view
-from .solution import Solution, Start
+from .solution import PieceResult, Solution, Start, pieces_summary
 from .solver_args import (check_arithmetic, check_graph, check_model_cap, check_params, check_params_per_state,
                           check_settings, initial_boxes)
 from .taylor import TaylorODE
@@ -249,17 +251,27 @@ def solve_batch(
             stepper.begin(run.sets)
             cX = stepper.coefficients(X)
             run.evaluations += 1
-            if not (np.isfinite(cX.lo).all() and np.isfinite(cX.hi).all()):
-                run.stop("Taylor coefficients are unbounded (an operation left its domain over the sets, e.g. a "
-                         "division by an interval containing zero, or overflowed)", "breakdown")
-                break
+            bounded = np.isfinite(cX.lo).all(axis=(1, 2)) & np.isfinite(cX.hi).all(axis=(1, 2))
+            if not bounded.all():
+                # those sets' pieces break down; the others take this step without them
+                if run.fail(~bounded, "Taylor coefficients are unbounded (an operation left its domain over the "
+                                      "sets, e.g. a division by an interval containing zero, or overflowed)") is None:
+                    break
+                continue
             gap_lo, gap_hi = run.gap()
             found = control.validate(stepper, X, cX, control.propose(stepper, cX, wrap.h_limit, gap_lo, gap_hi))
             run.evaluations += found.evaluations
             run.rejected += found.rejected
             if found.enclosure is None:
-                run.stop(f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}", "breakdown")
-                break
+                why = f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}"
+                bad, tries = _unvalidated(stepper, run.sets, X, found.h)
+                run.evaluations += tries
+                if bad is None:
+                    run.stop(why, "breakdown")
+                    break
+                if run.fail(bad, why) is None:  # (the sets that fail alone; the others go on)
+                    break
+                continue
             try:
                 step = run.advance(stepper, X, found, gap_lo, gap_hi)
             except SingularMatrixError as exc:
@@ -275,14 +287,21 @@ def solve_batch(
             if run.status:
                 break
             if split is not None:
+                before = run.sets
                 run.sets, n_split, reason = split.apply(step, run.sets)
                 if reason:
-                    run.stop(reason, "breakdown")
-                    break
+                    # over the budget of sets: the pieces whose sets ask to be split now
+                    # break down (all of them when they are all of them)
+                    if run.fail(split.select(step), reason) is None:
+                        break
+                if n_split:
+                    run.pieces.split(split.select(step), before, run.sets)
                 run.splits += n_split
                 run.max_sets = max(run.max_sets, run.sets.n_sets)
             if merge is not None:
                 run.sets, merged = merge.apply(run.sets)
+                if merged:
+                    run.pieces.replaced(run.sets.n_sets, run.t)  # (which sets merged: not told)
                 run.merges += merged
     except KeyboardInterrupt:
         # Ctrl-C: everything recorded so far is verified; return it
@@ -293,8 +312,38 @@ def solve_batch(
     result.stats["wall_s"] = time.perf_counter() - wall0
     for hook in hook_list:
         hook.after_run(result)  # records and statistics of the hooks
+    result = run.by_pieces(result)
     result.stats["wall_s"] = time.perf_counter() - wall0
     return result
+
+
+def _unvalidated(stepper, sets, X: Interval, h: float):
+    """The sets (B,) bool whose a-priori enclosure does not validate on their own with
+    the step ``h`` (the smallest the batch tried), found by bisecting the batch (each
+    group tested as a batch of its own: ``begin``, coefficients, ``apriori``); None
+    when no set fails alone (the batch as a whole failed: no culprit to drop). Returns
+    ``(bad, evaluations)``."""
+    B = sets.n_sets
+    if B < 2:
+        return None, 0
+    bad = np.zeros(B, dtype=bool)
+    evaluations = 0
+    todo = [np.arange(B // 2, B), np.arange(B // 2)]  # (the whole batch failed: start from its halves)
+    while todo:
+        idx = todo.pop()
+        sub = sets.take(idx)
+        stepper.begin(sub)
+        Xs = X[idx]
+        cXs = stepper.coefficients(Xs)
+        evaluations += 2
+        ok = bool(np.isfinite(cXs.lo).all() and np.isfinite(cXs.hi).all()) and stepper.apriori(Xs, cXs, h) is not None
+        if ok:
+            continue
+        if idx.size == 1:
+            bad[idx] = True
+        else:
+            todo += [idx[idx.size // 2:], idx[:idx.size // 2]]
+    return (bad if bad.any() else None), evaluations
 
 
 def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, sets_type=DoubletonSets):
@@ -356,6 +405,127 @@ def _state_view(view, n_sets: int, n_state: int):
     return SetView(c=np.ascontiguousarray(view.c[:, :n_state]), A=Interval._from_bounds(A, A), R=view.R)
 
 
+class _PieceBook:
+    """Which initial pieces (the run's initial boxes) each set may hold solutions of,
+    and which pieces broke down where.
+
+    Every set carries one piece (``origin``, (B,)), and the pieces form groups
+    (``group``, (P,): the smallest piece of each piece's group): a set may hold
+    solutions of every piece of its origin's group. At the start each initial box is
+    its own set and its own group. The driver's own operations keep the
+    correspondence: a set pruned (its row goes), a split (both halves keep their
+    parent's piece), a break-down (:meth:`fail`: every set of the failed groups goes).
+    Where the driver cannot tell which new set came from which (a hook that returned
+    new sets, a merge of neighbouring sets, initial sets a hook returned in another
+    number), every live piece joins one group (:meth:`replaced`): a later failure then
+    fails them all together, as every failure did before per-piece break-downs.
+
+    The invariant (what keeps dropping sets sound): the solutions from a live piece P
+    lie, at the run's time, in the union of the sets whose origin is in P's group. A
+    failure kills whole groups, so the sets kept hold every solution of every live
+    piece. The origin arrays are replaced, never changed in place: the records of
+    outputs and steps share them while they do not change.
+    """
+
+    def __init__(self, n_pieces: int, n_sets: int):
+        self.group = np.arange(n_pieces)
+        self.alive = np.ones(n_pieces, dtype=bool)
+        self.event = np.full(n_pieces, -1)  # index into events of the failure that ended each piece
+        self.events = []  # (t, reason) of each failure, in the order they happened
+        self.linked_at = None  # the time all live pieces were first linked (None: never)
+        self.origin = np.arange(n_pieces)
+        if n_sets != n_pieces:
+            self.replaced(n_sets, None)
+
+    def take(self, keep: np.ndarray) -> None:
+        """The sets kept by the mask ``keep`` (sets pruned)."""
+        self.origin = self.origin[keep]
+
+    def replaced(self, n_sets: int, t) -> None:
+        """New sets (``n_sets``) whose provenance is unknown: every live piece joins one
+        group, which every new set carries."""
+        live = np.flatnonzero(self.alive)
+        if live.size == 0:
+            self.origin = np.zeros(n_sets, dtype=np.intp)
+            return
+        root = int(live[0])
+        if (self.group[live] != root).any() and self.linked_at is None:
+            self.linked_at = t
+        self.group = np.where(self.alive, root, self.group)
+        self.origin = np.full(n_sets, root, dtype=np.intp)
+
+    def link(self, pieces: np.ndarray) -> int:
+        """Join the groups of ``pieces`` (indices) into one; returns its root."""
+        roots = np.unique(self.group[pieces])
+        root = int(roots[0])
+        if roots.size > 1:
+            self.group = np.where(np.isin(self.group, roots), root, self.group)
+        return root
+
+    def split(self, mask: np.ndarray, before, after) -> None:
+        """The sets ``mask`` of ``before`` were split in two (``after = before.split(mask)``:
+        the sets not split in their order, then the halves). Both halves keep their
+        parent's piece: the layout of the halves is that of ``before``'s type (set-major
+        for doubletons, side-major for second-order sets), checked against the parents'
+        hulls; where it does not fit, the parents' groups are joined instead."""
+        idx = np.flatnonzero(mask)
+        parents = self.origin[idx]
+        rest = self.origin[~mask]
+        k = idx.size
+        if after.n_sets != before.n_sets + k:
+            self.replaced(after.n_sets, None)  # (not a split of those sets: provenance unknown)
+            return
+        if k == 0 or (self.group[parents] == self.group[parents[0]]).all():
+            self.origin = np.concatenate([rest, np.full(2 * k, parents[0] if k else 0, dtype=np.intp)])
+            return
+        if isinstance(before, DoubletonSets):
+            which = np.repeat(np.arange(k), 2)  # set-major: a1 a2 b1 b2 ...
+        elif isinstance(before, QuadraticSets):
+            which = np.tile(np.arange(k), 2)  # side-major: a1 b1 ... a2 b2 ...
+        else:
+            which = None
+        if which is not None:
+            # a half lies in its parent's hull (up to the rounding its recentring folds
+            # into the set): the layout above is the split's
+            P = before.take(idx).hull()
+            H = after.take(np.arange(before.n_sets - k, after.n_sets)).hull()
+            lo, hi = P.lo[which], P.hi[which]
+            slack = 1e-6 * (np.abs(lo) + np.abs(hi) + (hi - lo)) + 1e-300
+            with np.errstate(invalid="ignore"):
+                fits = bool(((H.lo >= lo - slack) & (H.hi <= hi + slack)).all())
+            if fits:
+                self.origin = np.concatenate([rest, parents[which]])
+                return
+        root = self.link(parents)
+        self.origin = np.concatenate([rest, np.full(2 * k, root, dtype=np.intp)])
+
+    def fail(self, bad: np.ndarray, t: float, reason: str) -> np.ndarray:
+        """The sets ``bad`` (B,) cannot be continued: every piece of their groups breaks
+        down at ``t`` with ``reason``. Returns the mask (B,) of the sets to keep (those
+        of the live pieces)."""
+        roots = np.unique(self.group[self.origin[bad]])
+        dead = np.isin(self.group, roots) & self.alive
+        self.alive = self.alive & ~dead
+        self.event = np.where(dead, len(self.events), self.event)
+        self.events.append((float(t), reason))
+        keep = self.alive[self.origin]
+        self.origin = self.origin[keep]
+        return keep
+
+    def results(self, boxes: Interval, status: str, t_reached: float, reason: str) -> list:
+        """:class:`~verified.solution.PieceResult` per piece: a dead piece's failure, a
+        live one with the run's ``status``, ``t_reached`` and ``reason``."""
+        out = []
+        for i in range(self.group.size):
+            e = int(self.event[i])
+            if e >= 0:
+                t, why = self.events[e]
+                out.append(PieceResult(i, boxes[i], "breakdown", t, why))
+            else:
+                out.append(PieceResult(i, boxes[i], status, float(t_reached), reason))
+        return out
+
+
 class _Run:
     """The state of one integration: the sets, the exact time, what has been recorded,
     and the counters. It is the :class:`~verified.hooks.RunControl` the hooks get."""
@@ -384,6 +554,13 @@ class _Run:
         self.max_sets = self.sets.n_sets
         self.n_state = setup.n_state
         self.wrap = wrap  # the wrapping control (resume_point: a run continued from here keeps its limit)
+        # The initial pieces (the rows of ``initial``) and which of them each set may hold
+        # solutions of (see _PieceBook): a piece whose sets cannot be continued breaks down
+        # alone, the others go on
+        self.pieces = _PieceBook(initial.shape[0], self.sets.n_sets)
+        self.out_pieces = [np.arange(initial.shape[0])]  # per output: each box's piece
+        self.tube_pieces = []  # per step: each tube box's piece
+        self.initial = initial
 
     # ------------------------------------------------------------------ RunControl
     def stop(self, reason: str, status: str = "stopped") -> None:
@@ -405,6 +582,7 @@ class _Run:
         self.tube.pop()
         self.tube_t.pop()
         self.tube_views.pop()
+        self.tube_pieces.pop()  # (the step kept every set's row: the pieces stay as they are)
         self.sets, self.t, self.t_exact = last.previous, last.t_start, last.t_exact_start
         self.step = self.recent[-1]
         return self.step, self.sets
@@ -412,7 +590,9 @@ class _Run:
     # ------------------------------------------------------------------ one step
     def hull_for_step(self, param_boxes, n_state: int, n_steer: int, max_width: float):
         """The hull (B, N) of the sets to take the step's coefficients over, or None
-        (a break-down: not finite or wider than ``max_width``)."""
+        (a break-down: not finite or wider than ``max_width``). Sets that are not finite
+        or too wide break down their pieces alone (:meth:`fail`) when other pieces
+        remain: the hull of the remaining sets is returned."""
         X = self.sets.hull()
         if param_boxes is not None:
             # Parameters never change: their true values stay in the given boxes, so
@@ -424,16 +604,37 @@ class _Run:
             feasible = ~X.is_empty().any(axis=1)
             if not feasible.all():
                 self.sets = self.sets.take(np.flatnonzero(feasible))
+                self.pieces.take(feasible)
                 X = X[feasible]
                 self.pruned += int((~feasible).sum())
-        if not (np.isfinite(X.lo).all() and np.isfinite(X.hi).all()):
-            self.stop("enclosure is not finite (an operation overflowed, or divided by an interval containing zero)",
-                      "breakdown")
-            return None
-        if (X[:, :n_steer].width() > max_width).any():  # not states a hook appended (h)
-            self.stop(f"enclosure too wide (a component exceeds width {max_width:g})", "breakdown")
-            return None
+        finite = np.isfinite(X.lo).all(axis=1) & np.isfinite(X.hi).all(axis=1)
+        if not finite.all():
+            keep = self.fail(~finite, "enclosure is not finite (an operation overflowed, or divided by an interval "
+                                      "containing zero)")
+            if keep is None:
+                return None
+            X = X[keep]
+        with np.errstate(invalid="ignore"):
+            wide = (X[:, :n_steer].width() > max_width).any(axis=1)  # not states a hook appended (h)
+        if wide.any():
+            keep = self.fail(wide, f"enclosure too wide (a component exceeds width {max_width:g})")
+            if keep is None:
+                return None
+            X = X[keep]
         return X
+
+    def fail(self, bad: np.ndarray, reason: str):
+        """The sets ``bad`` (B,) cannot be continued: the pieces they may hold solutions
+        of break down at ``t`` with ``reason`` and every set of those pieces is dropped.
+        Returns the mask (B,) of the sets kept, or None when none is (the run stops:
+        a break-down)."""
+        keep = self.pieces.fail(bad, self.t, reason)
+        if not keep.any():
+            self.stop(reason, "breakdown")
+            return None
+        self.sets = self.sets.take(np.flatnonzero(keep))
+        self.recent = []  # no rollback to sets that held the dropped ones
+        return keep
 
     def gap(self):
         """Floats ``lo <= exact time to the next output <= hi``."""
@@ -461,6 +662,7 @@ class _Run:
         self.recent = (self.recent + [step])[-2:]
         self.tube.append(E[:, :self.n_state])
         self.tube_views.append(_state_view(step.tube_view, E.shape[0], self.n_state))
+        self.tube_pieces.append(self.pieces.origin)
         self.tube_t.append(step.t)
         return step
 
@@ -468,6 +670,8 @@ class _Run:
         for hook in hooks:
             new = hook.after_step(self.step, self.sets, self)
             if new is not None:
+                if new is not self.sets:
+                    self.pieces.replaced(new.n_sets, self.t)  # (which set came from which: unknown)
                 self.sets = new
                 self.recent = []  # no rollback past sets a hook replaced
             if self.status:
@@ -481,6 +685,7 @@ class _Run:
         self.out_views.append(set_view(self.sets, self.n_state))
         self.out_t.append(self.t)
         self.out_boxes.append(boxes)
+        self.out_pieces.append(self.pieces.origin)
         self.next_out += 1
 
     # ------------------------------------------------------------------ result
@@ -517,7 +722,100 @@ class _Run:
             state_names=state_names,
             views=(self.out_views + [None] * k)[:k],
             tube_views=(self.tube_views + [None] * n_tube)[:n_tube],
+            piece_results=self.pieces.results(self.initial, status, tube_t[-1], reason),
         )
+
+    def by_pieces(self, full: Solution) -> Solution:
+        """The run's Solution from ``full`` (what :meth:`solution` made, after the hooks'
+        ``after_run``): ``full`` itself when no piece broke down on its own; else the
+        run up to the first failure, when every piece was still verified (status
+        "breakdown", ``t_reached`` that time), with ``surviving`` the whole run over
+        the pieces that did not break down (None when none went on)."""
+        book = self.pieces
+        results = full.piece_results
+        for p in results:  # (a hook's after_run may have changed the run's own outcome)
+            if not p.failed:
+                p.status, p.t_reached, p.reason = full.status, float(full.t_reached), full.reason
+        if not book.events:
+            return full
+        T = min(t for t, _ in book.events)
+        main = _until(full, T)
+        main.status = "breakdown"
+        main.reason = pieces_summary(results) or book.events[0][1]
+        main.piece_results = results
+        main.stats["pieces_failed"] = int((~book.alive).sum())
+        if full.status != "breakdown" and book.alive.any() and self.sets.n_sets:
+            main.surviving = _restricted(full, book.alive, self.out_pieces, self.tube_pieces)
+        return main
+
+
+def _until(sol: Solution, T: float) -> Solution:
+    """A copy of ``sol`` with what it verified up to time ``T`` (a step boundary): the
+    outputs at times <= T, the steps that end by T, the consistency record up to T."""
+    keep = np.flatnonzero(np.asarray(sol.t) <= T)
+    steps = int(np.sum(np.asarray(sol.tube_t)[1:] <= T))
+    views = [sol.views[i] if i < len(sol.views) else None for i in keep] if sol.views else []
+    n = sol.hull.shape[-1]
+    return Solution(
+        t=np.asarray(sol.t)[keep], boxes=[sol.boxes[i] for i in keep], hull=sol.hull[keep],
+        tube_t=np.asarray(sol.tube_t)[:steps + 1], tube=list(sol.tube[:steps]),
+        tube_hull=sol.tube_hull[:steps] if steps else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))),
+        t_reached=float(sol.tube_t[steps]), status=sol.status, reason=sol.reason, stats=dict(sol.stats),
+        state_names=sol.state_names, consistency=_record_until(sol.consistency, T), views=views,
+        tube_views=list(sol.tube_views[:steps]) if sol.tube_views else [])
+
+
+def _record_until(rec, T: float):
+    """A copy of a consistency record (:class:`verified.reduction_area.ConsistencyRecord`)
+    with its series and tests up to time ``T``."""
+    if rec is None or not hasattr(rec, "ra_t"):
+        return rec
+    rec = copy.copy(rec)
+    ra_t = np.asarray(rec.ra_t)
+    m = ra_t <= T
+    for name in ("ra_t", "ra", "h_h", "h_v", "h_h_set", "h_v_set"):
+        v = getattr(rec, name, None)
+        if v is not None and np.shape(v)[:1] == m.shape:
+            setattr(rec, name, v[m] if isinstance(v, Interval) else np.asarray(v)[m])
+    rec.tests = [r for r in rec.tests if r.t <= T]
+    return rec
+
+
+def _restricted(sol: Solution, alive: np.ndarray, out_pieces: list, tube_pieces: list) -> Solution:
+    """A copy of ``sol`` with the boxes of the pieces ``alive`` (P,) only: at each output
+    and step the rows whose piece is alive (``out_pieces``, ``tube_pieces``: each row's
+    piece, as recorded; rows past the record, which a hook's ``after_run`` appended
+    for the sets the run ended with, are kept whole)."""
+
+    def rows(pieces, j, m):
+        if j < len(pieces) and pieces[j].shape[0] == m:
+            return np.flatnonzero(alive[pieces[j]])
+        return np.arange(m)
+
+    keep_out = [rows(out_pieces, j, b.shape[0]) for j, b in enumerate(sol.boxes)]
+    keep_tube = [rows(tube_pieces, j, b.shape[0]) for j, b in enumerate(sol.tube)]
+    boxes = [b[r] for b, r in zip(sol.boxes, keep_out)]
+    tube = [b[r] for b, r in zip(sol.tube, keep_tube)]
+    n = sol.hull.shape[-1]
+    empty = Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n)))
+
+    def view_rows(views, j, r, m):
+        v = views[j] if j < len(views) else None
+        if v is None or v.n_sets != m:
+            return None
+        return SetView(c=v.c[r], A=v.A[r], R=v.R[r])
+
+    views = [view_rows(sol.views, j, r, b.shape[0]) for j, (b, r) in enumerate(zip(sol.boxes, keep_out))] \
+        if sol.views else []
+    tube_views = [view_rows(sol.tube_views, j, r, b.shape[0]) for j, (b, r) in enumerate(zip(sol.tube, keep_tube))] \
+        if sol.tube_views else []
+    out = Solution(
+        t=np.asarray(sol.t), boxes=boxes, hull=stack_hulls(boxes), tube_t=np.asarray(sol.tube_t),
+        tube=tube, tube_hull=stack_hulls(tube) if tube else empty, t_reached=float(sol.t_reached),
+        status=sol.status, reason=sol.reason, stats=dict(sol.stats), state_names=sol.state_names,
+        consistency=sol.consistency, views=views, tube_views=tube_views, piece_results=sol.piece_results)
+    out.stats["pieces"] = int(alive.sum())
+    return out
 
 
 def _stepper(kind: SetKind, prob: VerifiedODE, order, params, error_basis, absorb=False,

@@ -142,7 +142,7 @@ from .graph import trace
 from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate, hull, stack
 from .batch import VerifiedODE, solve_batch
-from .solution import Solution, Start
+from .solution import PieceResult, Solution, Start, pieces_summary
 from .solver_args import _subdivision, check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
@@ -435,6 +435,11 @@ class _Pause(Hook):
 
     def after_step(self, step, sets, run):
         if sets.n_sets < self.at or run.landed_on_last_output(step):
+            return None
+        if getattr(getattr(run, "pieces", None), "events", None):
+            # some of its pieces broke down: its Solution stops at the first failure and
+            # only its surviving part goes on, which new chunks cut from its sets could
+            # not be stitched to; it goes on whole, as a chunk without re-chunking
             return None
         self.start = run.resume_point()
         run.stop(f"paused at {sets.n_sets} sets to be cut into new chunks", "stopped")
@@ -1218,11 +1223,56 @@ def _chunk_tube_hulls(sol):
 
 def merge_solutions(results, ranges, initial, outs, t0, state_names, interrupted=False):
     """One :class:`~verified.solver.Solution` from the chunk Solutions (``None``: a
-    chunk that did not run). See the module docstring for what each field means."""
+    chunk that did not run). See the module docstring for what each field means.
+
+    Per initial piece (``piece_results``): a chunk's own report (offset to the run's
+    indices) where it ran as one batch; every piece of a chunk that did not run, or of
+    a re-chunked chunk, with that chunk's status. Where some pieces broke down and
+    others went on, ``reason`` says which (:func:`verified.solution.pieces_summary`) and
+    ``surviving`` merges the chunks' surviving parts (a chunk without a failed piece
+    whole, a chunk with some its ``surviving``)."""
+    sol = _merge(results, ranges, initial, outs, t0, state_names, interrupted)
+    sol.piece_results = _merge_piece_results(results, ranges, initial, t0)
+    if any(p.failed for p in sol.piece_results):
+        summary = pieces_summary(sol.piece_results)
+        if summary:
+            sol.reason = summary
+        parts = [(i, r.surviving if r.surviving is not None else r) for i, r in enumerate(results)
+                 if r is not None and (r.surviving is not None or r.status != "breakdown")]
+        if parts:
+            ids = [i for i, _ in parts]
+            sub = concatenate([initial[ranges[i][0]:ranges[i][1]] for i in ids], axis=0)
+            sol.surviving = _merge([r for _, r in parts], [ranges[i] for i in ids], sub, outs, t0, state_names,
+                                   interrupted, ids=ids)
+            sol.surviving.piece_results = sol.piece_results
+    return sol
+
+
+def _merge_piece_results(results, ranges, initial, t0) -> list:
+    """``piece_results`` of a chunked run (see :func:`merge_solutions`)."""
+    out = []
+    for sol, (a, b) in zip(results, ranges):
+        own = sol.piece_results if sol is not None and sol.pieces is None else None
+        if own is not None and len(own) == b - a:
+            out += [PieceResult(a + p.index, initial[a + p.index], p.status, float(p.t_reached), p.reason)
+                    for p in own]
+            continue
+        if sol is None:
+            st, tr, why = "interrupted", float(t0), "interrupted before this chunk finished"
+        else:
+            st, tr, why = sol.status, float(sol.t_reached), sol.reason
+        out += [PieceResult(i, initial[i], st, tr, why if st != "completed" else "") for i in range(a, b)]
+    return out
+
+
+def _merge(results, ranges, initial, outs, t0, state_names, interrupted=False, ids=None):
+    """The Solution of :func:`merge_solutions` without the per-piece fields (``ids``: the
+    chunks' numbers in the run, for the reason; default their positions)."""
+    ids = list(range(len(results))) if ids is None else list(ids)
     n = initial.shape[-1]
     # status, reason, t_reached: the worst status; the reason of the earliest chunk of that status
     worst, t_reached, reason, reason_t = "completed", math.inf, "", math.inf
-    for i, (sol, (a, b)) in enumerate(zip(results, ranges)):
+    for i, sol, (a, b) in zip(ids, results, ranges):
         if sol is None:
             st, tr, why = "interrupted", float(t0), "interrupted before this chunk finished"
         else:

@@ -13,7 +13,7 @@ import numpy as np
 
 from .interval import Interval
 
-__all__ = ["Solution", "Start"]
+__all__ = ["Solution", "Start", "PieceResult", "pieces_summary"]
 
 
 @dataclass
@@ -37,6 +37,78 @@ class Start:
     t_exact: Fraction
     h_limit: float = float("inf")
     split_scale: np.ndarray | None = None
+
+
+@dataclass
+class PieceResult:
+    """How one initial piece of a run fared (``Solution.piece_results``).
+
+    index : int
+        The piece's row among the run's initial boxes (after ``subdivision``; with
+        ``start=``: the start's set).
+    box : Interval (n,)
+        Its initial box (states; for a run continued from ``start``: the hull of its set).
+    status : "completed", "breakdown", "stopped" or "interrupted"
+        "breakdown": the run could not continue this piece's sets (everything up to
+        ``t_reached`` is verified for it); the other statuses are the run's own.
+    t_reached : float
+        The last time up to which every solution from this piece is enclosed.
+    reason : str
+        Why it broke down or stopped ("" when completed).
+    """
+
+    index: int
+    box: Interval
+    status: str
+    t_reached: float
+    reason: str = ""
+
+    @property
+    def failed(self) -> bool:
+        return self.status == "breakdown"
+
+
+def _index_list(idx, limit: int = 8) -> str:
+    """"piece 5" / "pieces 5, 17, 40" / "pieces 0-15, 40" (runs of consecutive indices)
+    / "pieces 1, 3, 5, ... (12 more)"."""
+    idx = sorted({int(i) for i in idx})
+    runs = []
+    for i in idx:
+        if runs and i == runs[-1][1] + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    words = [str(a) if a == b else f"{a}, {b}" if b == a + 1 else f"{a}-{b}" for a, b in runs]
+    more = len(words) - limit
+    text = ", ".join(words[:limit]) + (f", ... ({more} more)" if more > 0 else "")
+    return f"piece{'s' if len(idx) > 1 else ''} {text}"
+
+
+def pieces_summary(results, t_end: float | None = None) -> str:
+    """One line on the pieces of a run: ``"3 of 64 pieces failed (pieces 5, 17, 40:
+    <reason>); 61 pieces verified to t = 2"`` (failures grouped by reason, in the order
+    they happened); "" when no piece failed or every piece failed at once (the run's
+    own reason says why)."""
+    results = list(results or ())
+    failed = [p for p in results if p.failed]
+    if not failed or (len(failed) == len(results) and len({(p.t_reached, p.reason) for p in failed}) == 1):
+        return ""  # (none failed, or all at once: the run's reason says it)
+    groups: dict = {}
+    for p in sorted(failed, key=lambda p: (p.t_reached, p.index)):
+        groups.setdefault(p.reason, []).append(p)
+    parts = []
+    for reason, ps in groups.items():
+        ts = sorted({p.t_reached for p in ps})
+        when = f"t = {ts[0]:g}" if len(ts) == 1 else f"t = {ts[0]:g}..{ts[-1]:g}"
+        parts.append(f"{_index_list(sorted(p.index for p in ps))} at {when}: {reason}")
+    text = f"{len(failed)} of {len(results)} pieces failed ({'; '.join(parts)})"
+    rest = [p for p in results if not p.failed]
+    if rest:
+        t_rest = min(p.t_reached for p in rest)
+        statuses = {p.status for p in rest}
+        how = "verified" if statuses == {"completed"} else f"verified ({'/'.join(sorted(statuses))})"
+        text += f"; {len(rest)} piece{'s' if len(rest) > 1 else ''} {how} to t = {t_rest:g}"
+    return text
 
 
 @dataclass
@@ -88,7 +160,32 @@ class Solution:
         tube and, with re-chunking, its ``pieces``; None for one in-process batch.
     pieces : list of dict or None
         A chunk's run that was re-chunked: each piece's parent, start time and status
-        (:func:`verified.parallel.solve_parallel`); None otherwise.
+        (:func:`verified.parallel.solve_parallel`); None otherwise. (Not the initial
+        pieces: those are ``piece_results``.)
+    piece_results : list of PieceResult or None
+        Per initial box of the run (after ``subdivision``): its status, ``t_reached`` and
+        reason. When the sets of some pieces cannot be continued (an enclosure not
+        finite or too wide, unbounded Taylor coefficients, no step validated), those
+        pieces break down and the run continues with the others: then ``status`` is
+        "breakdown", ``t_reached`` the time up to which *every* piece is verified, and
+        ``t``, ``boxes``, ``hull``, ``tube``... stop there (they enclose every solution
+        from the whole initial set); the pieces that went on are in ``surviving``.
+        Pieces whose sets were linked (see :func:`verified.batch.solve_batch`) fail
+        together.
+    surviving : Solution or None
+        Only where some pieces broke down and others went on: the run restricted to the
+        pieces that did *not* break down (``piece_results`` with status other than
+        "breakdown"), up to where they went (its own ``t_reached``/``status``). Its
+        boxes enclose the solutions from *those pieces only*, not from the whole
+        initial set. None when no piece broke down on its own (the Solution itself
+        covers every piece) or none went on.
+    method : str
+        The method that ran (:mod:`verified.methods`), with the settings that differ
+        from its defaults; for ``method="auto"`` the attempts in one line.
+    method_log : list of dict or None
+        ``method="auto"`` only (:mod:`verified.auto`): per attempt the method, the number
+        of pieces, how often they had been split, the span it verified, its status and
+        reason, its wall time and what was tried next (``"next"``).
     """
 
     t: np.ndarray
@@ -107,10 +204,25 @@ class Solution:
     tube_views: list = field(default_factory=list)
     chunks: list | None = None
     pieces: list | None = None
+    piece_results: list | None = None
+    surviving: "Solution | None" = None
+    method: str = ""
+    method_log: list | None = None
 
     @property
     def success(self) -> bool:
         return self.status == "completed"
+
+    @property
+    def failed_pieces(self) -> list:
+        """The indices of the initial pieces that broke down (``piece_results``)."""
+        return [p.index for p in (self.piece_results or ()) if p.failed]
+
+    def pieces_summary(self) -> str:
+        """``"3 of 64 pieces failed (pieces 5, 17, 40 at t = 0.31: <reason>); 61 pieces
+        verified to t = 2"``, or "" when no piece broke down on its own
+        (:func:`pieces_summary`)."""
+        return pieces_summary(self.piece_results)
 
     def __repr__(self):
         return (

@@ -109,15 +109,20 @@ def test_uncertain_parameters_per_chunk(client):
 
 def test_breakdown_of_one_chunk_is_the_merged_status(ode, box):
     """A wide single box breaks down (~0.45 s) where narrow pieces do not: worst status,
-    smallest t_reached, the reason names the chunk; outputs only where every chunk got."""
+    smallest t_reached, the reason names the piece (sol.chunks the chunk); outputs only
+    where every chunk got; the chunk that completed is the surviving part."""
     narrow = box.subdivide([64, 1, 1, 1]).reshape(-1, 4)[:2]
     sol = solve(ode, [narrow, box], (0.0, 0.7), t_eval=[0.2, 0.4, 0.6, 0.7], workers=1, chunks=2)
     c = sol.chunks
     assert c[0]["status"] == "completed" and c[1]["status"] == "breakdown"
     assert sol.status == "breakdown" and sol.t_reached == c[1]["t_reached"] < 0.6
-    assert sol.reason.startswith("chunk 1 (boxes 2..2)")
+    assert sol.reason.startswith("1 of 3 pieces failed (piece 2 at t = ")
+    assert sol.reason.endswith("2 pieces verified to t = 0.7")
+    assert sol.failed_pieces == [2] and [p.status for p in sol.piece_results] == ["completed"] * 2 + ["breakdown"]
     assert sol.t[-1] <= sol.t_reached and len(sol.boxes) == len(sol.t)
     assert sol.tube_t[-1] == sol.t_reached
+    s = sol.surviving
+    assert s.status == "completed" and s.t_reached == 0.7 and [b.shape[0] for b in s.boxes] == [2] * 5
 
 
 class SlowSteps(Hook):
