@@ -489,12 +489,58 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         if bar is not None:
             bar.close()
     if masses is not None:
+        summary = sol.pieces_summary()
         _prove_mass_matrix(masses, sol)
-    sol = Simulation.of(sol, mode=mode.name, params=_params_record(system, ode_params), control=loop)
+        _clip_failed_pieces(sol, summary)
+        _prove_surviving(masses, sol)
+    record = _params_record(system, ode_params)
+    sol = Simulation.of(sol, mode=mode.name, params=record, control=loop)
     sol.state_names = system.state_names
+    if sol.surviving is not None:  # (the pieces that went on after others broke down; no frames)
+        sol.surviving = Simulation.of(sol.surviving, mode=mode.name, params=record, control=loop)
+        sol.surviving.state_names = system.state_names
     if masses is not None:
         attach_frames(sol, masses.chain, loop.cparams if loop is not None else getattr(masses, "cparams", None))
     return sol
+
+
+def _clip_failed_pieces(sol: Solution, summary: str):
+    """After the M(q) > 0 proof (which may cut ``sol`` back): the pieces that broke down
+    are verified up to its ``t_reached`` at most (which of them the proof failed on is
+    not known here); without a surviving part the others share the run's outcome (the
+    pieces that went on are proven on their own, ``sol.surviving``)."""
+    T = float(sol.t_reached)
+    changed = False
+    for p in sol.piece_results or ():
+        if p.failed and p.t_reached > T:
+            p.t_reached, changed = T, True
+        elif not p.failed and sol.surviving is None:
+            p.status, p.t_reached, p.reason = sol.status, T, sol.reason
+    after = sol.pieces_summary()
+    if changed and summary and after and summary in sol.reason:
+        sol.reason = sol.reason.replace(summary, after, 1)
+
+
+def _prove_surviving(masses, sol: Solution):
+    """M(q) > 0 on the enclosures of the pieces that went on after others broke down
+    (``sol.surviving``, :func:`_prove_mass_matrix`). Where that fails, those pieces
+    break down too, at the time it names, and ``sol`` keeps no surviving part."""
+    surv = sol.surviving
+    if surv is None:
+        return
+    _prove_mass_matrix(masses, surv)
+    if surv.status != "breakdown":
+        return
+    before = sol.pieces_summary()
+    for p in sol.piece_results or ():
+        if not p.failed:
+            p.status, p.t_reached, p.reason = "breakdown", float(surv.t_reached), surv.reason
+    sol.surviving = None
+    after = sol.pieces_summary()
+    if after and before and before in sol.reason:
+        sol.reason = sol.reason.replace(before, after, 1)
+    elif after:
+        sol.reason = after
 
 
 def _invariant_hook(loop, t_switch, t0: float, t_end: float, t_eval, rhs=None):

@@ -22,7 +22,13 @@ Layout (keys exactly as issue 7 asks)::
                            "rotation": [[[lo, hi] x 9] per output time], "tube_t": [...],
                            "tube": [[[lo, hi] x 3] per step], "method": "both"}},
                                       # frame enclosures (chains; mbs.frames), m
-      "control": ["pd", ...]          # controllers of a closed loop (only if any)
+      "control": ["pd", ...],         # controllers of a closed loop (only if any)
+      "pieces": {"count": 64, "summary": "3 of 64 pieces failed (...); 61 pieces verified to t = 2",
+                 "failed": [{"index": 5, "t_reached": 0.31, "reason": "...", "box": [[lo, hi], ...]}, ...]},
+                                      # only when some initial pieces broke down: then
+                                      # "outputs" stop at the first failure (every piece)
+      "surviving": {"pieces": [0, 1, ...], "t_reached": 2.0, "status": "completed", "reason": "",
+                    "outputs": [...]} # the pieces that went on, to where they went (only then)
     }
 
 Bounds are JSON numbers written with Python's ``repr`` (17 significant digits at
@@ -113,15 +119,7 @@ def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=
     go under ``"frames"``."""
     names = list(state_names if state_names is not None else getattr(sol, "state_names", ()) or
                  [f"x{i + 1}" for i in range(sol.hull.shape[-1])])
-    outputs = []
-    for t, boxes in zip(sol.t, sol.boxes):
-        lo, hi = np.asarray(boxes.lo, float), np.asarray(boxes.hi, float)
-        lo2, hi2 = lo.reshape(-1, len(names)), hi.reshape(-1, len(names))
-        outputs.append({
-            "t": float(t),
-            "boxes": [_pairs(a, b) for a, b in zip(lo2, hi2)],
-            "hull": _pairs(lo2.min(axis=0), hi2.max(axis=0)),
-        })
+    outputs = _outputs(sol, len(names))
     stats = dict(getattr(sol, "stats", {}) or {})
     stats.setdefault("max_boxes", max((len(np.asarray(b.lo).reshape(-1, len(names))) for b in sol.boxes),
                                       default=0))
@@ -149,7 +147,34 @@ def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=
     control = getattr(sol, "control", None)
     if control is not None:
         out["control"] = [c.name for c in control.controllers]
+    results = getattr(sol, "piece_results", None) or []
+    if any(p.failed for p in results):
+        # some initial pieces broke down: which, when and why; "outputs" above stop at
+        # the first failure (they enclose every piece), "surviving" goes on with the rest
+        out["pieces"] = {"count": len(results), "summary": sol.pieces_summary(),
+                         "failed": [{"index": int(p.index), "t_reached": float(p.t_reached), "reason": p.reason,
+                                     "box": _pairs(np.ravel(p.box.lo)[:len(names)], np.ravel(p.box.hi)[:len(names)])}
+                                    for p in results if p.failed]}
+    surv = getattr(sol, "surviving", None)
+    if surv is not None:
+        out["surviving"] = {"pieces": [int(p.index) for p in results if not p.failed],
+                            "t_reached": float(surv.t_reached), "status": surv.status, "reason": surv.reason or "",
+                            "outputs": _outputs(surv, len(names))}
     return out
+
+
+def _outputs(sol, n: int) -> list:
+    """result.json's ``outputs`` of a Solution: per output time its boxes and their hull."""
+    outputs = []
+    for t, boxes in zip(sol.t, sol.boxes):
+        lo, hi = np.asarray(boxes.lo, float), np.asarray(boxes.hi, float)
+        lo2, hi2 = lo.reshape(-1, n), hi.reshape(-1, n)
+        outputs.append({
+            "t": float(t),
+            "boxes": [_pairs(a, b) for a, b in zip(lo2, hi2)],
+            "hull": _pairs(lo2.min(axis=0), hi2.max(axis=0)),
+        })
+    return outputs
 
 
 def write_result(path, sol=None, *, data: dict | None = None, **kwargs) -> Path:
@@ -171,9 +196,11 @@ def read_result(path) -> dict:
         data = json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise ResultError(f"{path}: cannot read result: {e}") from None
-    for out in data.get("outputs", []):
+    for out in data.get("outputs", []) + data.get("surviving", {}).get("outputs", []):
         out["boxes"] = [[[bound_from_json(a), bound_from_json(b)] for a, b in box] for box in out["boxes"]]
         out["hull"] = [[bound_from_json(a), bound_from_json(b)] for a, b in out["hull"]]
+    for p in data.get("pieces", {}).get("failed", []):
+        p["box"] = [[bound_from_json(a), bound_from_json(b)] for a, b in p["box"]]
     return data
 
 

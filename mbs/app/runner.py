@@ -32,7 +32,8 @@ from .sampling import sample_points, sample_trajectories
 from .scene import Scene, SceneError, output_times, parse_scene, scene_dir
 from ..uncertain import ParameterError
 
-__all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "sample_states", "final_widths"]
+__all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "sample_states", "final_widths",
+           "status_line", "surviving_samples"]
 
 
 def reference_system(model, mode="ii", energy_rate="unsimplified", params=None, control=None, q_init=None):
@@ -196,9 +197,30 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
                 log(f"WARNING: {len(bad)} sampled states lie outside the enclosure (first: sample {bad[0][0]} "
                     f"at t = {sol.t[bad[0][1]]:g}); this is a bug, please report it")
     report["interrupted"] = interrupted
+    surv = getattr(sol, "surviving", None)
+    report["surviving_checked"] = report["surviving_escaped"] = 0
+    if samples > 0 and surv is not None and len(surv.t) > 1 and not interrupted and not kw.get("param_subdivision"):
+        # the pieces that went on after others broke down: sampled from their own boxes
+        # (with the parameter box cut into pieces a piece holds only some parameter
+        # values, which its box does not say: not checked then)
+        try:
+            s_t = np.asarray(surv.t, float)
+            s_traj = surviving_samples(system, sol, samples, s_t, system.params)
+        except KeyboardInterrupt:
+            interrupted = report["interrupted"] = True
+            log("interrupted: sampled trajectories of the surviving pieces skipped")
+        else:
+            bad = check_samples(surv, s_traj)
+            report["surviving_checked"], report["surviving_escaped"] = int(s_traj.shape[0]), len(bad)
+            report["escaped"] += len(bad)
+            if bad:
+                log(f"WARNING: {len(bad)} sampled states of the surviving pieces lie outside their enclosure "
+                    f"(first: sample {bad[0][0]} at t = {surv.t[bad[0][1]]:g}); this is a bug, please report it")
 
     extra = {"wall_total_s": wall, "model_s": t_model, "samples_checked": report["checked"],
              "samples_escaped": report["escaped"], "output_times_requested": len(want) + 1}
+    if surv is not None:
+        extra["surviving_samples_checked"] = report["surviving_checked"]
     frames = []
     if getattr(sol, "frame", None) is not None and len(sol.t):
         frames = list(scene.frames) if scene.frames else [default_frame(sol.frame.chain)]
@@ -237,8 +259,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
             report["paths"]["consistency_plane"] = fig_consistency_plane(
                 sol, system.energy, out / "consistency_plane.png", params=pbox)
     st = sol.stats
-    log(f"{sol.status} at t = {sol.t_reached:g} s{(' (' + sol.reason + ')') if sol.reason else ''}; "
-        f"{st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")
+    log(f"{status_line(sol)}; {st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")
     if "invariant_from" in st:
         rates = [float(r) for _, lam in st.get("decay_rates", [])[:1] for r in lam]
         log(f"every time after {st['invariant_from']:g} s proven at once by the closed loop's energy"
@@ -248,12 +269,50 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
         what = {"completed": "final widths", "breakdown": "widths at the break-down"}.get(
             sol.status, f"widths when {sol.status}")
         log(f"{what} ({t_w}): " + ", ".join(f"{n} {_fmt_width(v)}" for n, v in zip(names, w)))
+    if surv is not None:
+        t_s, w_s = final_widths(surv)
+        k = sum(1 for p in sol.piece_results if not p.failed)
+        log(f"the {k} surviving piece{'s' if k > 1 else ''}: {surv.status} at t = {surv.t_reached:g} s"
+            + (f"; widths ({t_s}): " + ", ".join(f"{n} {_fmt_width(v)}" for n, v in zip(names, w_s))
+               if w_s is not None else ""))
     if report["checked"]:
+        esc = report["escaped"] - report["surviving_escaped"]
         log(f"{report['checked']} sampled trajector{'y' if report['checked'] == 1 else 'ies'}: "
-            f"{'all inside' if not report['escaped'] else str(report['escaped']) + ' states OUTSIDE'}")
+            f"{'all inside' if not esc else str(esc) + ' states OUTSIDE'}")
+    if report["surviving_checked"]:
+        log(f"{report['surviving_checked']} sampled trajectories from the surviving pieces: "
+            f"{'all inside' if not report['surviving_escaped'] else str(report['surviving_escaped']) + ' states OUTSIDE'}")
     for k, p in report["paths"].items():
         log(f"wrote {p}")
     return report
+
+
+def status_line(sol) -> str:
+    """``"completed at t = 2 s"``, ``"breakdown at t = 0.31 s (reason)"``, or where some
+    pieces broke down and others went on ``"breakdown at t = 0.31 s: 3 of 64 pieces
+    failed (pieces 5, 17, 40 at t = 0.31: <reason>); 61 pieces verified to t = 2"``."""
+    head = f"{sol.status} at t = {sol.t_reached:g} s"
+    why = sol.reason or ""
+    summary = sol.pieces_summary() if hasattr(sol, "pieces_summary") else ""
+    if summary and why.startswith(summary):
+        return f"{head}: {why}"
+    return f"{head} ({why})" if why else head
+
+
+def surviving_samples(system, sol, count: int, times, params=None, seed: int = 0) -> np.ndarray:
+    """States (S, len(times), n) along DOP853 trajectories (:func:`sample_states`) from
+    ``count`` points of the pieces of ``sol`` that did not break down
+    (``sol.piece_results``): a seeded random choice of those pieces, points of each
+    piece's own box (its centre and corners first)."""
+    alive = [p for p in sol.piece_results if not p.failed]
+    rng = np.random.default_rng(seed)
+    pick = np.sort(rng.integers(0, len(alive), size=count))
+    parts = []
+    for j, k in zip(*np.unique(pick, return_counts=True)):
+        box = alive[int(j)].box
+        traj, _ = sample_states(system, box.lo, box.hi, int(k), times, params, seed=seed + int(j))
+        parts.append(traj)
+    return np.concatenate(parts, axis=0)
 
 
 def _frame_samples(sol, frame, traj, names):

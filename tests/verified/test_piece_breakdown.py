@@ -45,6 +45,9 @@ NEG_INVERSE = trace(lambda x, p: [-1 / x[0], -x[1]], 2)
 BOX = Interval([0.2, 0.9], [1.4, 1.1])
 T = 0.9
 T_EVAL = np.linspace(0.0, T, 10)
+#: one batch in this process, first-order QR-Lohner sets at the defaults (the method
+#: named, so that the run is the driver's own, not a method that retries failed pieces)
+ONE = dict(workers=1, order=12, tol=1e-10)
 
 
 def _points(results, count, seed=0):
@@ -110,7 +113,7 @@ def _check_whole_run(sol, f, count=12):
 
 
 def test_failing_pieces_are_named_and_the_others_go_on():
-    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, workers=1)
+    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, **ONE)
     assert sol.failed_pieces == [4, 5]
     t4, t5 = sol.piece_results[4].t_reached, sol.piece_results[5].t_reached
     assert 0.6 < t5 < t4 < 0.85
@@ -132,7 +135,7 @@ def test_failing_pieces_are_named_and_the_others_go_on():
     assert _escapes(s, _square, _points(_alive(sol), 24)) == []
     # the surviving enclosure is what the pieces alone give (their steps were shortened by
     # the failing ones while those lived: not narrower than alone, and not far wider)
-    alone = solve(SQUARE, Interval([0.2, 0.9], [1.0, 1.1]), (0.0, T), subdivision=[4, 1], t_eval=T_EVAL, workers=1)
+    alone = solve(SQUARE, Interval([0.2, 0.9], [1.0, 1.1]), (0.0, T), subdivision=[4, 1], t_eval=T_EVAL, **ONE)
     assert alone.status == "completed"
     assert (s.hull[-1].width() >= 0.9 * alone.hull[-1].width()).all()
     assert (s.hull[-1].width() <= 3.0 * alone.hull[-1].width()).all()
@@ -153,7 +156,7 @@ def test_a_driver_that_drops_a_surviving_piece_is_caught(monkeypatch):
         return keep
 
     monkeypatch.setattr(batch._PieceBook, "fail", fail_and_lose_piece_1)
-    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, workers=1)
+    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, **ONE)
     assert sol.failed_pieces == [4, 5] and sol.surviving is not None
     pts = _points([sol.piece_results[1]], 6)
     assert _escapes(sol.surviving, _square, pts)  # caught
@@ -164,7 +167,7 @@ def test_pieces_that_fail_at_t0_do_not_take_the_others_with_them():
     """x' = 1/x: the pieces with x = 0 in their box have unbounded coefficients at t = 0
     ("breakdown at t = 0" for the whole run, as before); the others run to T = 1."""
     sol = solve(INVERSE, Interval([-0.5, 0.9], [1.5, 1.1]), (0.0, 1.0), subdivision=[4, 1],
-                t_eval=np.linspace(0, 1, 5), workers=1)
+                t_eval=np.linspace(0, 1, 5), **ONE)
     assert sol.status == "breakdown" and sol.t_reached == 0.0 and list(sol.t) == [0.0]
     assert len(sol.tube) == 0 and sol.boxes[0].shape[0] == 4
     assert sol.failed_pieces == [0, 1]
@@ -181,7 +184,7 @@ def test_step_size_underflow_fails_only_the_sets_that_cannot_step():
     """x' = -1/x: the pieces whose x reaches 0 before T find no step above h_min (found
     by bisecting the batch); the others go on."""
     sol = solve(NEG_INVERSE, Interval([0.5, 0.9], [1.5, 1.1]), (0.0, 0.3), subdivision=[4, 1],
-                t_eval=np.linspace(0, 0.3, 4), workers=1, h_min=1e-4)
+                t_eval=np.linspace(0, 0.3, 4), **ONE, h_min=1e-4)
     assert sol.failed_pieces == [0, 1]
     assert all("step size underflow" in sol.piece_results[i].reason for i in (0, 1))
     t0, t1 = sol.piece_results[0].t_reached, sol.piece_results[1].t_reached
@@ -196,7 +199,7 @@ def test_adaptive_splitting_follows_each_piece():
     """With adaptive splitting the sets of the blowing-up piece multiply until the budget
     of sets is spent: that piece breaks down (before: the whole run), the halves of the
     others' sets stay with their pieces."""
-    sol = solve(SQUARE, BOX, (0.0, 0.75), subdivision=[3, 1], t_eval=np.linspace(0, 0.75, 4), workers=1,
+    sol = solve(SQUARE, BOX, (0.0, 0.75), subdivision=[3, 1], t_eval=np.linspace(0, 0.75, 4), **ONE,
                 adaptive=True, split_ratio=0.2, max_boxes=256)
     assert sol.stats["splits"] > 0
     assert sol.failed_pieces == [2] and "max_boxes=256" in sol.piece_results[2].reason
@@ -236,7 +239,7 @@ def test_sets_a_hook_replaced_fail_together():
     """After a hook returned new sets, the driver cannot tell which piece a set holds:
     every piece is linked, a later failure fails them all (as before per-piece
     break-downs); nothing is reported as surviving."""
-    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, workers=1, hooks=[_Replace()])
+    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, **ONE, hooks=[_Replace()])
     assert sol.status == "breakdown" and sol.surviving is None
     assert sol.failed_pieces == list(range(6))
     assert len({(p.t_reached, p.reason) for p in sol.piece_results}) == 1
@@ -247,7 +250,7 @@ def test_sets_a_hook_replaced_fail_together():
 def test_chunked_runs_report_every_piece():
     """In chunks (each its own batch) the chunks' reports merge: the failed pieces named
     by their index in the run, the surviving parts of the chunks merged."""
-    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, workers=1, chunks=3)
+    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, **ONE, chunks=3)
     assert [c["status"] for c in sol.chunks] == ["completed", "completed", "breakdown"]
     assert sol.failed_pieces == [4, 5] and [p.index for p in sol.piece_results] == list(range(6))
     _check_whole_run(sol, _square)
@@ -256,16 +259,16 @@ def test_chunked_runs_report_every_piece():
     assert s.status == "completed" and s.t_reached == T and s.boxes[-1].shape[0] == 4
     assert _escapes(s, _square, _points(_alive(sol), 16)) == []
     # a chunk whose pieces all completed, the other with one piece left
-    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, workers=1, chunks=2)
+    sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, **ONE, chunks=2)
     assert sol.failed_pieces == [4, 5] and sol.surviving.boxes[-1].shape[0] == 4
     assert _escapes(sol.surviving, _square, _points(_alive(sol), 12)) == []
 
 
 def test_one_box_and_runs_without_failures_are_as_before():
-    one = solve(SQUARE, Interval([1.2, 0.9], [1.4, 1.1]), (0.0, T), t_eval=T_EVAL, workers=1)
+    one = solve(SQUARE, Interval([1.2, 0.9], [1.4, 1.1]), (0.0, T), t_eval=T_EVAL, **ONE)
     assert one.status == "breakdown" and one.reason.startswith("enclosure too wide")
     assert one.surviving is None and one.failed_pieces == [0] and one.pieces_summary() == ""
-    ok = solve(SQUARE, Interval([0.2, 0.9], [0.6, 1.1]), (0.0, T), subdivision=[2, 1], t_eval=T_EVAL, workers=1)
+    ok = solve(SQUARE, Interval([0.2, 0.9], [0.6, 1.1]), (0.0, T), subdivision=[2, 1], t_eval=T_EVAL, **ONE)
     assert ok.status == "completed" and ok.surviving is None and ok.failed_pieces == []
     assert [(p.status, p.t_reached) for p in ok.piece_results] == [("completed", T)] * 2
 
