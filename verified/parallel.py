@@ -79,8 +79,17 @@ up to the step-size differences):
 ``t_reached``, ``status``, ``reason``
     ``t_reached`` is the smallest over the chunks; ``status`` the worst
     (breakdown > interrupted > stopped > completed), ``reason`` names the chunk
-    (``"chunk 3 (boxes 96..127): ..."``). A chunk that never ran (Ctrl-C, cancelled)
-    counts as reaching ``t0``.
+    (``"chunk 3 (boxes 96..127): ..."``), or, where some initial pieces broke down,
+    which (``"3 of 64 pieces failed (pieces 5, 17, 40 at t = 0.31: ...); 61 pieces
+    verified to t = 2"``). A chunk that never ran (Ctrl-C, cancelled) counts as
+    reaching ``t0``.
+``piece_results``, ``surviving``
+    Per initial piece its status, ``t_reached`` and reason: a chunk's own report where
+    it ran as one batch (its pieces break down alone there, :mod:`verified.batch`),
+    else (not run, re-chunked) the chunk's outcome for each of its pieces. ``surviving``
+    (where some pieces broke down and others went on): the chunks' parts that went on
+    merged as above (a chunk without a failed piece whole, else its ``surviving``). A
+    chunk in which a piece broke down is not re-chunked after that.
 ``stats``
     Counters summed over the chunks (``steps`` is the total of chunk steps,
     ``steps_max`` the longest chunk's), ``wall_s`` of the whole call, plus
