@@ -40,7 +40,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .auto import solve_auto
 from .batch import MODEL_CAPS, VerifiedODE, solve_batch
+from .methods import Auto, as_method, from_settings
 from .parallel import auto_workers, solve_parallel
 from .solution import Solution, Start
 
@@ -54,10 +56,11 @@ def solve(
     x0,
     t_span,
     *,
+    method=None,
     params=None,
     t_eval=None,
-    order: int = 12,
-    tol: float = 1e-10,
+    order: int | None = None,
+    tol: float | None = None,
     subdivision=None,
     h_max: float | None = None,
     h_min: float = 1e-9,
@@ -68,13 +71,13 @@ def solve(
     max_boxes: int = 4096,
     wrap_target: float = 0.03,
     merge_slack: float | None = None,
-    error_basis: str = "qr",
+    error_basis: str | None = None,
     arithmetic: str | None = None,
-    set_order: int = 1,
-    set_step: str = "mean_value",
+    set_order: int | None = None,
+    set_step: str | None = None,
     model_degree: int | None = None,
     model_caps: dict | None = None,
-    absorb: bool = False,
+    absorb: bool | None = None,
     params_per_state: int | None = None,
     consistency=None,
     hooks=(),
@@ -94,6 +97,18 @@ def solve(
     x0 : Interval (n,) or (B, n), or a list of them
         Initial boxes (their union is the initial set).
     t_span : (t0, t1) with t1 > t0
+    method : None (default), a name or a :mod:`verified.methods` object
+        How the sets are advanced: ``"lohner"`` (:class:`~verified.methods.Lohner`,
+        first-order QR-Lohner sets), ``"second_order"``, ``"composition"`` or ``"auto"``
+        (:class:`~verified.methods.Auto`, :mod:`verified.auto`: chosen from the problem;
+        a piece that cannot be continued is taken up by a stronger method, then split).
+        None: ``"auto"``, unless one of the method settings below (``order``, ``tol``,
+        ``error_basis``, ``arithmetic``, ``set_order``, ``set_step``, ``model_degree``,
+        ``model_caps``, ``absorb``, ``params_per_state``) is given: they select the
+        method as before methods were objects (at the old defaults: order 12, tol 1e-10,
+        first-order sets), and beside ``method=`` they are an error (they are the
+        method's fields). What ran is ``Solution.method`` (and, for ``"auto"``,
+        ``Solution.method_log``).
     params : Interval or floats, shape (p,) (or (B, p) per initial box)
     t_eval : sorted (non-decreasing) finite output times in [t0, t1] (default: t1 only;
         t0 is always included; repeated times are reported once)
@@ -276,6 +291,84 @@ def solve(
     TypeError
         when ``ode`` is not a Graph or VerifiedODE.
     """
+    method, flags = _method_settings(method, ode, start, dict(
+        order=order, tol=tol, error_basis=error_basis, arithmetic=arithmetic, set_order=set_order,
+        set_step=set_step, model_degree=model_degree, model_caps=model_caps, absorb=absorb,
+        params_per_state=params_per_state))
+    if isinstance(method, Auto):
+        return solve_auto(
+            solve, ode, x0, t_span, method=method, params=params, t_eval=t_eval, subdivision=subdivision,
+            consistency=consistency, hooks=hooks, progress=progress, h_max=h_max, h_min=h_min,
+            max_steps=max_steps, max_width=max_width, adaptive=adaptive, split_ratio=split_ratio,
+            max_boxes=max_boxes, wrap_target=wrap_target, merge_slack=merge_slack, workers=workers,
+            client=client, chunks=chunks, rechunk=rechunk)
+    order, tol, error_basis, arithmetic = flags["order"], flags["tol"], flags["error_basis"], flags["arithmetic"]
+    set_order, set_step, model_degree = flags["set_order"], flags["set_step"], flags["model_degree"]
+    model_caps, absorb, params_per_state = flags["model_caps"], flags["absorb"], flags["params_per_state"]
+    sol = _solve_one_method(ode, x0, t_span, params=params, t_eval=t_eval, order=order, tol=tol,
+                            subdivision=subdivision, h_max=h_max, h_min=h_min, max_steps=max_steps,
+                            max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
+                            wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis,
+                            arithmetic=arithmetic, set_order=set_order, set_step=set_step,
+                            model_degree=model_degree, model_caps=model_caps, absorb=absorb,
+                            params_per_state=params_per_state, consistency=consistency, hooks=hooks,
+                            progress=progress, workers=workers, client=client, chunks=chunks, rechunk=rechunk,
+                            start=start)
+    sol.method = method.describe() if method is not None else _legacy_name(flags)
+    return sol
+
+
+#: the solver settings of the signature before methods were objects, at their old
+#: defaults (a call that names any of them runs that method, as before)
+_LEGACY_DEFAULTS = dict(order=12, tol=1e-10, error_basis="qr", arithmetic=None, set_order=1,
+                        set_step="mean_value", model_degree=None, model_caps=None, absorb=False,
+                        params_per_state=None)
+
+
+def _legacy_name(flags: dict) -> str:
+    """The method object the old settings describe, in words (``Method.describe``)."""
+    fl = dict(flags)
+    if fl.get("arithmetic") is None:
+        fl["arithmetic"] = "interval"
+    if fl["set_order"] != 1 or fl["set_step"] != "mean_value":
+        fl.pop("absorb", None)
+    if fl["set_step"] != "composition":
+        fl.pop("model_degree", None)
+        fl.pop("model_caps", None)
+    try:
+        return from_settings(**fl).describe()
+    except (TypeError, ValueError):  # (a combination the driver refuses with its own message)
+        return f"set_order={flags['set_order']}, set_step={flags['set_step']!r}"
+
+
+def _method_settings(method, ode, start, flags: dict):
+    """(the method or None, the driver's settings). ``method`` None and no method
+    setting given: ``Auto()`` (the default), unless the run continues from ``start`` or
+    ``ode`` is a prepared VerifiedODE (which carries an arithmetic of its own): then the
+    QR-Lohner method at its defaults, as before. Method settings given beside
+    ``method=`` are refused: they are the method's fields."""
+    given = {k: v for k, v in flags.items() if v is not None}
+    if method is not None:
+        if given:
+            names = ", ".join(sorted(given))
+            raise ValueError(f"{names} {'is a setting' if len(given) == 1 else 'are settings'} of the method: "
+                             f"pass them to it (e.g. method=verified.methods.Lohner(order=8)), not beside method=")
+        method = as_method(method)
+        if isinstance(method, Auto):
+            if start is not None:
+                raise ValueError("method 'auto' cannot continue from start=: name the method the sets were made with")
+            return method, None
+        return method, {**_LEGACY_DEFAULTS, **method.settings()}
+    if given or start is not None or isinstance(ode, VerifiedODE):
+        return None, {**_LEGACY_DEFAULTS, **given}
+    return Auto(), None
+
+
+def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivision, h_max, h_min, max_steps,
+                      max_width, adaptive, split_ratio, max_boxes, wrap_target, merge_slack, error_basis,
+                      arithmetic, set_order, set_step, model_degree, model_caps, absorb, params_per_state,
+                      consistency, hooks, progress, workers, client, chunks, rechunk, start) -> Solution:
+    """One method's run: chunked (:mod:`verified.parallel`) or one batch here."""
     if workers is None and client is None and chunks is None:
         # None: every core when worthwhile (verified.parallel.auto_workers), else one batch here
         if start is not None:

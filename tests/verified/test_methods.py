@@ -1,0 +1,166 @@
+"""Methods as objects and the automatic method (issue 40).
+
+The oracle for the ``auto`` runs is scipy's DOP853 (rtol = atol = 1e-12) from sampled
+initial points: every sampled true state at the final time must lie in the union of
+the final boxes. A monkeypatched ``auto`` that loses a piece when it splits must fail
+that check.
+"""
+import re
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import verified.auto as auto_mod
+from verified.graph import trace
+from verified.interval import Interval
+from verified.methods import METHODS, Auto, Composition, Lohner, SecondOrder, as_method
+from verified.solver import solve
+
+BOX = Interval([-0.5, -0.5], [0.5, 0.5])
+
+
+def _vdp_like():
+    """x' = y, y' = -x - 2 y x^2: with the old default it broke down at 0.395 s from BOX."""
+    return trace(lambda x, p: [x[1], -x[0] - 2 * x[1] * x[0] * x[0]], 2)
+
+
+def _f(t, x):
+    return [x[1], -x[0] - 2 * x[1] * x[0] ** 2]
+
+
+def _sampled_final(T, count=200, seed=3):
+    rng = np.random.default_rng(seed)
+    pts = np.concatenate([rng.uniform(BOX.lo, BOX.hi, (count, 2)),
+                          np.array([[a, b] for a in (-0.5, 0.5) for b in (-0.5, 0.5)])])
+    return np.array([solve_ivp(_f, (0, T), p, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1] for p in pts])
+
+
+def _inside_union(states, boxes: Interval, slack=1e-9):
+    lo, hi = np.asarray(boxes.lo), np.asarray(boxes.hi)
+    inside = ((states[:, None, :] >= lo[None] - slack) & (states[:, None, :] <= hi[None] + slack)).all(axis=2)
+    return inside.any(axis=1)
+
+
+# ------------------------------------------------------------------ the objects
+def test_names_and_defaults():
+    assert set(METHODS) == {"lohner", "second_order", "composition", "auto"}
+    assert as_method("composition") == Composition()
+    assert Lohner().settings()["set_order"] == 1 and SecondOrder().settings()["set_order"] == 2
+    assert Composition().settings()["set_step"] == "composition"
+    assert Composition(order=8).describe() == "composition(order=8)"
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda: Lohner(order=1), "lohner: order must be an integer in [2, 60]"),
+    (lambda: Lohner(tol=0.0), "lohner: tol"),
+    (lambda: Lohner(error_basis="lu"), "lohner: error_basis"),
+    (lambda: SecondOrder(arithmetic="float"), "second_order: arithmetic"),
+    (lambda: Composition(model_degree=5), "composition: model_degree"),
+    (lambda: Composition(model_caps={"quad": 3}), "unknown key 'quad'"),
+    (lambda: Composition(params_per_state=0), "params_per_state"),
+    (lambda: Auto(max_pieces=0), "auto: max_pieces"),
+    (lambda: Auto(rungs=("auto",)), "other than 'auto'"),
+    (lambda: as_method("rk45"), "unknown method 'rk45'"),
+])
+def test_bad_fields_are_one_line_errors(make, words):
+    with pytest.raises(ValueError, match=re.escape(words)) as info:
+        make()
+    assert "\n" not in str(info.value)
+
+
+def test_method_settings_beside_method_are_refused():
+    with pytest.raises(ValueError, match="order is a setting of the method"):
+        solve(_vdp_like(), BOX, (0.0, 0.1), method="lohner", order=8)
+
+
+def test_a_method_refuses_what_it_does_not_support():
+    from verified.consistency import EnergyTest
+    g = trace(lambda x, p: [x[1], -x[0]], 2)
+    H = trace(lambda x, p: [0.5 * (x[0] * x[0] + x[1] * x[1])], 2)
+    with pytest.raises(ValueError, match="method 'lohner' does not support a consistency"):
+        Lohner(absorb=True).refuse(consistency=True)
+    # the named method runs exactly what the old keyword arguments ran
+    a = solve(g, BOX, (0.0, 1.0), method=Lohner(order=10))
+    b = solve(g, BOX, (0.0, 1.0), order=10)
+    assert np.array_equal(a.hull.lo, b.hull.lo) and np.array_equal(a.hull.hi, b.hull.hi)
+    assert a.method == "lohner(order=10)" and b.method == "lohner(order=10)"
+    assert EnergyTest(H, "zero") is not None
+
+
+# ------------------------------------------------------------------ auto
+def test_auto_is_the_default_and_reaches_t_end_where_the_old_default_broke_down():
+    g = _vdp_like()
+    old = solve(g, BOX, (0.0, 3.0), method="lohner")
+    assert old.status == "breakdown" and old.t_reached < 0.5
+    sol = solve(g, BOX, (0.0, 3.0))
+    assert sol.status == "completed", sol.reason
+    assert sol.method.startswith("auto:") and len(sol.method_log) >= 2
+    assert any("split" in e.get("next", "") for e in sol.method_log)
+    states = _sampled_final(3.0)
+    assert _inside_union(states, sol.boxes[-1]).all()
+
+
+def test_auto_switches_rungs_and_loses_no_state():
+    """A weak first rung fails; the next continues from the failed pieces' own initial
+    boxes: every sampled true state is enclosed after the switch."""
+    g = _vdp_like()
+    sol = solve(g, BOX, (0.0, 1.5), method=Auto(rungs=("lohner", "composition")))
+    assert sol.status == "completed", sol.reason
+    assert sol.method_log[0]["method"] == "lohner" and sol.method_log[0]["status"] == "breakdown"
+    assert "composition" in sol.method_log[0]["next"]
+    assert _inside_union(_sampled_final(1.5), sol.boxes[-1]).all()
+
+
+def test_a_split_that_drops_a_piece_is_caught(monkeypatch):
+    """The oracle bites: an ``auto`` whose split keeps only half of each failed piece
+    completes, but misses sampled true states."""
+    real = auto_mod.split_boxes
+
+    def lossy(boxes, max_dims=auto_mod.SPLIT_DIMS):
+        parts = real(boxes, max_dims)
+        return parts[: max(1, parts.shape[0] // 2)]
+    monkeypatch.setattr(auto_mod, "split_boxes", lossy)
+    sol = solve(_vdp_like(), BOX, (0.0, 3.0))
+    assert sol.status == "completed"
+    assert not _inside_union(_sampled_final(3.0), sol.boxes[-1]).all()
+
+
+def test_auto_gives_up_with_what_it_tried():
+    """max_pieces = 1: no split allowed; the break-down says what auto tried."""
+    sol = solve(_vdp_like(), BOX, (0.0, 3.0), method=Auto(max_pieces=1))
+    assert sol.status == "breakdown"
+    assert "auto tried composition" in sol.reason and "method_log" in sol.reason
+    assert "gave up" in sol.method_log[-1]["next"]
+
+
+def test_split_boxes_covers_each_box():
+    boxes = Interval([[0.0, 0.0, 5.0], [1.0, 1.0, 1.0]], [[1.0, 0.2, 5.0], [2.0, 3.0, 1.5]])
+    parts = auto_mod.split_boxes(boxes)
+    # box 0 (widths 1, 0.2, 0): x0 only -> 2 parts; box 1 (widths 1, 2, 0.5): x0 and x1 -> 4 parts
+    assert parts.shape == (6, 3)
+    pts = np.array([[0.3, 0.1, 5.0], [0.7, 0.2, 5.0], [1.5, 2.9, 1.2], [1.0, 1.0, 1.5]])
+    assert _inside_union(pts, parts).all()
+
+
+def test_target_ratio_splits_until_the_enclosure_is_tight_enough():
+    """The paper's pendulum swinging below the top (q in [1.0, 1.1], qd in [0, 0.1],
+    T = 3): one piece gives ~1.4x the sampled spread; with target_ratio = 1.15 auto
+    splits the pieces and returns a tighter enclosure, still containing every sampled
+    true state."""
+    def f(t, x):
+        return [x[1], -9.81 * np.sin(x[0])]
+    from models import pendulum
+    g = trace(pendulum.rhs, 2)
+    box = Interval([1.0, 0.0], [1.1, 0.1])
+    one = solve(g, box, (0.0, 3.0))
+    sol = solve(g, box, (0.0, 3.0), method=Auto(target_ratio=1.15))
+    assert sol.status == "completed"
+    est = [e["ratio_estimate"] for e in sol.method_log if "ratio_estimate" in e]
+    assert len(est) >= 2 and est[-1] < est[0]
+    assert (sol.hull[-1].width() <= one.hull[-1].width()).all()
+    assert (sol.hull[-1].width() < one.hull[-1].width()).any()
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(box.lo, box.hi, (150, 2))
+    ends = np.array([solve_ivp(f, (0, 3.0), p, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1] for p in pts])
+    assert _inside_union(ends, sol.boxes[-1]).all()

@@ -1,0 +1,299 @@
+"""``method="auto"``: choose the method from the problem and do not give up while a
+stronger one exists.
+
+The ladder (:class:`verified.methods.Auto`): the initial pieces are advanced with the
+first rung (:func:`default_rungs`: second-order sets by composition for systems of up to
+:data:`COMPOSITION_MAX_STATES` states, first-order QR-Lohner sets beyond). A piece whose
+sets cannot be continued is taken up again by the next rung, and after the last rung it
+is split (:func:`split_boxes`: bisected along its widest components) and its parts are
+run with the last rung, until every piece reaches ``t1`` or the pieces would exceed
+``max_pieces``. The pieces that reached ``t1`` are kept as they are (a one-batch run
+goes on with the pieces that did not fail: ``Solution.surviving``).
+
+Soundness: every attempt starts from sets that enclose every true state at its start
+time: a failed piece is taken up again from its own initial box at ``t0`` (the initial
+set itself, exactly), so no state is lost between rungs, and the result is the union
+of the attempts that together cover every initial piece (:func:`verified.parallel.
+merge_solutions`). A piece that fails on every rung keeps the failed attempt's
+enclosure, verified up to where that attempt got, and the run is a break-down at the
+earliest such time, naming what was tried.
+
+``Solution.method_log`` lists the attempts: which method advanced which pieces over
+which span, how it ended, and why the next one was tried.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .interval import Interval, concatenate
+from .methods import Auto, Composition, Lohner, Method
+from .solution import Solution
+
+__all__ = ["solve_auto", "default_rungs", "split_boxes", "COMPOSITION_MAX_STATES"]
+
+#: up to this many states (parameters carried as states included) the first rung is the
+#: composition: on every case measured for issue 40 (3-link arm, double pendulum, the
+#: paper's pendulum, Laub-Loomis, x'' = -x - 2 x^2 x') it went further than first-order
+#: sets at a similar or lower cost; its Taylor models grow with the square of the states
+COMPOSITION_MAX_STATES = 24
+#: at most this many components are bisected at once when a piece is split (a piece of a
+#: 7-state box bisected in every component would become 128)
+SPLIT_DIMS = 3
+#: split pieces must get further than their parent by this fraction of the time span, or
+#: splitting stops (what stops them is then not the width of the set)
+MIN_GAIN = 0.01
+
+
+def default_rungs(graph, boxes: Interval, params=None) -> tuple[Method, ...]:
+    """The rungs ``auto`` tries, weakest first, for ``graph`` from ``boxes`` (B, n)."""
+    n = graph.n_inputs
+    # (uncertain parameters are carried as constant states)
+    p_wide = 0 if params is None else int(np.count_nonzero(np.any(np.atleast_2d(params.width()) > 0, axis=0)))
+    if n + p_wide <= COMPOSITION_MAX_STATES:
+        return (Composition(),)
+    return (Lohner(arithmetic="affine"), Lohner(arithmetic="affine", error_basis="auto"))
+
+
+def split_boxes(boxes: Interval, max_dims: int = SPLIT_DIMS) -> Interval:
+    """Each box (B, n) bisected along its widest components (those at least half as wide
+    as its widest, at most ``max_dims`` of them): (B * 2^d, n), every point of a box in
+    one of its parts (the cut is shared by both halves)."""
+    out = []
+    for b in range(boxes.shape[0]):
+        lo, hi = np.asarray(boxes.lo[b], float), np.asarray(boxes.hi[b], float)
+        w = hi - lo
+        order = np.argsort(-w, kind="stable")
+        dims = [int(j) for j in order[:max_dims] if w[j] > 0 and w[j] >= 0.5 * w[order[0]]]
+        parts = [(lo.copy(), hi.copy())]
+        for j in dims:
+            cut = 0.5 * (lo[j] + hi[j])
+            nxt = []
+            for a, c in parts:
+                a1, c1 = a.copy(), c.copy()
+                c1[j] = cut
+                a2, c2 = a.copy(), c.copy()
+                a2[j] = cut
+                nxt += [(a1, c1), (a2, c2)]
+            parts = nxt
+        out += parts
+    return Interval(np.array([a for a, _ in out]), np.array([c for _, c in out]))
+
+
+@dataclass
+class _Task:
+    boxes: Interval          # (k, n) initial pieces
+    params: object           # the run's params ((p,) for all) or (k, p) rows, or None
+    rung: int                # index into the rungs
+    splits: int = 0          # how often these pieces were split
+    parent_t: float = -np.inf  # where the pieces they were split from broke down
+
+
+def _rows(params, idx):
+    """The parameter rows of pieces ``idx`` (params per piece (k, p)), or params as is."""
+    if params is None or not isinstance(params, Interval) or params.ndim != 2:
+        return params
+    return params[np.asarray(idx, dtype=int)]
+
+
+def _repeat_rows(params, times: int):
+    if params is None or not isinstance(params, Interval) or params.ndim != 2:
+        return params
+    idx = np.repeat(np.arange(params.shape[0]), times)
+    return params[idx]
+
+
+def solve_auto(solve, ode, x0, t_span, *, method: Auto, params=None, t_eval=None, subdivision=None,
+               consistency=None, hooks=(), progress=None, **common) -> Solution:
+    """Run :class:`~verified.methods.Auto`'s ladder (module docstring). ``solve`` is
+    :func:`verified.solver.solve` (passed in: this module is imported by it);
+    ``common`` the rest of its keyword arguments (step bounds, adaptive splitting,
+    execution), the same for every attempt. With ``method.target_ratio``, the ladder is
+    repeated on split pieces while its final enclosure is wider than that ratio times
+    the sampled spread (:func:`sampled_ratio`)."""
+    from .batch import VerifiedODE
+    from .solver_args import check_graph, check_params, initial_boxes
+
+    wall0 = time.perf_counter()
+    graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
+    boxes = initial_boxes(x0, graph.n_inputs, subdivision)
+    pv = check_params(params, graph, boxes.shape[0], subdivision)
+    kw = dict(method=method, t_eval=t_eval, consistency=consistency, hooks=hooks, progress=progress, **common)
+    sol, pieces = _ladder(solve, ode, graph, boxes, pv, t_span, **kw)
+    target = method.target_ratio
+    if target is not None and sol.status == "completed" and (pv is None or pv.ndim == 1):
+        log = list(sol.method_log)
+        best, best_w, ratio = sol, _final_width(sol), sampled_ratio(graph, boxes, pv, sol)
+        log[-1]["ratio_estimate"] = ratio
+        while ratio > target:
+            # the pieces the tightest run ended with, each split (its failures are not repeated)
+            parts = split_boxes(pieces)
+            if parts.shape[0] > method.max_pieces:
+                break
+            nxt, pieces = _ladder(solve, ode, graph, parts, pv, t_span, **kw)
+            log += nxt.method_log
+            if nxt.status != "completed":
+                break
+            w = _final_width(nxt)
+            new_ratio = sampled_ratio(graph, boxes, pv, nxt)
+            log[-1]["ratio_estimate"] = new_ratio
+            if not np.all(w <= best_w):  # (no tighter in every state: more pieces do not pay)
+                break
+            best, best_w, ratio = nxt, w, new_ratio
+        best.method_log = log
+        best.method = _summary(log)
+        sol = best
+    sol.stats["wall_s"] = time.perf_counter() - wall0
+    return sol
+
+
+def _final_width(sol) -> np.ndarray:
+    return np.asarray(sol.hull[-1].width(), float)
+
+
+def sampled_ratio(graph, boxes: Interval, params, sol, per_box: int = 8, seed: int = 0) -> float:
+    """Worst state's ratio of ``sol``'s final enclosure width to the spread of float
+    trajectories (DOP853, rtol = atol = 1e-10) from the corners (up to 2^6) and
+    ``per_box`` random points of every initial box, at ``sol.t[-1]``: an estimate that
+    guides ``target_ratio`` (a lower bound of the true spread, so the ratio is an upper
+    bound of the true one, up to the integrator's error). ``inf`` where it fails."""
+    from scipy.integrate import solve_ivp
+
+    rng = np.random.default_rng(seed)
+    n = graph.n_inputs
+    pts = []
+    for b in range(boxes.shape[0]):
+        lo, hi = np.asarray(boxes.lo[b], float), np.asarray(boxes.hi[b], float)
+        k = min(n, 6)
+        corners = np.array(np.meshgrid(*[[0.0, 1.0]] * k, indexing="ij")).reshape(k, -1).T
+        c = np.tile(0.5 * (lo + hi), (corners.shape[0], 1))
+        c[:, :k] = lo[:k] + corners * (hi[:k] - lo[:k])
+        pts.append(c)
+        pts.append(lo + (hi - lo) * rng.random((per_box, n)))
+    pts = np.concatenate(pts)
+    if params is not None:
+        p = np.asarray(params.mid() if params.ndim == 1 else params.hull(axis=0).mid(), float)
+    else:
+        p = None
+    S = pts.shape[0]
+
+    def f(t, y):
+        return graph.eval_float(y.reshape(S, n), p).reshape(-1)
+    T = float(sol.t[-1]) - float(sol.t[0])
+    if T <= 0:
+        return 1.0
+    with np.errstate(all="ignore"):
+        r = solve_ivp(f, (0.0, T), pts.reshape(-1), method="DOP853", rtol=1e-10, atol=1e-10)
+    if not r.success:
+        return float("inf")
+    end = r.y[:, -1].reshape(S, n)
+    spread = end.max(axis=0) - end.min(axis=0)
+    enc = _final_width(sol)[:n]
+    ok = spread > 1e-12
+    return float(np.max(enc[ok] / spread[ok])) if ok.any() else 1.0
+
+
+def _summary(log) -> str:
+    return "auto: " + "; ".join(f"{e['method']} on {e['pieces']} piece(s) {e['status']} to t = {e['t_span'][1]:g}"
+                                for e in log)
+
+
+def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_eval, consistency, hooks, progress,
+            **common) -> Solution:
+    """One pass of the ladder from ``boxes`` (module docstring)."""
+    from .parallel import merge_solutions
+    from .solver_args import check_settings
+
+    n = graph.n_inputs
+    t0, t1, outs, _ = check_settings(
+        t_span=t_span, t_eval=t_eval, order=method.order, tol=method.tol, h_max=common.get("h_max"),
+        h_min=common.get("h_min", 1e-9), max_steps=common.get("max_steps", 100_000),
+        max_width=common.get("max_width", 1e3), adaptive=common.get("adaptive", False),
+        split_ratio=common.get("split_ratio", 0.01), max_boxes=common.get("max_boxes", 4096),
+        wrap_target=common.get("wrap_target", 0.03), merge_slack=common.get("merge_slack"),
+        error_basis="qr", progress=progress)
+    rungs = method.rungs or default_rungs(graph, boxes, pv)
+    for r in rungs:
+        r.refuse(adaptive=bool(common.get("adaptive")), consistency=consistency is not None,
+                 params=pv is not None and bool(np.any(pv.width() > 0)))
+    hooks = list(hooks)
+
+    todo = [_Task(boxes, pv, 0)]
+    done: list[tuple[Interval, Solution]] = []
+    log: list[dict] = []
+    pieces_total = boxes.shape[0]
+    give_up = None
+    while todo:
+        task = todo.pop(0)
+        rung = rungs[task.rung]
+        t_start = time.perf_counter()
+        sol = solve(ode, task.boxes, (t0, t1), method=rung, params=task.params, t_eval=t_eval,
+                    consistency=None if consistency is None else copy.deepcopy(consistency),
+                    hooks=hooks, progress=progress, **common)
+        entry = dict(method=rung.describe(), pieces=int(task.boxes.shape[0]), splits=task.splits,
+                     t_span=(float(t0), float(sol.t_reached)), status=sol.status, reason=sol.reason,
+                     wall_s=time.perf_counter() - t_start)
+        log.append(entry)
+        if sol.status != "breakdown":  # completed, or stopped / interrupted: nothing more is tried
+            done.append((task.boxes, sol))
+            if sol.status != "completed":
+                give_up = sol.status
+                for rest in todo:  # (not run: their pieces are verified at t0 only)
+                    done.append((rest.boxes, None))
+                todo = []
+            continue
+        failed = [p.index for p in (sol.piece_results or ()) if p.failed]
+        if not failed or sol.surviving is None:
+            failed = list(range(task.boxes.shape[0]))
+        kept = [i for i in range(task.boxes.shape[0]) if i not in set(failed)]
+        fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
+        if task.rung + 1 < len(rungs):
+            nxt = _Task(fb, fp, task.rung + 1, task.splits)
+            entry["next"] = f"{len(failed)} piece(s) to {rungs[task.rung + 1].describe()}"
+        else:
+            parts = split_boxes(fb)
+            per = parts.shape[0] // fb.shape[0]
+            t_fail = min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=sol.t_reached)
+            why = None
+            if pieces_total - fb.shape[0] + parts.shape[0] > method.max_pieces:
+                why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {method.max_pieces}"
+            elif t_fail <= task.parent_t + MIN_GAIN * (t1 - t0):
+                # splitting did not take the pieces further: the cause is not the sets' width
+                # (a blow-up, a singularity, a step-size limit), and more pieces will not help
+                why = (f"the split pieces broke down at t = {t_fail:g}, no later than the piece they were "
+                       f"split from (t = {task.parent_t:g})")
+            if why is not None:
+                entry["next"] = f"gave up: {why}"
+                done.append((task.boxes, sol))  # (the failed attempt encloses all its pieces up to its end)
+                give_up = "breakdown"
+                continue
+            pieces_total += parts.shape[0] - fb.shape[0]
+            nxt = _Task(parts, _repeat_rows(fp, per), len(rungs) - 1, task.splits + 1, t_fail)
+            entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[-1].describe()}"
+        if kept:
+            done.append((task.boxes[np.asarray(kept)], sol.surviving))
+        todo.append(nxt)
+
+    pieces = concatenate([b for b, _ in done], axis=0)
+    if len(done) == 1 and done[0][1] is not None:
+        result = done[0][1]
+    else:
+        initial = concatenate([b for b, _ in done], axis=0)
+        ends = np.cumsum([b.shape[0] for b, _ in done])
+        ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
+        result = merge_solutions([s for _, s in done], ranges, initial, outs, t0,
+                                 tuple(graph.input_names[:n]), interrupted=give_up == "interrupted")
+        result.chunks = None  # (the attempts are in method_log)
+    if result.status == "breakdown" and give_up == "breakdown":
+        tried = ", ".join(dict.fromkeys(e["method"] for e in log))
+        result.reason = (f"{result.reason} (auto tried {tried} on up to {pieces_total} pieces; "
+                         f"see Solution.method_log)")
+    result.method_log = log
+    result.method = _summary(log)
+    # (per-piece params rows follow the pieces only without splitting of per-box params)
+    result.stats["auto_pieces"] = int(pieces.shape[0])
+    return result, pieces
