@@ -46,6 +46,7 @@ from verified.energy_shell import EnergyShellHook, max_energy
 from verified.hooks import StopAfterWall
 from verified.interval import Interval, _as_interval
 from verified.invariant import InvariantHook
+from verified.methods import METHOD_FIELDS
 from verified.solver import Solution, solve
 
 from . import progress as _progress
@@ -300,7 +301,7 @@ def _initial_box(x0, n: int, name: str) -> Interval:
 
 
 def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.0, output_dt: float | None = None,
-             params=None, order: int = 12, tol: float = 1e-10, subdivision=None,
+             params=None, method=None, order: int | None = None, tol: float | None = None, subdivision=None,
              energy_rate: str = "unsimplified", test_interval: float | None = None, test_splits: int | None = None,
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
              backward_depth: int = 0, contract: str = "step", prune: bool = True,
@@ -330,7 +331,14 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         They enter the graphs as parameters (never constants); the verified solver
         carries those with width as constant states. With parameters, ``simulate``
         uses ``error_basis="auto"`` unless told otherwise. ``sol.params`` lists them.
-    order, tol, subdivision : solver settings (see :func:`verified.solver.solve`)
+    method : None (default: ``"auto"``), a name (``"lohner"``, ``"second_order"``,
+        ``"composition"``, ``"auto"``) or a :mod:`verified.methods` object: how the sets
+        are advanced (:func:`verified.solver.solve`). What ran is ``sol.method`` (for
+        ``"auto"``: every attempt, also in ``sol.method_log``).
+    order, tol : the Taylor order and tolerance of the method of the old signature (given
+        without ``method``, they and the other method settings in ``solver_kwargs``, e.g.
+        ``set_order``, select that method as before)
+    subdivision : solver setting (see :func:`verified.solver.solve`)
     energy_rate : "unsimplified" or "simplified"
         Which of the symbolic model's ``dH/dt`` mode iii integrates (modes i and ii
         derive it; :mod:`verified.energy_rate`)
@@ -421,7 +429,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
             if subdivision is not None and not isinstance(subdivision, (int, np.integer)):
                 subdivision = list(subdivision) + [1] * (system.n - len(list(subdivision)))
         params = system.params
-        if "arithmetic" not in solver_kwargs:
+        if "arithmetic" not in solver_kwargs and _legacy_method(method, order, tol, solver_kwargs):
             # measured: a 2-link arm under computed torque (q, qd +- 1e-3, T = 1): interval
             # arithmetic breaks down at 0.26 s ("qr") / 0.89 s ("auto"), affine completes
             # with widths 1e-3..4e-3; the controller doubles the graph's depth
@@ -447,7 +455,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
                                 else params)
     if param_subdivision:
         box, ode_params = _split_params(box, ode_params, system, param_subdivision, subdivision)
-    if "error_basis" not in solver_kwargs and ode_params is not None:
+    if "error_basis" not in solver_kwargs and ode_params is not None and _legacy_method(method, order, tol,
+                                                                                         solver_kwargs):
         # measured: with parameters the "qr" error basis breaks down early (paper URDF
         # double pendulum, payload mass [0.2, 0.3]: 0.27 s against completed to 0.3 s
         # with "auto", 3.7x narrower q1; even with point parameters: example-robot-data's
@@ -482,9 +491,12 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         progress = bar if bar.enabled else None
     try:
         with ctrl_c:
-            sol = solve(system.rhs, box, (t0, t_end), t_eval=t_eval, params=ode_params,
-                        order=order, tol=tol, subdivision=subdivision, consistency=test, progress=progress,
-                        **solver_kwargs)
+            if order is not None:
+                solver_kwargs["order"] = order
+            if tol is not None:
+                solver_kwargs["tol"] = tol
+            sol = solve(system.rhs, box, (t0, t_end), t_eval=t_eval, params=ode_params, method=method,
+                        subdivision=subdivision, consistency=test, progress=progress, **solver_kwargs)
     finally:
         if bar is not None:
             bar.close()
@@ -670,6 +682,15 @@ def _params_record(system: System, ode_params) -> dict:
     return {k: (float(a), float(b)) for k, a, b in zip(names, lo, hi)}
 
 
+def _legacy_method(method, order, tol, solver_kwargs: dict) -> bool:
+    """Whether the run names its method by the old signature's settings (``order``,
+    ``set_order``, ...; no ``method``): then the defaults that method needs with a
+    controller or parameters are filled in as before (the methods of
+    :mod:`verified.methods` carry their own)."""
+    return method is None and (order is not None or tol is not None
+                               or any(k in solver_kwargs for k in METHOD_FIELDS))
+
+
 def _check_solver_kwargs(kwargs: dict):
     """Unknown keyword arguments name :func:`simulate` (not the solver it calls)."""
     ours = set(inspect.signature(simulate).parameters) - {"solver_kwargs"}
@@ -677,9 +698,9 @@ def _check_solver_kwargs(kwargs: dict):
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values()):
         return
     theirs = set(sig.parameters) - {"ode", "x0", "t_span", "t_eval", "params", "order", "tol",
-                                    "subdivision", "consistency", "progress"}
+                                    "subdivision", "consistency", "progress", "method"}
     # names users bring from scipy's solve_ivp and what they are called here
-    known = {"t_eval": "output_dt", "rtol": "tol", "atol": "tol", "method": "set_step", "t_span": "t_end"}
+    known = {"t_eval": "output_dt", "rtol": "tol", "atol": "tol", "t_span": "t_end"}
     for k in kwargs:
         if k not in theirs:
             close = [known[k]] if k in known else difflib.get_close_matches(k, sorted(ours | theirs), n=1)

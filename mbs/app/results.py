@@ -134,6 +134,8 @@ def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=
         "t_reached": float(sol.t_reached),
         "status": sol.status,
         "reason": sol.reason or "",
+        "method": getattr(sol, "method", "") or "",
+        "method_log": _jsonable(getattr(sol, "method_log", None) or []),
         "outputs": outputs,
         "stats": _jsonable(stats),
     }

@@ -260,6 +260,8 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
                 sol, system.energy, out / "consistency_plane.png", params=pbox)
     st = sol.stats
     log(f"{status_line(sol)}; {st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")
+    if getattr(sol, "method", ""):
+        log(f"method: {sol.method}")
     if "invariant_from" in st:
         rates = [float(r) for _, lam in st.get("decay_rates", [])[:1] for r in lam]
         log(f"every time after {st['invariant_from']:g} s proven at once by the closed loop's energy"

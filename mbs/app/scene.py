@@ -141,7 +141,7 @@ _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_m
            "split_ratio": float, "error_basis": str, "wrap_target": float, "arithmetic": str,
            "set_order": int, "merge_slack": float, "param_subdivision": None, "absorb": bool,
            "params_per_state": int, "energy_shell": bool, "invariant_after": float, "set_step": str,
-           "model_degree": int}
+           "model_degree": int, "method": str, "target_ratio": float, "max_pieces": int}
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str, "contract": str, "prune": bool}
 _CONTRACTS = ("step", "test", "off")
@@ -555,6 +555,8 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
             solver[k] = dict(v)
         else:
             solver[k] = _typed(v, _SOLVER[k], f"{where} {k}", positive=True)
+    if "method" in solver:
+        solver["method"] = _scene_method(solver, where)
     if "error_basis" in solver and solver["error_basis"] not in ("qr", "auto"):
         raise SceneError(f"{where} error_basis: {solver['error_basis']!r} is not 'qr' or 'auto'")
     if "arithmetic" in solver and solver["arithmetic"] not in ("interval", "affine", "taylor_model"):
@@ -686,6 +688,27 @@ def _typed(v, typ, where: str, positive: bool):
             raise SceneError(f"{where}: expected a string, got {v!r}")
         return v
     return _number(v, where, typ, positive=positive)
+
+
+def _scene_method(solver: dict, where: str):
+    """``[solver] method = "..."`` and that method's fields (taken out of ``solver``),
+    validated by the method (:mod:`verified.methods`)."""
+    import dataclasses
+
+    from verified.methods import METHOD_FIELDS, METHODS
+    name = solver.pop("method")
+    cls = METHODS.get(name)
+    if cls is None:
+        raise SceneError(f"{where} method: {name!r} is not one of {', '.join(METHODS)}")
+    own = {f.name for f in dataclasses.fields(cls)}
+    stray = sorted(k for k in solver if k in METHOD_FIELDS and k not in own)
+    if stray:
+        raise SceneError(f"{where} {stray[0]}: not a setting of method {name!r} (its settings: "
+                         f"{', '.join(sorted(own - {'rungs'}))})")
+    try:
+        return cls(**{k: solver.pop(k) for k in list(solver) if k in own})
+    except (TypeError, ValueError) as e:
+        raise SceneError(f"{where} {e}") from None
 
 
 def _subdivision(v, where):

@@ -239,3 +239,19 @@ def test_control_scenes_parse():
         loads_scene(base.replace("t_end = 1", "t_end = 1\nmode = 'iii'") + "[control]\ntype = 'pd'\nkp = 1\nkd = 1\n")
     with pytest.raises(SceneError, match="frames"):
         loads_scene(base.replace("t_end = 1", "t_end = 1\nframes = 3"))
+
+
+def test_solver_method_and_its_fields_validated_by_the_method():
+    """(issue 40) ``[solver] method = "..."`` plus that method's own fields become one
+    method object; a field the method does not have, or a bad value, is a one-line error."""
+    from verified.methods import Auto, Composition
+    kw = loads_scene(GOOD.replace("order = 12\n", 'method = "composition"\norder = 8\nmodel_degree = 4\n')
+                     ).simulate_kwargs(NAMES)
+    assert kw["method"] == Composition(order=8, model_degree=4)
+    assert "order" not in kw and "model_degree" not in kw and kw["subdivision"] == [8, 1, 1, 1]
+    kw = loads_scene(GOOD.replace("order = 12\n", 'method = "auto"\ntarget_ratio = 1.02\n')).simulate_kwargs(NAMES)
+    assert kw["method"] == Auto(target_ratio=1.02)
+    _err(GOOD.replace("order = 12\n", 'method = "lohner"\nmodel_degree = 3\n'), "model_degree",
+         "not a setting of method 'lohner'")
+    _err(GOOD.replace("order = 12\n", 'method = "composition"\norder = 99\n'), "composition: order")
+    _err(GOOD.replace("order = 12\n", 'method = "rk45"\n'), "method", "'rk45'")
