@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .hooks import StopAfterWall
 from .interval import Interval, concatenate
 from .methods import Auto, Composition, Lohner, Method
 from .solution import Solution
@@ -122,7 +123,8 @@ def solve_auto(solve, ode, x0, t_span, *, method: Auto, params=None, t_eval=None
     graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
     boxes = initial_boxes(x0, graph.n_inputs, subdivision)
     pv = check_params(params, graph, boxes.shape[0], subdivision)
-    kw = dict(method=method, t_eval=t_eval, consistency=consistency, hooks=hooks, progress=progress, **common)
+    kw = dict(method=method, t_eval=t_eval, consistency=consistency, hooks=hooks, progress=progress,
+              started=wall0, **common)
     sol, pieces = _ladder(solve, ode, graph, boxes, pv, t_span, **kw)
     target = method.target_ratio
     if target is not None and sol.status == "completed" and (pv is None or pv.ndim == 1):
@@ -197,13 +199,24 @@ def sampled_ratio(graph, boxes: Interval, params, sol, per_box: int = 8, seed: i
     return float(np.max(enc[ok] / spread[ok])) if ok.any() else 1.0
 
 
+def _attempt_hooks(hooks, started: float) -> list:
+    """The hooks of one attempt: a wall-clock cap (:class:`~verified.hooks.StopAfterWall`)
+    counts from the start of the whole ``auto`` run, not of the attempt."""
+    out = []
+    for h in hooks:
+        if isinstance(h, StopAfterWall):
+            h = StopAfterWall(max(0.0, h.seconds - (time.perf_counter() - started)), h.clock)
+        out.append(h)
+    return out
+
+
 def _summary(log) -> str:
     return "auto: " + "; ".join(f"{e['method']} on {e['pieces']} piece(s) {e['status']} to t = {e['t_span'][1]:g}"
                                 for e in log)
 
 
 def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_eval, consistency, hooks, progress,
-            **common) -> Solution:
+            started: float, **common) -> Solution:
     """One pass of the ladder from ``boxes`` (module docstring)."""
     from .parallel import merge_solutions
     from .solver_args import check_settings
@@ -233,7 +246,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         t_start = time.perf_counter()
         sol = solve(ode, task.boxes, (t0, t1), method=rung, params=task.params, t_eval=t_eval,
                     consistency=None if consistency is None else copy.deepcopy(consistency),
-                    hooks=hooks, progress=progress, **common)
+                    hooks=_attempt_hooks(hooks, started), progress=progress, **common)
         entry = dict(method=rung.describe(), pieces=int(task.boxes.shape[0]), splits=task.splits,
                      t_span=(float(t0), float(sol.t_reached)), status=sol.status, reason=sol.reason,
                      wall_s=time.perf_counter() - t_start)

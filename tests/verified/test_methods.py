@@ -164,3 +164,18 @@ def test_target_ratio_splits_until_the_enclosure_is_tight_enough():
     pts = rng.uniform(box.lo, box.hi, (150, 2))
     ends = np.array([solve_ivp(f, (0, 3.0), p, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1] for p in pts])
     assert _inside_union(ends, sol.boxes[-1]).all()
+
+
+def test_a_wall_clock_cap_counts_for_the_whole_auto_run():
+    """StopAfterWall given to an auto run caps all its attempts together: each attempt
+    gets what is left (the bench's 300 s cap had let a split run take 555 s)."""
+    import time
+
+    from verified.hooks import StopAfterWall
+    cap = StopAfterWall(8.0)
+    (h,) = auto_mod._attempt_hooks([cap], time.perf_counter() - 5.0)
+    assert isinstance(h, StopAfterWall) and 2.5 < h.seconds <= 3.0
+    (h,) = auto_mod._attempt_hooks([cap], time.perf_counter() - 20.0)
+    assert h.seconds == 0.0
+    sol = solve(_vdp_like(), BOX, (0.0, 3.0), hooks=[StopAfterWall(0.0)])
+    assert sol.status == "stopped" and len(sol.method_log) == 1
