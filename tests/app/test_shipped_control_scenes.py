@@ -20,8 +20,9 @@ def test_shipped_ur5_quintic_scene_encloses_the_sampled_closed_loop(monkeypatch)
     assert row["inside"] and row["frame_inside"]
     # the scene as shipped runs the composition step (the setting that reaches T = 2)
     from mbs.app.scene import load_scene
+    from verified.methods import Composition
     solver = load_scene("ur5_quintic").solver
-    assert solver["set_order"] == 2 and solver["set_step"] == "composition"
+    assert solver["method"] == Composition(order=8, params_per_state=12)
 
 
 @pytest.mark.slow
