@@ -34,9 +34,11 @@ class System:
         side forms ``dH/dt = grad H(x) . f(x)`` by forward-mode differentiation of the
         graphs (what the paper did with FADBAD++ in mode (ii)); "zero": ``dH/dt`` is
         identically 0 (declared, e.g. after symbolic simplification), ``H_V`` stays
-        ``H(0)`` and no rate is integrated (only sound if true; checked); a Graph:
-        ``x -> [dH/dt]`` (1 output, W). Old spellings, with a ``DeprecationWarning``:
-        ``None`` for "derive", ``conservative=True`` for "zero".
+        ``H(0)`` and no rate is integrated; a Graph: ``x -> [dH/dt]`` (1 output, W).
+        A declaration is used only once proven exactly equal to ``grad H . f`` (when
+        the run starts); an unproven one is replaced by the derived rate, with an
+        ``EnergyClaimWarning`` (:mod:`verified.energy_rate`). Old spellings, with a
+        ``DeprecationWarning``: ``None`` for "derive", ``conservative=True`` for "zero".
     params : dict
         Parameter values (numbers or ``(lo, hi)``) by name, if the graphs have any.
     description : str

@@ -34,7 +34,8 @@ This module owns :class:`EnergyTest`, the solver hook that composes the pieces
 below, keeps the statistics and hands the record to the Solution. The pieces:
 
 - :mod:`verified.consistency_graphs`: the energy, its rate claim and the constraints
-  lifted onto the integrated states (:class:`Constraint`, :class:`EnergyClaimError`,
+  lifted onto the integrated states, and the proof and refutation of a declared rate
+  (:class:`Constraint`, :class:`EnergyClaimError`, :class:`EnergyClaimWarning`,
   :func:`prove_energy_rate` live there and are re-exported here);
 - :mod:`verified.energy_state`: ``h(0)`` correlated with the initial states, and
   restarting ``h``;
@@ -48,13 +49,15 @@ below, keeps the statistics and hands the record to the Solution. The pieces:
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import replace
 
 import numpy as np
 
 from .backward_test import backward_test
 from .branch_prune import STRATEGIES, branch_and_prune
-from .consistency_graphs import Constraint, EnergyClaimError, lift_graphs, prove_energy_rate, refute_claim
+from .consistency_graphs import (Constraint, EnergyClaimError, EnergyClaimWarning, lift_graphs, prove_energy_rate,
+                                 refute_claim)
 from .energy_contraction import EnergyContraction
 from .energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
 from .energy_state import assign, initial_sets, reset_h
@@ -66,7 +69,7 @@ from .reduction_area import ConsistencyRecord, ReductionArea, TestRecord
 from .sets import DoubletonSets
 
 __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES", "EnergyClaimError",
-           "prove_energy_rate"]
+           "EnergyClaimWarning", "prove_energy_rate"]
 
 
 def _renamed(value, old_value, name: str, old_name: str, default):
@@ -118,8 +121,14 @@ class EnergyTest(Hook):
         How ``dH/dt(x, p)``, integrated into ``H_V`` (eq. (12)), is obtained (the
         vocabulary: :mod:`verified.energy_rate`): "derive" forms ``grad H . f`` by
         forward-mode differentiation (mode (ii)); "zero" declares the system
-        conservative (``H_V = H(0)``; only sound if it is, so it is checked); a Graph
-        is the rate itself (checked too). ``None`` (deprecated) means "zero".
+        conservative (``H_V = H(0)``); a Graph is the rate itself. ``None``
+        (deprecated) means "zero". A declared rate ("zero" or a Graph) is used only
+        when proven identically equal to ``grad H . f`` (exact symbolic proof at
+        set-up, :func:`verified.consistency_graphs.prove_claim`); an unproven one is
+        replaced by the derived rate, with one :class:`EnergyClaimWarning`
+        (``claim_proof`` says why; ``stats["energy_rate_unproven"]`` is 1). Either
+        way it is refuted on intervals at the initial sets and over every step's
+        tube: a refuted claim raises :class:`EnergyClaimError`.
     constraints : sequence of Constraint
     test_interval : float
         Longest time (s) between two tests (the paper: 0.1 s in mode (ii), 0.01 s in (iii));
@@ -159,6 +168,10 @@ class EnergyTest(Hook):
         row's mean-value remainder is wider than what the sets leave to cut, and on the
         UR5 (q +- 1e-3, T = 1) none of 358 contractions narrowed anything, at 4.9 s of
         a 64-s run.
+    check_claim : bool
+        True (default): prove and refute a declared ``energy_rate`` (above). False:
+        use it as given, unproven and unrefuted (the caller vouches for it: a wrong
+        rate removes true states).
     test_backoff : int or None
         The same for the tests at ``RA``'s peaks (``t*``): after a test that pruned
         nothing, the next 1, 2, 4, ... (at most this many) steps' peaks are passed by;
@@ -247,6 +260,7 @@ class EnergyTest(Hook):
         # (see contract_backoff, test_backoff)
         self._set_waits(0 if isinstance(setup.sets, DoubletonSets) else 16)
         self._refute_claim(setup.sets.hull(), setup.sets.c, setup.t0)
+        self._warn_unproven()
         # "a test at least every test_interval seconds" (contraction alone needs no cap:
         # it runs after every step, and a cap changes the steps of the run it is compared with)
         tests = self.prune or self.contract == "test"
@@ -263,6 +277,25 @@ class EnergyTest(Hook):
                     g = self._lifted.jac(self._lifted.residual, point(final.c))[:, 0, :].mid()
             self.align.set_direction(g)
         return out
+
+    @property
+    def claim_proof(self):
+        """The :class:`verified.consistency_graphs.ClaimProof` of the declared rate in
+        the last run (None: none was checked, or no run yet)."""
+        lifted = getattr(self, "_lifted", None)
+        return None if lifted is None else lifted.proof
+
+    def _warn_unproven(self):
+        """One :class:`EnergyClaimWarning` when the declared rate was not proven (the
+        run integrates ``grad H . f`` instead, :func:`lift_graphs`)."""
+        if not self._lifted.rate_unproven:
+            return
+        decl = ("energy_rate='zero' (dH/dt = 0)" if isinstance(self.energy_rate, str)
+                else "the energy_rate graph")
+        warnings.warn(EnergyClaimWarning(
+            f"{decl} could not be proven equal to grad H . f ({self._lifted.proof.reason}); the energy test "
+            "does not use it and integrates the derived rate grad H . f instead (pass energy_rate='derive' to "
+            "skip the proof)"), stacklevel=2)
 
     def _refute_claim(self, boxes: Interval, points: np.ndarray, t: float):
         """See :func:`verified.consistency_graphs.refute_claim`."""
@@ -376,7 +409,7 @@ class EnergyTest(Hook):
         self.stats = dict(tests=0, pruned_boxes=0, test_s=0.0, backward_s=0.0, backward_runs=0,
                           backward_deleted=0, refinements_skipped=0, contractions=0, contracted_empty=0,
                           contraction_s=0.0, contraction_ratio_min=1.0, h_resets=0, contractions_skipped=0,
-                          tests_skipped=0)
+                          tests_skipped=0, energy_rate_unproven=int(lifted.rate_unproven))
         self._set_waits(0)
         return lifted.graph
 

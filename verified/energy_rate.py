@@ -14,10 +14,19 @@ value          ``dH/dt`` is ...
 "simplified"   the symbolic model's expression simplified to ``qd^T tau``; identically
                0 for the paper's conservative models, which then declare "zero"
 "zero"         declared 0 (a conservative system): ``H_V`` stays ``H(0)``, nothing is
-               integrated. Only sound if true, so the claim is checked
-               (:mod:`verified.consistency_graphs`)
-a ``Graph``    given by the caller (``x, p -> [dH/dt]``, W); checked like "zero"
+               integrated -- once proven (below)
+a ``Graph``    given by the caller (``x, p -> [dH/dt]``, W); proven like "zero"
 ============== ===========================================================================
+
+A declared rate ("zero" or a graph) is only sound if true, and an interval check
+cannot show that it is (around an equilibrium, ``grad H . f - rate`` of a false claim
+encloses 0 on every set). So the energy test uses it only when
+:func:`verified.consistency_graphs.prove_claim` proves ``grad H . f - rate``
+identically 0 (exactly, once at set-up); an unproven one is replaced by the derived
+rate ``grad H . f`` with one ``EnergyClaimWarning``, and any declared rate refuted on
+intervals during the run raises ``EnergyClaimError``
+(:mod:`verified.consistency_graphs`). ``EnergyTest(check_claim=False)`` uses a
+declaration unproven (the caller vouches for it).
 
 Which layer takes which (a one-line ``ValueError`` names the allowed ones otherwise):
 
@@ -45,7 +54,7 @@ ENERGY_RATES = {
     "derive": "grad H . f, derived by forward-mode differentiation of the energy graph along the ODE",
     "unsimplified": "the symbolic model's dH/dt as the chain rule gives it, integrated",
     "simplified": "the symbolic model's dH/dt simplified (qd^T tau; 'zero' for a conservative model)",
-    "zero": "declared 0 (conservative): H_V = H(0); checked",
+    "zero": "declared 0 (conservative): H_V = H(0); used only when proven, else derived",
 }
 
 #: what a model is asked for (simulate, system_for, registry factories, scenes)
