@@ -10,6 +10,8 @@ Layout (keys exactly as issue 7 asks)::
       "t_end": 1.0, "t_reached": 1.0,
       "status": "completed",          # or "breakdown"
       "reason": "",                   # why it broke down ("" when completed)
+      "method": "auto: composition on 1 piece(s) completed to t = 1",   # what ran (verified.methods)
+      "method_log": [{"method": "composition", "pieces": 1, "t_span": [0, 1], "status": ..., ...}],
       "outputs": [                    # one entry per output time (k * output_dt)
         {"t": 0.05,
          "boxes": [[[lo, hi], [lo, hi], ...], ...],   # boxes whose union encloses x(t)

@@ -51,8 +51,8 @@ def test_result_file_round_trip(tmp_path):
     p = write_result(tmp_path / "out" / "result.json", sol, scene="s.toml", mode="i", state_names=["q", "qd"],
                      t_end=0.5)
     data = read_result(p)
-    assert set(data) == {"scene", "mode", "state_names", "t_end", "t_reached", "status", "reason", "outputs",
-                         "stats"}
+    assert set(data) == {"scene", "mode", "state_names", "t_end", "t_reached", "status", "reason", "method",
+                         "method_log", "outputs", "stats"}
     assert data["status"] == "completed" and data["state_names"] == ["q", "qd"]
     assert {"wall_s", "steps", "max_boxes", "pruned_boxes"} <= set(data["stats"])
     back = result_boxes(data, 0)

@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+from mbs.app.sampling import dop853
 
 import verified.auto as auto_mod
 from verified.graph import trace
@@ -33,7 +33,7 @@ def _sampled_final(T, count=200, seed=3):
     rng = np.random.default_rng(seed)
     pts = np.concatenate([rng.uniform(BOX.lo, BOX.hi, (count, 2)),
                           np.array([[a, b] for a in (-0.5, 0.5) for b in (-0.5, 0.5)])])
-    return np.array([solve_ivp(_f, (0, T), p, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1] for p in pts])
+    return np.array([dop853(_f, p, T, dense=False).y[:, -1] for p in pts])
 
 
 def _inside_union(states, boxes: Interval, slack=1e-9):
@@ -162,7 +162,7 @@ def test_target_ratio_splits_until_the_enclosure_is_tight_enough():
     assert (sol.hull[-1].width() < one.hull[-1].width()).any()
     rng = np.random.default_rng(5)
     pts = rng.uniform(box.lo, box.hi, (150, 2))
-    ends = np.array([solve_ivp(f, (0, 3.0), p, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1] for p in pts])
+    ends = np.array([dop853(f, p, 3.0, dense=False).y[:, -1] for p in pts])
     assert _inside_union(ends, sol.boxes[-1]).all()
 
 
