@@ -259,7 +259,8 @@ def test_huge_tol_completes_without_a_runtime_warning(kw):
 def test_huge_box_breaks_down_in_words_without_a_runtime_warning(big, max_width):
     import warnings
     g = trace(lambda x, p: [x[1], -x[0] - 2 * x[1] * x[0] * x[0]], 2)
-    for kw in _METHODS:
+    # (dict(): the default, method="auto"; the QR-Lohner method, the default before, named)
+    for kw in _METHODS + [dict(method="lohner")]:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             sol = solve(g, Interval([-big, -big], [big, big]), (0.0, 1.0), max_width=max_width, **kw)
