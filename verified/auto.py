@@ -8,7 +8,10 @@ sets cannot be continued is taken up again by the next rung, and after the last 
 is split (:func:`split_boxes`: bisected along its widest components) and its parts are
 run with the last rung, until every piece reaches ``t1`` or the pieces would exceed
 ``max_pieces``. The pieces that reached ``t1`` are kept as they are (a one-batch run
-goes on with the pieces that did not fail: ``Solution.surviving``).
+goes on with the pieces that did not fail: ``Solution.surviving``). An attempt whose
+first steps are so short that the span would take more than :data:`STALL_STEPS` of them
+is stopped (:class:`StallGuard`) and its pieces go to :data:`FALLBACK` (first-order
+sets), which splits on its own when it must.
 
 Soundness: every attempt starts from sets that enclose every true state at its start
 time: a failed piece is taken up again from its own initial box at ``t0`` (the initial
@@ -30,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hooks import StopAfterWall
+from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate
 from .methods import Auto, Composition, Lohner, Method
 from .solution import Solution
@@ -67,7 +70,8 @@ def split_boxes(boxes: Interval, max_dims: int = SPLIT_DIMS) -> Interval:
     out = []
     for b in range(boxes.shape[0]):
         lo, hi = np.asarray(boxes.lo[b], float), np.asarray(boxes.hi[b], float)
-        w = hi - lo
+        with np.errstate(over="ignore"):  # (a box of +-1.7e308 is wider than the largest float)
+            w = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
         order = np.argsort(-w, kind="stable")
         dims = [int(j) for j in order[:max_dims] if w[j] > 0 and w[j] >= 0.5 * w[order[0]]]
         parts = [(lo.copy(), hi.copy())]
@@ -199,6 +203,35 @@ def sampled_ratio(graph, boxes: Interval, params, sol, per_box: int = 8, seed: i
     return float(np.max(enc[ok] / spread[ok])) if ok.any() else 1.0
 
 
+#: the method that takes over the pieces of an attempt that stalled
+FALLBACK = Lohner(arithmetic="affine", error_basis="auto")
+#: an attempt stalls when its first STALL_MIN_STEPS steps would need more than
+#: STALL_STEPS steps for the whole span (UR5 to T = 1: ~220-860 steps; a 3-link
+#: arm piece to T = 2: ~400)
+STALL_MIN_STEPS = 1000
+STALL_STEPS = 20_000
+STALLED = "stalled"
+
+
+class StallGuard(Hook):
+    """Stop an attempt (a break-down whose reason starts with ``"stalled"``) whose first
+    :data:`STALL_MIN_STEPS` steps are so short that the span would take more than
+    :data:`STALL_STEPS` of them."""
+
+    def __init__(self, t0: float, t1: float):
+        self.t0, self.t1, self.steps = float(t0), float(t1), 0
+
+    def after_step(self, step, sets, run):
+        self.steps += 1
+        done = float(step.t) - self.t0
+        # judged once, at the STALL_MIN_STEPS-th step: a run whose steps shrink only near its
+        # end (a set blowing up before a break-down) is not a stall, it is a split's business
+        if self.steps == STALL_MIN_STEPS and done * STALL_STEPS < self.steps * (self.t1 - self.t0):
+            run.stop(f"{STALLED}: {self.steps} steps to t = {step.t:g} (about "
+                     f"{self.steps * (self.t1 - self.t0) / max(done, 1e-300):.3g} for the span)", "breakdown")
+        return None
+
+
 def _attempt_hooks(hooks, started: float) -> list:
     """The hooks of one attempt: a wall-clock cap (:class:`~verified.hooks.StopAfterWall`)
     counts from the start of the whole ``auto`` run, not of the attempt."""
@@ -229,7 +262,12 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         split_ratio=common.get("split_ratio", 0.01), max_boxes=common.get("max_boxes", 4096),
         wrap_target=common.get("wrap_target", 0.03), merge_slack=common.get("merge_slack"),
         error_basis="qr", progress=progress)
-    rungs = method.rungs or default_rungs(graph, boxes, pv)
+    rungs = list(method.rungs or default_rungs(graph, boxes, pv))
+    # the method a stalled attempt's pieces go to: first-order sets take long steps where
+    # the composition's remainders keep its steps tiny (x' = -p x, p in [0.5, 0.7]:
+    # 1.25e-4 s steps against one step of 0.3 s)
+    rungs.append(FALLBACK)
+    fallback = len(rungs) - 1
     for r in rungs:
         r.refuse(adaptive=bool(common.get("adaptive")), consistency=consistency is not None,
                  params=pv is not None and bool(np.any(pv.width() > 0)))
@@ -244,9 +282,10 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         task = todo.pop(0)
         rung = rungs[task.rung]
         t_start = time.perf_counter()
+        guard = [] if task.rung == fallback else [StallGuard(t0, t1)]
         sol = solve(ode, task.boxes, (t0, t1), method=rung, params=task.params, t_eval=t_eval,
                     consistency=None if consistency is None else copy.deepcopy(consistency),
-                    hooks=_attempt_hooks(hooks, started), progress=progress, **common)
+                    hooks=_attempt_hooks(hooks, started) + guard, progress=progress, **common)
         entry = dict(method=rung.describe(), pieces=int(task.boxes.shape[0]), splits=task.splits,
                      t_span=(float(t0), float(sol.t_reached)), status=sol.status, reason=sol.reason,
                      wall_s=time.perf_counter() - t_start)
@@ -264,7 +303,13 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             failed = list(range(task.boxes.shape[0]))
         kept = [i for i in range(task.boxes.shape[0]) if i not in set(failed)]
         fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
-        if task.rung + 1 < len(rungs):
+        last = fallback if task.rung == fallback else fallback - 1  # (the rung splitting continues with)
+        if sol.reason.startswith(STALLED) and task.rung != fallback:
+            # the method crawls here (steps far below the span): the fallback method takes these
+            # pieces over, with splitting of its own
+            nxt = _Task(fb, fp, fallback, task.splits, task.parent_t)
+            entry["next"] = f"{len(failed)} piece(s) to {rungs[fallback].describe()} (stalled)"
+        elif task.rung + 1 < fallback:
             nxt = _Task(fb, fp, task.rung + 1, task.splits)
             entry["next"] = f"{len(failed)} piece(s) to {rungs[task.rung + 1].describe()}"
         else:
@@ -272,7 +317,9 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             per = parts.shape[0] // fb.shape[0]
             t_fail = min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=sol.t_reached)
             why = None
-            if pieces_total - fb.shape[0] + parts.shape[0] > method.max_pieces:
+            if parts.shape[0] == fb.shape[0]:
+                why = "the pieces cannot be split (no component of finite, nonzero width)"
+            elif pieces_total - fb.shape[0] + parts.shape[0] > method.max_pieces:
                 why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {method.max_pieces}"
             elif t_fail <= task.parent_t + MIN_GAIN * (t1 - t0):
                 # splitting did not take the pieces further: the cause is not the sets' width
@@ -285,8 +332,8 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
                 give_up = "breakdown"
                 continue
             pieces_total += parts.shape[0] - fb.shape[0]
-            nxt = _Task(parts, _repeat_rows(fp, per), len(rungs) - 1, task.splits + 1, t_fail)
-            entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[-1].describe()}"
+            nxt = _Task(parts, _repeat_rows(fp, per), last, task.splits + 1, t_fail)
+            entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[last].describe()}"
         if kept:
             done.append((task.boxes[np.asarray(kept)], sol.surviving))
         todo.append(nxt)

@@ -288,6 +288,11 @@ class StepControl:
             rejected += 1
 
 
+#: see WrapControl.update: the smallest linear size (relative to the state's magnitude)
+#: a set's wrapping is measured against
+WRAP_FLOOR = 1e-12
+
+
 @dataclass
 class WrapControl:
     """Wrapping control: the error a step injects through the spread of the Jacobian
@@ -304,9 +309,15 @@ class WrapControl:
     def update(self, step) -> None:
         """Adapt ``h_limit`` after the accepted :class:`~verified.stepper.StepResult` ``step``."""
         n = self.steer
+        # the linear size has a floor of WRAP_FLOOR times the state's magnitude: a point set
+        # (width 0: a deterministic run) has no wrapping to control, and the rounding in its
+        # nonlinear part over a zero linear size had driven h_limit to 0 (the composition
+        # took 0-length steps after landing on an output time until max_steps)
+        c = np.abs(np.asarray(step.sets.c, float)[:, :n])
+        floor = WRAP_FLOOR * (1.0 + c.max(axis=1))
         with np.errstate(invalid="ignore"):  # (a NaN width, a set breaking down, leaves the limit as it is)
             ratio = float(np.max(step.nonlinear_width[:, :n].max(axis=1)
-                                 / (step.sets.linear_width()[:, :n].max(axis=1) + 1e-300)))
+                                 / (step.sets.linear_width()[:, :n].max(axis=1) + floor)))
         h = step.length
         if ratio > self.target:
             self.h_limit = h * max(0.2, np.sqrt(self.target / ratio))

@@ -179,3 +179,26 @@ def test_a_wall_clock_cap_counts_for_the_whole_auto_run():
     assert h.seconds == 0.0
     sol = solve(_vdp_like(), BOX, (0.0, 3.0), hooks=[StopAfterWall(0.0)])
     assert sol.status == "stopped" and len(sol.method_log) == 1
+
+
+def test_a_point_set_landing_on_an_output_time_keeps_stepping():
+    """(found under auto) a point initial set: after landing on t = 0.1 the composition's
+    wrapping control had shrunk the step to 0 (rounding over a zero linear size) and
+    used up max_steps there."""
+    g = trace(lambda x, p: [x[1], -x[0]], 2)
+    for m in ("composition", "auto"):
+        sol = solve(g, Interval([1.0, 0.0]), (0.0, 1.0), t_eval=[0.1, 1.0], method=m, max_steps=200)
+        assert sol.status == "completed" and sol.stats["steps"] < 50, (m, sol.reason)
+        assert sol.hull[-1].contains(np.array([np.cos(1.0), -np.sin(1.0)])).all()
+
+
+def test_a_stalled_composition_hands_its_pieces_to_the_fallback():
+    """x' = -p x, p in [0.5, 0.7]: the composition's steps stay near 1.25e-4 s (22,000 steps
+    to T = 3, 215 s); auto stops it as stalled and the first-order fallback completes.
+    Closed form: x(3) = x0 exp(-3 p) in [exp(-2.1), 2 exp(-1.5)]."""
+    g = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
+    sol = solve(g, Interval([1.0], [2.0]), (0.0, 3.0), params=Interval([0.5], [0.7]))
+    assert sol.status == "completed"
+    assert sol.method_log[0]["reason"].startswith("stalled") and "stalled" in sol.method_log[0]["next"]
+    assert sol.method_log[-1]["method"].startswith("lohner")
+    assert sol.hull[-1].lo[0] <= np.exp(-2.1) and sol.hull[-1].hi[0] >= 2 * np.exp(-1.5)
