@@ -313,8 +313,8 @@ class WrapControl:
         # (width 0: a deterministic run) has no wrapping to control, and the rounding in its
         # nonlinear part over a zero linear size had driven h_limit to 0 (the composition
         # took 0-length steps after landing on an output time until max_steps)
-        c = np.abs(np.asarray(step.sets.c, float)[:, :n])
-        floor = WRAP_FLOOR * (1.0 + c.max(axis=1))
+        c = getattr(step.sets, "c", None)  # (the set's centres; a bare set-like object has none)
+        floor = WRAP_FLOOR * (1.0 + (0.0 if c is None else np.abs(np.asarray(c, float)[:, :n]).max(axis=1)))
         with np.errstate(invalid="ignore"):  # (a NaN width, a set breaking down, leaves the limit as it is)
             ratio = float(np.max(step.nonlinear_width[:, :n].max(axis=1)
                                  / (step.sets.linear_width()[:, :n].max(axis=1) + floor)))
