@@ -152,7 +152,7 @@ def test_double_pendulum_contracted_boxes_keep_every_sampled_trajectory(scale, t
     rate = trace(lambda x, p: [0.0 * x[0]], 4)  # conservative: the claim is checked too
     test = EnergyTest(H, rate, contract="step", prune=False)
     sol = solve(rhs, Interval(lo, hi), (0.0, t_end), t_eval=np.linspace(t_end / 4, t_end, 4),
-                subdivision=[pieces, 1, 1, 1], consistency=test)
+                subdivision=[pieces, 1, 1, 1], consistency=test, method="lohner")  # (first-order sets' contraction)
     assert sol.t_reached > 0 and sol.stats["contractions"] > 0
     if bites:
         assert sol.stats["contraction_ratio_min"] < 0.97
@@ -167,7 +167,7 @@ def test_a_contraction_that_cuts_too_far_is_caught_by_the_sampling_oracle(monkey
     lo, hi = dp.initial_box()
     test = EnergyTest(H, "derive", contract="step", prune=False)
     sol = solve(rhs, Interval(lo, hi), (0.0, 1.0), t_eval=np.linspace(0.25, 1.0, 4), subdivision=[64, 1, 1, 1],
-                consistency=test)
+                consistency=test, method="lohner")  # (the monkeypatched contraction is the first-order sets')
     sols = trajectories(lambda x: dp.rhs(x), sample_initial_points(lo, hi, 20), sol.t_reached)
     assert misses(sol, sols, per_step=2)
 
@@ -177,7 +177,8 @@ def test_contraction_with_pruning_and_the_backward_test_is_sound():
     rhs, H = _pendulum()
     lo, hi = pd.initial_box()
     test = EnergyTest(H, "derive", contract="step", test_interval=0.1, test_splits=16, min_gain=0.0, backward_depth=1)
-    sol = solve(rhs, Interval(lo, hi), (0.0, 0.8), t_eval=np.linspace(0.1, 0.8, 8), consistency=test)
+    # (the backward test runs on first-order sets: method="lohner")
+    sol = solve(rhs, Interval(lo, hi), (0.0, 0.8), t_eval=np.linspace(0.1, 0.8, 8), consistency=test, method="lohner")
     assert sol.status == "completed" and sol.stats["tests"] > 0
     _check(sol, lambda x: pd.rhs(x), lo, hi, 0.8)
 
