@@ -119,7 +119,7 @@ def solve_auto(solve, ode, x0, t_span, *, method: Auto, params=None, t_eval=None
     ``common`` the rest of its keyword arguments (step bounds, adaptive splitting,
     execution), the same for every attempt. With ``method.target_ratio``, the ladder is
     repeated on split pieces while its final enclosure is wider than that ratio times
-    the sampled spread (:func:`sampled_ratio`)."""
+    the sampled spread (:func:`sampled_spread`)."""
     from .batch import VerifiedODE
     from .solver_args import check_graph, check_params, initial_boxes
 
@@ -133,7 +133,9 @@ def solve_auto(solve, ode, x0, t_span, *, method: Auto, params=None, t_eval=None
     target = method.target_ratio
     if target is not None and sol.status == "completed" and (pv is None or pv.ndim == 1):
         log = list(sol.method_log)
-        best, best_w, ratio = sol, _final_width(sol), sampled_ratio(graph, boxes, pv, sol)
+        # the sampled spread depends on the initial set and the span only: integrated once
+        spread = sampled_spread(graph, boxes, pv, float(sol.t[-1]) - float(sol.t[0]))
+        best, best_w, ratio = sol, _final_width(sol), _ratio(sol, spread)
         log[-1]["ratio_estimate"] = ratio
         while ratio > target:
             # the pieces the tightest run ended with, each split (its failures are not repeated)
@@ -145,7 +147,7 @@ def solve_auto(solve, ode, x0, t_span, *, method: Auto, params=None, t_eval=None
             if nxt.status != "completed":
                 break
             w = _final_width(nxt)
-            new_ratio = sampled_ratio(graph, boxes, pv, nxt)
+            new_ratio = _ratio(nxt, spread)
             log[-1]["ratio_estimate"] = new_ratio
             if not np.all(w <= best_w):  # (no tighter in every state: more pieces do not pay)
                 break
@@ -161,12 +163,11 @@ def _final_width(sol) -> np.ndarray:
     return np.asarray(sol.hull[-1].width(), float)
 
 
-def sampled_ratio(graph, boxes: Interval, params, sol, per_box: int = 8, seed: int = 0) -> float:
-    """Worst state's ratio of ``sol``'s final enclosure width to the spread of float
-    trajectories (DOP853, rtol = atol = 1e-10) from the corners (up to 2^6) and
-    ``per_box`` random points of every initial box, at ``sol.t[-1]``: an estimate that
-    guides ``target_ratio`` (a lower bound of the true spread, so the ratio is an upper
-    bound of the true one, up to the integrator's error). ``inf`` where it fails."""
+def sampled_spread(graph, boxes: Interval, params, T: float, per_box: int = 8, seed: int = 0):
+    """Per state, the spread at time ``T`` of float trajectories (DOP853, rtol = atol =
+    1e-10) from the corners (up to 2^6) and ``per_box`` random points of every initial
+    box: a lower bound of the true spread, up to the integrator's error, that guides
+    ``target_ratio`` (never the enclosure). None where the integration fails."""
     from scipy.integrate import solve_ivp
 
     rng = np.random.default_rng(seed)
@@ -181,24 +182,28 @@ def sampled_ratio(graph, boxes: Interval, params, sol, per_box: int = 8, seed: i
         pts.append(c)
         pts.append(lo + (hi - lo) * rng.random((per_box, n)))
     pts = np.concatenate(pts)
-    if params is not None:
-        p = np.asarray(params.mid() if params.ndim == 1 else params.hull(axis=0).mid(), float)
-    else:
-        p = None
+    p = None if params is None else np.asarray(params.mid() if params.ndim == 1 else params.hull(axis=0).mid(),
+                                               float)
     S = pts.shape[0]
 
     def f(t, y):
         return graph.eval_float(y.reshape(S, n), p).reshape(-1)
-    T = float(sol.t[-1]) - float(sol.t[0])
     if T <= 0:
-        return 1.0
+        return np.zeros(n)
     with np.errstate(all="ignore"):
         r = solve_ivp(f, (0.0, T), pts.reshape(-1), method="DOP853", rtol=1e-10, atol=1e-10)
     if not r.success:
-        return float("inf")
+        return None
     end = r.y[:, -1].reshape(S, n)
-    spread = end.max(axis=0) - end.min(axis=0)
-    enc = _final_width(sol)[:n]
+    return end.max(axis=0) - end.min(axis=0)
+
+
+def _ratio(sol, spread) -> float:
+    """Worst state's ratio of ``sol``'s final enclosure width to ``spread``
+    (:func:`sampled_spread`): inf where that failed, 1 where nothing spreads."""
+    if spread is None:
+        return float("inf")
+    enc = _final_width(sol)[:spread.size]
     ok = spread > 1e-12
     return float(np.max(enc[ok] / spread[ok])) if ok.any() else 1.0
 
