@@ -19,6 +19,10 @@ Layout (keys exactly as issue 7 asks)::
         ...
       ],
       "stats": {"wall_s": ..., "steps": ..., "max_boxes": ..., "pruned_boxes": ..., ...},
+      "tightness": {"t": 1.0, "method": "...", "samples": 64,   # the enclosure against the
+                    "states": [{"name": "x1", "width": ..., "spread": ..., "ratio": ...}, ...],
+                    "worst": {"name": "x3", "ratio": 1.17}},    # sampled trajectories at the
+                                      # last output time (mbs simulate; see tightness())
       "parameters": {"payload.mass": [lo, hi], ...},  # uncertain parameters (only if any)
       "frames": {"tool0": {"t": [...], "position": [[[lo, hi] x 3] per output time],
                            "rotation": [[[lo, hi] x 9] per output time], "tube_t": [...],
@@ -51,7 +55,7 @@ import numpy as np
 from verified.interval import Interval
 
 __all__ = ["ResultError", "solution_to_dict", "write_result", "read_result", "bound_to_json",
-           "bound_from_json", "result_boxes", "frame_to_json"]
+           "bound_from_json", "result_boxes", "frame_to_json", "tightness", "format_tightness"]
 
 
 class ResultError(ValueError):
@@ -114,11 +118,76 @@ def _jsonable(v):
     return str(v)
 
 
+def tightness(sol, spread=None, state_names=None, samples: int = 0) -> dict | None:
+    """How tight the enclosure is at the last output time ``t = sol.t[-1]`` (``t_end``
+    for a completed run): per state the enclosure's width (hull of all boxes), the
+    spread (max - min) of the sampled true states ``spread`` (n,) at ``t`` and their
+    ratio width / spread (None where the spread is 0: a state without uncertainty, or
+    no samples), the worst ratio, and ``sol.method`` (what ran; for ``"auto"`` every
+    attempt). The true reachable width lies between the spread and the width, so the
+    ratio bounds how much wider than necessary the enclosure is. None for a run
+    without outputs."""
+    if not len(sol.t):
+        return None
+    widths = np.asarray(sol.hull.width()[-1], float).ravel()
+    names = list(state_names if state_names is not None else getattr(sol, "state_names", None) or
+                 [f"x{i + 1}" for i in range(widths.size)])
+    spread = None if spread is None else np.asarray(spread, float).ravel()
+    rows, worst = [], None
+    for k, w in enumerate(widths):
+        s = None if spread is None or k >= spread.size or not np.isfinite(spread[k]) else float(spread[k])
+        ratio = float(w) / s if s is not None and s > 0 else None
+        rows.append({"name": names[k] if k < len(names) else f"x{k + 1}", "width": float(w), "spread": s,
+                     "ratio": ratio})
+        if ratio is not None and (worst is None or ratio > worst["ratio"]):
+            worst = {"name": rows[-1]["name"], "ratio": ratio}
+    return {"t": float(sol.t[-1]), "method": getattr(sol, "method", "") or "", "samples": int(samples),
+            "states": rows, "worst": worst}
+
+
+def _num(v) -> str:
+    if v is None:
+        return "-"
+    v = float(v)
+    if v < np.finfo(float).tiny and v >= 0:
+        return "0"  # (the width of a point: one ulp of outward rounding at 0)
+    return f"{v:.4g}"
+
+
+def format_tightness(summary: dict) -> str:
+    """The table of :func:`tightness` and a line with the worst ratio, e.g.::
+
+        at t = 1 s (method: lohner), against 64 sampled trajectories:
+          state   enclosure width   sampled spread   ratio
+          q1      0.2874            0.2651           1.084
+          qd1     0.8277            0.7012           1.180
+        worst ratio: 1.18 (qd1): the enclosure is at most 1.18 times as wide as the true set
+    """
+    head = ["state", "enclosure width", "sampled spread", "ratio"]
+    rows = [[r["name"], _num(r["width"]), _num(r["spread"]), "-" if r["ratio"] is None else f"{r['ratio']:.4g}"]
+            for r in summary["states"]]
+    size = [max(len(x[i]) for x in rows + [head]) for i in range(len(head))]
+    n = summary.get("samples") or 0
+    lines = [f"at t = {summary['t']:g} s (method: {summary['method'] or '?'}), "
+             + (f"against {n} sampled trajector{'y' if n == 1 else 'ies'}:" if n else "no sampled trajectories:")]
+    lines += ["  " + "   ".join(c.ljust(w) for c, w in zip(r, size)).rstrip() for r in [head] + rows]
+    worst = summary.get("worst")
+    if worst is not None:
+        lines.append(f"worst ratio: {worst['ratio']:.4g} ({worst['name']}): the enclosure is at most "
+                     f"{worst['ratio']:.4g} times as wide as the true set (whose width is at least the "
+                     f"sampled spread)")
+    elif n:
+        lines.append("worst ratio: - (the samples do not spread: every state's sampled spread is 0)")
+    return "\n".join(lines)
+
+
 def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=None,
-                     t_end: float | None = None, extra_stats: dict | None = None, frames=()) -> dict:
+                     t_end: float | None = None, extra_stats: dict | None = None, frames=(),
+                     tightness: dict | None = None) -> dict:
     """The result.json dict of a :class:`verified.solver.Solution` (see module doc);
     ``frames``: frame names whose enclosures (``sol.frame(name)``, :mod:`mbs.frames`)
-    go under ``"frames"``."""
+    go under ``"frames"``; ``tightness``: :func:`tightness`'s dict, under
+    ``"tightness"``."""
     names = list(state_names if state_names is not None else getattr(sol, "state_names", ()) or
                  [f"x{i + 1}" for i in range(sol.hull.shape[-1])])
     outputs = _outputs(sol, len(names))
@@ -141,6 +210,8 @@ def solution_to_dict(sol, scene: str = "", mode: str | None = None, state_names=
         "outputs": outputs,
         "stats": _jsonable(stats),
     }
+    if tightness is not None:
+        out["tightness"] = _jsonable(tightness)
     params = getattr(sol, "params", None)
     if params:
         out["parameters"] = {str(k): [bound_to_json(float(lo)), bound_to_json(float(hi))]
