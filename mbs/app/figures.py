@@ -2,13 +2,16 @@
 
 * :func:`fig_reduction_area` -- Fig. 2: the reduction area RA(t) of eq. (16) with the
   test times t* marked (and the H_H / H_V enclosures it compares).
-* :func:`fig_consistency_plane` -- Fig. 3: the (q, qd) plane at t*: the regions where
+* :func:`fig_consistency_plane` -- Fig. 3 (drawn by the CLI and the demo only when a test
+  pruned a sub-box): the (q, qd) plane at t*: the regions where
   the energy H is certainly outside [H_V(t*)] (H evaluated in interval arithmetic on a
   grid of cells over the tested box; a shaded cell holds no consistent state), the
   tested sub-boxes, kept ones outlined, pruned ones crossed.
 * :func:`fig_enclosures` -- Fig. 5: the hull of the enclosure of each state over time
-  for several modes overlaid (solid (i), grey (ii), dashed (iii), as in the paper),
-  optionally with sampled true trajectories (:func:`mbs.app.sampling.sample_trajectories`).
+  for several modes overlaid (solid black (i), thick grey (ii), dashed blue (iii)),
+  optionally with sampled true trajectories (:func:`mbs.app.sampling.sample_trajectories`),
+  and beside it the enclosure's width over time on a log scale, one line per mode, with
+  the samples' spread as the reference (where the modes differ).
 * :func:`fig_work_precision` -- final width ratio against wall time (benchmarks).
 """
 from __future__ import annotations
@@ -187,17 +190,40 @@ def _finite_extent(lo, hi, width_cap):
     return float(lo[ok].min()), float(hi[ok].max())
 
 
+def _sampled_spread(samples, sample_times, solutions):
+    """(times, spread (k, n)): the samples' spread (max - min over the samples whose
+    states are finite) at the output times of ``solutions`` that are sample times (the
+    times at which the enclosures are compared), or at every sample time if none is."""
+    times = np.asarray(sample_times, float)
+    outs = np.unique(np.concatenate([np.asarray(s_.t, float) for s_ in solutions.values()] or [np.zeros(0)]))
+    k = np.searchsorted(times, outs).clip(0, max(len(times) - 1, 0))
+    hit = np.isclose(times[k], outs, rtol=0, atol=1e-12) if len(times) else np.zeros(0, bool)
+    idx = np.unique(k[hit]) if hit.any() else np.arange(len(times))
+    x = np.asarray(samples, float)[:, idx, :]
+    spread = np.full((len(idx), x.shape[-1]), np.nan)
+    for j in range(len(idx)):
+        ok = np.isfinite(x[:, j, :]).all(axis=1)
+        if ok.any():
+            spread[j] = x[ok, j, :].max(axis=0) - x[ok, j, :].min(axis=0)
+    return times[idx], spread
+
+
 def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None, tube=True, units=None):
-    """Hull of each state's enclosure over time for each mode (paper Fig. 5).
+    """Paper Fig. 5: per state (one row each), left the hull of the enclosure over time
+    for each mode (solid black (i), thick grey (ii), dashed blue (iii)) with sampled true
+    trajectories, right the enclosure's width at the output times on a log scale, one
+    line per mode, with the samples' spread (a lower bound of the true width) as the
+    reference: the modes differ in width where their bounds overlap on the left.
 
     ``solutions``: dict mode -> Solution (or a single Solution). ``tube``: draw the
     enclosure over every step (``tube_t``/``tube_hull``) as a staircase, else the
     output times only. ``samples``: (S, k, n) sampled true states at ``sample_times``.
     ``units``: axis unit strings per state (default: rad for the first half, rad/s
-    for the second). The y-axes show the verified enclosures: the last steps before a
-    break-down, whose width explodes, are drawn but do not set the axis range (an
+    for the second). The left y-axes show the verified enclosures: the last steps before
+    a break-down, whose width explodes, are drawn but do not set the axis range (an
     enclosure wider than 4 times the widest output-time width of a completed mode, or
-    of the samples' spread, is left out of the range).
+    of the samples' spread, is left out of the range); the log scale on the right shows
+    them.
     """
     plt = _plt()
     if not isinstance(solutions, dict):
@@ -205,12 +231,13 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
     first = next(iter(solutions.values()))
     n = first.hull.shape[-1]
     names = list(getattr(first, "state_names", None) or [f"x{k + 1}" for k in range(n)])
-    cols = 2 if n > 1 else 1
-    rows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(6 * cols, 2.8 * rows), squeeze=False, sharex=True)
+    fig, axes = plt.subplots(n, 2, figsize=(12, 2.4 * n + 0.6), squeeze=False, sharex=True)
     units = list(units) if units is not None else _state_units(names, n)
+    spread_t = spread = None
+    if samples is not None:
+        spread_t, spread = _sampled_spread(samples, sample_times, solutions)
     for k in range(n):
-        ax = axes[k // cols][k % cols]
+        ax, axw = axes[k]
         # the width scale of what was verified well: completed modes' output hulls, samples
         ref = [np.asarray(s_.hull.width(), float)[:, k] for s_ in solutions.values() if s_.status == "completed"]
         scale = max([float(np.nanmax(w)) for w in ref if w.size] or [0.0])
@@ -227,7 +254,7 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
             S = samples.shape[0]
             step = max(1, S // 60)
             for s in range(0, S, step):
-                ax.plot(sample_times, samples[s, :, k], color="tab:orange", lw=0.4, alpha=0.5,
+                ax.plot(sample_times, samples[s, :, k], color="tab:orange", lw=0.4, alpha=0.35, zorder=1,
                         label="sampled trajectories" if s == 0 else None)
         for mode, sol in solutions.items():
             style = dict(MODE_STYLE.get(mode, dict(color="black", ls="-", lw=1.0, label=str(mode))))
@@ -241,11 +268,23 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
             else:
                 tt = np.asarray(sol.t, float)
                 lo, hi = np.asarray(sol.hull.lo, float)[:, k], np.asarray(sol.hull.hi, float)[:, k]
-            ax.plot(tt, lo, label=label, **style)
-            ax.plot(tt, hi, **style)
+            ax.plot(tt, lo, label=label, zorder=3, **style)
+            ax.plot(tt, hi, zorder=3, **style)
             ext = _finite_extent(np.asarray(lo, float), np.asarray(hi, float), cap)
             if ext is not None:
                 ylo, yhi = min(ylo, ext[0]), max(yhi, ext[1])
+            # the widths at the output times (where the modes are compared; a width 0,
+            # a point state, has no place on a log scale)
+            w = np.asarray(sol.hull.width(), float)[:, k]
+            ok = np.isfinite(w) & (w > np.finfo(float).tiny)
+            if ok.any():
+                axw.plot(np.asarray(sol.t, float)[ok], w[ok], marker="o", ms=2.5, label=label, zorder=3, **style)
+        if spread is not None:
+            sk = spread[:, k]
+            ok = np.isfinite(sk) & (sk > np.finfo(float).tiny)
+            if ok.any():
+                axw.plot(spread_t[ok], sk[ok], color="tab:orange", ls=":", lw=1.6, marker="x", ms=3, zorder=4,
+                         label="sampled spread (true width is at least this)")
         if samples is not None and np.isfinite(samples[:, :, k]).any():
             ylo = min(ylo, float(np.nanmin(samples[:, :, k])))
             yhi = max(yhi, float(np.nanmax(samples[:, :, k])))
@@ -253,13 +292,19 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
             pad = 0.05 * (yhi - ylo)
             ax.set_ylim(ylo - pad, yhi + pad)
         ax.set_ylabel(names[k] + units[k])
-        if k // cols == rows - 1:
+        if axw.lines:
+            axw.set_yscale("log")
+        axw.set_ylabel(f"width of {names[k]}" + units[k])
+        axw.grid(True, which="both", alpha=0.25)
+        if k == n - 1:
             ax.set_xlabel("t [s]")
+            axw.set_xlabel("t [s]")
         if k == 0:
             ax.legend(fontsize=7, loc="best")
-    for k in range(n, rows * cols):
-        axes[k // cols][k % cols].axis("off")
-    fig.suptitle(title or "State enclosures (hull of all boxes) over time")
+            axw.legend(fontsize=7, loc="best")
+    axes[0][0].set_title("enclosure (hull of all boxes)", fontsize=9)
+    axes[0][1].set_title("its width at the output times (log scale)", fontsize=9)
+    fig.suptitle(title or "State enclosures over time")
     fig.tight_layout()
     return _save(fig, path)
 
