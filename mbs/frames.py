@@ -48,6 +48,7 @@ from .errors import ModelError
 from .scalar import is_sympy
 
 __all__ = ["FrameEnclosure", "Frames", "frame_enclosure", "frame_graph", "attach_frames", "default_frame",
+           "default_frame_note",
            "evaluate_frame", "METHODS"]
 
 METHODS = ("both", "set", "mean-value", "affine", "interval")
@@ -316,6 +317,21 @@ def default_frame(chain) -> str:
     if not cand:
         raise ModelError(f"{chain.name!r} has no frame on its last body")
     return max(cand)[1]
+
+
+def default_frame_note(chain, frame: str | None = None) -> str:
+    """One line for the output when the default end effector (:func:`default_frame`, or
+    ``frame``) is only the origin of the last joint: a chain without a tool frame (a bare
+    URDF whose last link has no fixed child link, a DH chain without a tool offset),
+    whose frames on the last body all sit at its joint. "" otherwise."""
+    frame = default_frame(chain) if frame is None else frame
+    body, T = chain.frames.get(frame, (None, None))
+    if body is None or body != chain.n - 1 or float(np.linalg.norm(np.asarray(T[1], float))) > 0:
+        return ""
+    joint = chain.joint_names[-1]
+    return (f"frame: no tool frame given; using the origin of joint {joint!r} (the last joint, frame "
+            f"{frame!r}), not the arm's tip; to enclose the tip, add a fixed link at the tip (a tool link) "
+            f"to the model and name it in [simulation] frames")
 
 
 def attach_frames(sol, chain, cparams=None):
