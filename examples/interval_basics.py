@@ -1,6 +1,7 @@
 """Interval arithmetic on numpy arrays: rigor, tightness and batching in a few lines.
 
 Run: python examples/interval_basics.py
+     (it takes about a second: MBS_EXAMPLE_SHORT=1 and --short change nothing)
 """
 
 from fractions import Fraction
