@@ -2,7 +2,7 @@
 
 Writes ``DIR/benchmarks.md`` and ``DIR/bench_work_precision.png``; ``DIR`` defaults to
 ``out/bench`` under the current working directory (never into the installed package).
-The report in a checkout's docs is ``python -m mbs bench --out docs``.
+The report in a checkout's docs is ``python -m mbs bench --out docs/lab`` (docs/lab/benchmarks.md).
 
 1. Work-precision on the paper's double pendulum (eq. 22, box 25): for each mode
    (i, ii, iii), Taylor order and subdivision of x1(0), the final widths, their
