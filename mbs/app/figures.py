@@ -11,7 +11,8 @@
   for several modes overlaid (solid black (i), thick grey (ii), dashed blue (iii)),
   optionally with sampled true trajectories (:func:`mbs.app.sampling.sample_trajectories`),
   and beside it the enclosure's width over time on a log scale, one line per mode, with
-  the samples' spread as the reference (where the modes differ).
+  the samples' spread as the reference, and the excess width over that spread (log
+  scale: where the modes differ).
 * :func:`fig_work_precision` -- final width ratio against wall time (benchmarks).
 """
 from __future__ import annotations
@@ -190,40 +191,48 @@ def _finite_extent(lo, hi, width_cap):
     return float(lo[ok].min()), float(hi[ok].max())
 
 
-def _sampled_spread(samples, sample_times, solutions):
-    """(times, spread (k, n)): the samples' spread (max - min over the samples whose
-    states are finite) at the output times of ``solutions`` that are sample times (the
-    times at which the enclosures are compared), or at every sample time if none is."""
+def _spread_at(samples, sample_times, t):
+    """The samples' spread (max - min over the samples whose states are finite), (len(t),
+    n), at the times ``t`` that are sample times (NaN at the others)."""
     times = np.asarray(sample_times, float)
-    outs = np.unique(np.concatenate([np.asarray(s_.t, float) for s_ in solutions.values()] or [np.zeros(0)]))
-    k = np.searchsorted(times, outs).clip(0, max(len(times) - 1, 0))
-    hit = np.isclose(times[k], outs, rtol=0, atol=1e-12) if len(times) else np.zeros(0, bool)
-    idx = np.unique(k[hit]) if hit.any() else np.arange(len(times))
-    x = np.asarray(samples, float)[:, idx, :]
-    spread = np.full((len(idx), x.shape[-1]), np.nan)
-    for j in range(len(idx)):
-        ok = np.isfinite(x[:, j, :]).all(axis=1)
+    t = np.asarray(t, float)
+    x = np.asarray(samples, float)
+    out = np.full((t.size, x.shape[-1]), np.nan)
+    if not times.size:
+        return out
+    k = np.searchsorted(times, t).clip(0, times.size - 1)
+    for j in np.flatnonzero(np.isclose(times[k], t, rtol=0, atol=1e-12)):
+        ok = np.isfinite(x[:, k[j], :]).all(axis=1)
         if ok.any():
-            spread[j] = x[ok, j, :].max(axis=0) - x[ok, j, :].min(axis=0)
-    return times[idx], spread
+            out[j] = x[ok, k[j], :].max(axis=0) - x[ok, k[j], :].min(axis=0)
+    return out
+
+
+#: Fig. 5's excess widths (width / sampled spread - 1) are drawn from this floor up (a
+#: log scale has no 0: an enclosure as tight as the samples show)
+EXCESS_FLOOR = 1e-6
 
 
 def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None, tube=True, units=None):
-    """Paper Fig. 5: per state (one row each), left the hull of the enclosure over time
-    for each mode (solid black (i), thick grey (ii), dashed blue (iii)) with sampled true
-    trajectories, right the enclosure's width at the output times on a log scale, one
-    line per mode, with the samples' spread (a lower bound of the true width) as the
-    reference: the modes differ in width where their bounds overlap on the left.
+    """Paper Fig. 5, one row per state: the hull of the enclosure over time for each mode
+    (solid black (i), thick grey (ii), dashed blue (iii)) with sampled true
+    trajectories; its width at the output times on a log scale, one line per mode, with
+    the samples' spread (a lower bound of the true width) as the reference; and (with
+    samples) the excess width, width / sampled spread - 1, on a log scale (from
+    :data:`EXCESS_FLOOR`): there the modes differ even where their bounds and widths
+    overlap (a ratio 1.03 against 1.003 is a decade apart).
 
     ``solutions``: dict mode -> Solution (or a single Solution). ``tube``: draw the
     enclosure over every step (``tube_t``/``tube_hull``) as a staircase, else the
-    output times only. ``samples``: (S, k, n) sampled true states at ``sample_times``.
+    output times only. ``samples``: (S, k, n) sampled true states at ``sample_times``
+    (the widths are compared at the output times that are sample times).
     ``units``: axis unit strings per state (default: rad for the first half, rad/s
     for the second). The left y-axes show the verified enclosures: the last steps before
     a break-down, whose width explodes, are drawn but do not set the axis range (an
     enclosure wider than 4 times the widest output-time width of a completed mode, or
-    of the samples' spread, is left out of the range); the log scale on the right shows
-    them.
+    of the samples' spread, is left out of the range); the log scales show them.
+    Widths below 1e-9 of a state's largest (the outward rounding of a point value) are
+    not drawn.
     """
     plt = _plt()
     if not isinstance(solutions, dict):
@@ -231,13 +240,16 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
     first = next(iter(solutions.values()))
     n = first.hull.shape[-1]
     names = list(getattr(first, "state_names", None) or [f"x{k + 1}" for k in range(n)])
-    fig, axes = plt.subplots(n, 2, figsize=(12, 2.4 * n + 0.6), squeeze=False, sharex=True)
+    ncol = 3 if samples is not None else 2
+    fig, axes = plt.subplots(n, ncol, figsize=(5.2 * ncol, 2.4 * n + 0.6), squeeze=False, sharex=True)
     units = list(units) if units is not None else _state_units(names, n)
     spread_t = spread = None
-    if samples is not None:
-        spread_t, spread = _sampled_spread(samples, sample_times, solutions)
+    if samples is not None:  # at the output times of every mode
+        spread_t = np.unique(np.concatenate([np.asarray(s_.t, float) for s_ in solutions.values()]))
+        spread = _spread_at(samples, sample_times, spread_t)
     for k in range(n):
-        ax, axw = axes[k]
+        ax, axw = axes[k][0], axes[k][1]
+        axr = axes[k][2] if ncol == 3 else None
         # the width scale of what was verified well: completed modes' output hulls, samples
         ref = [np.asarray(s_.hull.width(), float)[:, k] for s_ in solutions.values() if s_.status == "completed"]
         scale = max([float(np.nanmax(w)) for w in ref if w.size] or [0.0])
@@ -249,6 +261,7 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
             scale = max([float(np.nanmedian(np.asarray(s_.tube_hull.width(), float)[:, k]))
                          for s_ in solutions.values() if len(s_.tube_t) > 1] or [1.0])
         cap = 4.0 * scale
+        floor = 1e-9 * scale  # (widths below: the outward rounding of a point value)
         ylo, yhi = np.inf, -np.inf
         if samples is not None:
             S = samples.shape[0]
@@ -259,6 +272,7 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
         for mode, sol in solutions.items():
             style = dict(MODE_STYLE.get(mode, dict(color="black", ls="-", lw=1.0, label=str(mode))))
             label = style.pop("label")
+            style["zorder"] = 3 + 1.0 / style.get("lw", 1.0)  # (thin lines over thick ones: mode i over ii)
             if sol.status != "completed":
                 label += f" (breakdown t={sol.t_reached:.3g})"
             if tube and len(sol.tube_t) > 1:
@@ -268,22 +282,28 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
             else:
                 tt = np.asarray(sol.t, float)
                 lo, hi = np.asarray(sol.hull.lo, float)[:, k], np.asarray(sol.hull.hi, float)[:, k]
-            ax.plot(tt, lo, label=label, zorder=3, **style)
-            ax.plot(tt, hi, zorder=3, **style)
+            ax.plot(tt, lo, label=label, **style)
+            ax.plot(tt, hi, **style)
             ext = _finite_extent(np.asarray(lo, float), np.asarray(hi, float), cap)
             if ext is not None:
                 ylo, yhi = min(ylo, ext[0]), max(yhi, ext[1])
-            # the widths at the output times (where the modes are compared; a width 0,
-            # a point state, has no place on a log scale)
+            # the widths at the output times, where the modes are compared
+            t_out = np.asarray(sol.t, float)
             w = np.asarray(sol.hull.width(), float)[:, k]
-            ok = np.isfinite(w) & (w > np.finfo(float).tiny)
+            ok = np.isfinite(w) & (w > floor)
             if ok.any():
-                axw.plot(np.asarray(sol.t, float)[ok], w[ok], marker="o", ms=2.5, label=label, zorder=3, **style)
+                axw.plot(t_out[ok], w[ok], marker="o", ms=2.5, label=label, **style)
+            if axr is not None:
+                sp = spread[np.searchsorted(spread_t, t_out), k]
+                ok = np.isfinite(w) & np.isfinite(sp) & (sp > floor)
+                if ok.any():
+                    excess = np.maximum(w[ok] / sp[ok] - 1.0, EXCESS_FLOOR)
+                    axr.plot(t_out[ok], excess, marker="o", ms=2.5, label=label, **style)
         if spread is not None:
             sk = spread[:, k]
-            ok = np.isfinite(sk) & (sk > np.finfo(float).tiny)
+            ok = np.isfinite(sk) & (sk > floor)
             if ok.any():
-                axw.plot(spread_t[ok], sk[ok], color="tab:orange", ls=":", lw=1.6, marker="x", ms=3, zorder=4,
+                axw.plot(spread_t[ok], sk[ok], color="tab:orange", ls=":", lw=1.6, marker="x", ms=3, zorder=5,
                          label="sampled spread (true width is at least this)")
         if samples is not None and np.isfinite(samples[:, :, k]).any():
             ylo = min(ylo, float(np.nanmin(samples[:, :, k])))
@@ -292,18 +312,27 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
             pad = 0.05 * (yhi - ylo)
             ax.set_ylim(ylo - pad, yhi + pad)
         ax.set_ylabel(names[k] + units[k])
-        if axw.lines:
-            axw.set_yscale("log")
         axw.set_ylabel(f"width of {names[k]}" + units[k])
-        axw.grid(True, which="both", alpha=0.25)
+        for a in (axw, axr):
+            if a is None:
+                continue
+            if a.lines:
+                a.set_yscale("log")
+            a.grid(True, which="both", alpha=0.25)
+        if axr is not None:
+            axr.set_ylabel(f"{names[k]}: width / spread - 1")
+            if axr.lines:
+                axr.set_ylim(bottom=EXCESS_FLOOR * 0.7)
         if k == n - 1:
-            ax.set_xlabel("t [s]")
-            axw.set_xlabel("t [s]")
+            for a in axes[k]:
+                a.set_xlabel("t [s]")
         if k == 0:
             ax.legend(fontsize=7, loc="best")
             axw.legend(fontsize=7, loc="best")
     axes[0][0].set_title("enclosure (hull of all boxes)", fontsize=9)
     axes[0][1].set_title("its width at the output times (log scale)", fontsize=9)
+    if ncol == 3:
+        axes[0][2].set_title("excess over the sampled spread (log scale)", fontsize=9)
     fig.suptitle(title or "State enclosures over time")
     fig.tight_layout()
     return _save(fig, path)
