@@ -6,8 +6,11 @@ test, (ii) numeric model with the energy consistency test, (iii) symbolic model 
 the energy test, each with the same solver settings. The demo prints the comparison
 table (time reached, widths at common output times, pruned boxes, wall time), checks
 every enclosure against densely sampled DOP853 trajectories, and writes the paper's
-figures (Fig. 5 for the three modes with the sampled trajectories overlaid, Figs. 2
-and 3 of mode ii) into ``--out`` (default ``out/demo``).
+figures (Fig. 5 for the three modes with the sampled trajectories overlaid and their
+widths against the samples' spread on a log scale, Figs. 2 and 3 of mode ii; Fig. 3
+only when a test pruned a sub-box) into ``--out`` (default ``out/demo``). On a
+terminal one progress bar runs over the three modes, the sampling and the figures,
+naming the phase, and a first run says when the kernels compile.
 
 It exits with 1 when a sampled state lies outside an enclosure or when a mode breaks
 down before ``T`` (the demo must reach what it shows; ``tests/app/test_demo_and_scenes.py``
@@ -24,9 +27,10 @@ import numpy as np
 from verified.warmup import finish_background, start_in_background
 
 from ..modes import ALL_MODES, MODE_I, MODE_II, MODES
+from ..progress import Progress, compile_note
 from ..simulate import simulate, system_for
 from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
-from .runner import check_samples
+from .runner import check_samples, kernel_families, pruned_anything
 from .sampling import line_points, sample_trajectories
 from .scene import load_scene
 
@@ -59,27 +63,33 @@ def _table(rows, header):
     return "\n".join(out)
 
 
-def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print) -> int:
+def run(out="out/demo", t_end=None, pieces=None, samples=None, log=print, started=None, progress=None) -> int:
     """The demo (module docstring); 0 when every mode reached ``t_end`` with every sampled
     state inside, else 1. On a machine with two cores or more, the kernels of the other
     arithmetics (affine, Taylor models), which the demo does not use, compile meanwhile in
     a background process (:mod:`verified.warmup`), so that the next runs and the test
-    suite start warm; ``MBS_NO_WARMUP=1`` turns that off."""
+    suite start warm; ``MBS_NO_WARMUP=1`` turns that off. ``started``: ``time.time()`` of
+    the command's start (the progress bar's clock counts from it); ``progress``: None (a
+    bar on an interactive stderr), False (none) or True (always)."""
     warm = start_in_background()
+    bar = Progress(len(MODES) * (DEMO["t_end"] if t_end is None else t_end), "demo", start=started,
+                   enabled=progress)
     try:
-        rc = _run(out, t_end, pieces, samples, log)
+        rc = _run(out, t_end, pieces, samples, bar.printing(log), bar)
     except BaseException:
+        bar.close()
         if warm is not None:  # (Ctrl-C or an error: the warm-up is not waited for)
             warm.kill()
             warm.wait()
         raise
+    bar.close()
     note = finish_background(warm)
     if note:
         log(note)
     return rc
 
 
-def _run(out, t_end, pieces, samples, log) -> int:
+def _run(out, t_end, pieces, samples, log, bar) -> int:
     t_all = time.perf_counter()
     t_end = DEMO["t_end"] if t_end is None else t_end
     pieces = DEMO["pieces"] if pieces is None else pieces
@@ -95,14 +105,20 @@ def _run(out, t_end, pieces, samples, log) -> int:
     log(f"energy test every {kw.get('test_interval', MODE_II.test_interval):g} s with "
         f"{kw.get('test_splits', MODE_II.test_splits)} splits (modes {' and '.join(tested)}).\n")
     sols, walls = {}, {}
-    for mode in MODES:
+    cold = compile_note(kernel_families(kw)) if bar.enabled else ""
+    bar.note(cold)
+    for k, mode in enumerate(MODES):
+        bar.offset = k * t_end  # (one bar over the three modes)
+        bar.phase(f"mode {mode}: " + ("compiling" if cold and k == 0 else "solving"))
         t0 = time.perf_counter()
-        sols[mode] = simulate("double_pendulum_paper", x0, t_end, mode=mode, output_dt=DEMO["output_dt"], **kw)
+        sols[mode] = simulate("double_pendulum_paper", x0, t_end, mode=mode, output_dt=DEMO["output_dt"],
+                              progress=bar, **kw)
         walls[mode] = time.perf_counter() - t0
         s = sols[mode]
         log(f"  mode {mode:>3}: {s.status} at t = {s.t_reached:.3f} s ({walls[mode]:.1f} s)")
 
     # sampled true trajectories: x1(0) dense over its interval (the other states are points)
+    bar.phase(f"sampling {samples} trajectories")
     lo, hi = np.asarray(x0.lo, float), np.asarray(x0.hi, float)
     pts = line_points(lo, hi, samples, 0)
     t_out = max((s.t for s in sols.values()), key=len)
@@ -140,15 +156,20 @@ def _run(out, t_end, pieces, samples, log) -> int:
                             "test s", "wall s", "reason"]))
 
     out = Path(out)
+    bar.phase("figures")
     paths = [fig_enclosures(sols, out / "fig5_enclosures.png", samples=traj, sample_times=dense,
-                            title="Double pendulum (paper Fig. 5): (i) black, (ii) grey, (iii) dashed")]
+                            title="Double pendulum (paper Fig. 5): the enclosures of modes (i), (ii), (iii) "
+                                  "and their widths against the samples' spread")]
     s2 = sols[MODE_II.name]  # Figs. 2 and 3: mode ii, as in the paper
     if s2.consistency is not None and len(s2.consistency.ra_t) > 1:
         paths.append(fig_reduction_area(s2, out / "fig2_reduction_area.png"))
-    if s2.consistency is not None and s2.consistency.tests:
+    if s2.consistency is not None and s2.consistency.tests and pruned_anything(s2):
         paths.append(fig_consistency_plane(s2, system_for("double_pendulum_paper", MODE_II).energy,
                                            out / "fig3_consistency_plane.png"))
+    bar.close()  # (the report below without a bar redrawn after every line)
     log("\nFigures: " + ", ".join(str(p) for p in paths))
+    if s2.consistency is not None and s2.consistency.tests and not pruned_anything(s2):
+        log(f"nothing pruned by mode {MODE_II.name}'s {len(s2.consistency.tests)} energy tests: Fig. 3 not drawn")
     verdict = "every enclosure contains all" if not escaped else f"{escaped} sampled states OUTSIDE the enclosures of"
     log(f"Checked against {samples} sampled trajectories: {verdict} sampled states. "
         f"({time.perf_counter() - t_all:.1f} s)")

@@ -21,19 +21,19 @@ from verified.parallel import (SchedulerError, connect, dask_available, default_
 
 from ..control import ControlError
 from ..errors import ModelError
-from ..frames import default_frame
+from ..frames import default_frame, default_frame_note
 from ..modes import get_mode
-from ..progress import Progress
+from ..progress import Progress, compile_note
 from ..simulate import simulate, system_for
 from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
 from .frame_figures import fig_frame_region
-from .results import write_result
+from .results import format_tightness, tightness, write_result
 from .sampling import sample_points, sample_trajectories
 from .scene import Scene, SceneError, output_times, parse_scene, scene_dir
 from ..uncertain import ParameterError
 
 __all__ = ["run_scene", "reference_system", "check_samples", "sample_points", "sample_states", "final_widths",
-           "status_line", "surviving_samples"]
+           "status_line", "surviving_samples", "sampled_spread", "pruned_anything", "kernel_families"]
 
 
 def reference_system(model, mode="ii", energy_rate="unsimplified", params=None, control=None, q_init=None):
@@ -111,24 +111,71 @@ def check_samples(sol, samples, slack=1e-9):
 
 
 def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, samples=None,
-              figures=True, log=None, progress=True, max_wall=None, workers=None, client=None) -> dict:
+              figures=True, log=None, progress=True, max_wall=None, workers=None, client=None,
+              started=None) -> dict:
     """Simulate ``scene`` and write ``out``/result.json (+ figures). Returns a report
-    dict: solution, paths, sample check (``escaped``: sampled states outside).
+    dict: solution, paths, sample check (``escaped``: sampled states outside),
+    ``tightness`` (:func:`mbs.app.results.tightness`: per state the width at the last
+    output time, the sampled spread and their ratio; also in result.json).
 
     ``samples``: exactly this many sampled trajectories (default 64; 0: none).
     ``max_wall``: stop the integration after this many seconds (status "stopped").
     ``workers``, ``client``: chunked execution (:func:`parallel_kwargs`, verified/parallel.py).
+    ``progress``: True (a bar on an interactive stderr: :class:`mbs.progress.Progress`,
+    its clock counting from ``started``, ``time.time()`` of the command's start, and its
+    description naming the phase: model, compiling, solving, sampling, frame
+    enclosures, figures; with a note when the kernels compile first), False (none) or
+    a callable ``(t, t_end)`` of the caller's.
     Ctrl-C during the integration ends it with status "interrupted"; during the
     sampling it skips the rest of the sampling and the figures. Either way
     result.json is written with everything verified so far."""
     log = log or (lambda *a, **k: None)
-    out = Path(out)
     mode = mode or scene.mode
     t_end = float(t_end if t_end is not None else scene.t_end)
+    bar = None if callable(progress) else Progress(t_end, f"mode {mode}", enabled=None if progress else False,
+                                                   start=started)
+    try:
+        return _run_scene(scene, Path(out), bar=bar, progress=progress if bar is None else bar,
+                          log=log if bar is None else bar.printing(log), mode=mode, t_end=t_end,
+                          output_dt=output_dt, samples=samples, figures=figures, max_wall=max_wall,
+                          workers=workers, client=client)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def kernel_families(kw: dict) -> tuple:
+    """The numba kernel families (:data:`mbs.progress.KERNEL_FAMILIES`) that simulate
+    with the keyword arguments ``kw`` calls first: the interval kernels always, the
+    Taylor-model ones for ``method="auto"`` (the default: the composition first) and
+    the composition, the affine ones for the affine arithmetic."""
+    fam = ["interval"]
+    m = kw.get("method")
+    name = m if isinstance(m, str) else getattr(m, "name", None)
+    arith = getattr(m, "arithmetic", None) or kw.get("arithmetic")
+    legacy = m is None and any(k in kw for k in ("order", "tol", "set_order", "set_step", "arithmetic",
+                                                   "model_degree", "error_basis"))
+    if arith is None and not legacy and (m is None or name in ("auto", "composition")):
+        arith = "taylor_model"
+    if arith == "taylor_model":
+        fam.append("Taylor-model")
+    elif arith == "affine":
+        fam.append("affine")
+    return tuple(fam)
+
+
+def _phase(bar, name):
+    if bar is not None:
+        bar.phase(name)
+
+
+def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, samples, figures, max_wall,
+               workers, client) -> dict:
     dt = output_dt if output_dt is not None else scene.output_dt
     samples = 64 if samples is None else int(samples)
 
     t0 = time.perf_counter()
+    _phase(bar, "building the model")
     model = scene.build_model()
     kw = scene.simulate_kwargs()
     try:
@@ -161,26 +208,25 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     if system.rhs.n_params:
         log("uncertain parameters: " + ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in
                                                  ((k, system.params[k]) for k in system.rhs.param_names)))
-    # progress: True/False (a bar of our own, interactive only), or a callable (t, t_end)
-    # of the caller's (a scenario batch's one bar over all its runs)
-    bar = progress if callable(progress) else Progress(t_end, f"mode {mode}", enabled=None if progress else False)
+    if bar is not None and bar.enabled:  # (the cache is read only for a terminal that shows the note)
+        note = compile_note(kernel_families(kw))
+        bar.note(note)
+        _phase(bar, "compiling" if note else "solving")
     try:
         x_sim = x0 if x_user is not None else x0[:len(names)]
-        sol = simulate(model, x_sim, t_end, output_dt=dt, progress=bar, max_wall=max_wall, **kw,
+        sol = simulate(model, x_sim, t_end, output_dt=dt, progress=progress, max_wall=max_wall, **kw,
                        **parallel_kwargs(workers, client))
     except (ValueError, TypeError, ModelError) as e:  # settings the solver refuses
         raise SceneError(f"{scene.source}: cannot simulate: {e}") from None
-    finally:
-        if not callable(progress):
-            bar.close()
     wall = time.perf_counter() - t0
     want = output_times(t_end, dt)
     report = {"solution": sol, "system": system, "escaped": 0, "checked": 0, "paths": {}}
 
-    # sampled true trajectories: soundness check and figure overlay
-    traj = traj_t = None
+    # sampled true trajectories: soundness check, tightness and figure overlay
+    traj = traj_t = spread = None
     interrupted = sol.status == "interrupted"
     if samples > 0 and len(sol.t) > 1 and not interrupted:
+        _phase(bar, f"sampling {samples} trajector{'y' if samples == 1 else 'ies'}")
         try:
             dense = np.linspace(0.0, float(sol.t[-1]), 201)
             traj_t = np.unique(np.concatenate([np.asarray(sol.t, float), dense]))
@@ -193,6 +239,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
             bad = check_samples(sol, at_out)
             report["escaped"] = len(bad)
             report["checked"] = int(pts.shape[0])
+            spread = sampled_spread(at_out[:, -1, :])
             if bad:
                 log(f"WARNING: {len(bad)} sampled states lie outside the enclosure (first: sample {bad[0][0]} "
                     f"at t = {sol.t[bad[0][1]]:g}); this is a bug, please report it")
@@ -221,6 +268,8 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
              "samples_escaped": report["escaped"], "output_times_requested": len(want) + 1}
     if surv is not None:
         extra["surviving_samples_checked"] = report["surviving_checked"]
+    state_names = list(getattr(sol, "state_names", None) or names)
+    report["tightness"] = tight = tightness(sol, spread, state_names, report["checked"] if spread is not None else 0)
     frames = []
     if getattr(sol, "frame", None) is not None and len(sol.t):
         frames = list(scene.frames) if scene.frames else [default_frame(sol.frame.chain)]
@@ -228,21 +277,30 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
         if bad:
             raise SceneError(f"{scene.source}: [simulation] frames: unknown frame(s) {', '.join(map(repr, bad))}; "
                              f"frames of the model: {', '.join(sol.frame.names)}")
+        if not scene.frames:
+            said = default_frame_note(sol.frame.chain, frames[0])
+            if said:
+                log(said)
+        _phase(bar, "frame enclosures")
+        if bar is not None and bar.enabled:
+            bar.note(compile_note(("affine",), " for the frame enclosures"))
         t_fr = time.perf_counter()
         for f in frames:
             enc = sol.frame(f)
             log(f"frame {f!r} at t = {enc.t[-1]:g} s: position enclosed to "
                 + ", ".join(_fmt_width(v) for v in np.asarray(enc.position.width()[-1], float)) + " m")
         extra["frames_s"] = time.perf_counter() - t_fr
-    path = write_result(out / "result.json", sol, scene=scene.source, mode=mode,
-                        state_names=list(getattr(sol, "state_names", None) or names), t_end=t_end,
-                        extra_stats=extra, frames=frames)
+    path = write_result(out / "result.json", sol, scene=scene.source, mode=mode, state_names=state_names,
+                        t_end=t_end, extra_stats=extra, frames=frames, tightness=tight)
     report["frames"] = frames
     report["paths"]["result"] = path
+    if figures and not interrupted:
+        _phase(bar, "figures")
     if figures and not interrupted and frames:
         report["paths"]["frame_region"] = fig_frame_region(
             sol.frame(frames[0]), out / "frame_region.png", title=f"{scene.name}: frame {frames[0]!r}",
             samples=_frame_samples(sol, frames[0], traj, names))
+    not_drawn = []
     if figures and not interrupted:
         report["paths"]["enclosures"] = fig_enclosures(
             {mode: sol}, out / "enclosures.png", samples=traj, sample_times=traj_t,
@@ -251,13 +309,19 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
         if cons is not None and len(getattr(cons, "ra_t", ())) > 1:
             report["paths"]["reduction_area"] = fig_reduction_area(sol, out / "reduction_area.png")
         if cons is not None and getattr(cons, "tests", None) and system.energy is not None:
-            pbox = None
-            if system.energy.n_params:  # H over every cell and every parameter value
-                pn = system.energy.param_names
-                pbox = Interval(np.array([system.params[k][0] for k in pn], float),
-                                np.array([system.params[k][1] for k in pn], float))
-            report["paths"]["consistency_plane"] = fig_consistency_plane(
-                sol, system.energy, out / "consistency_plane.png", params=pbox)
+            if pruned_anything(sol):
+                pbox = None
+                if system.energy.n_params:  # H over every cell and every parameter value
+                    pn = system.energy.param_names
+                    pbox = Interval(np.array([system.params[k][0] for k in pn], float),
+                                    np.array([system.params[k][1] for k in pn], float))
+                report["paths"]["consistency_plane"] = fig_consistency_plane(
+                    sol, system.energy, out / "consistency_plane.png", params=pbox)
+            else:
+                not_drawn.append(f"nothing pruned by the {len(cons.tests)} energy test"
+                                 f"{'s' if len(cons.tests) > 1 else ''}: Fig. 3 (consistency_plane.png) not drawn")
+    if bar is not None:
+        bar.close()  # (the report below without a bar redrawn after every line)
     st = sol.stats
     log(f"{status_line(sol)}; {st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")
     if getattr(sol, "method", ""):
@@ -284,9 +348,30 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
     if report["surviving_checked"]:
         log(f"{report['surviving_checked']} sampled trajectories from the surviving pieces: "
             f"{'all inside' if not report['surviving_escaped'] else str(report['surviving_escaped']) + ' states OUTSIDE'}")
+    for line in not_drawn:
+        log(line)
     for k, p in report["paths"].items():
         log(f"wrote {p}")
+    if tight is not None:
+        log("\n" + format_tightness(tight))
     return report
+
+
+def sampled_spread(states) -> np.ndarray:
+    """Per state the spread (max - min) of sampled states (S, n) over the samples whose
+    states are all finite (a DOP853 failure leaves NaN rows); NaN when there are none."""
+    x = np.asarray(states, float)
+    ok = np.isfinite(x).all(axis=1)
+    if not ok.any():
+        return np.full(x.shape[-1], np.nan)
+    return x[ok].max(axis=0) - x[ok].min(axis=0)
+
+
+def pruned_anything(sol) -> bool:
+    """Whether an energy consistency test of ``sol`` pruned a sub-box (Fig. 3 draws the
+    test that pruned the most; without one it would show only kept boxes)."""
+    cons = getattr(sol, "consistency", None)
+    return any((~np.asarray(rec.kept, bool)).any() for rec in (getattr(cons, "tests", None) or ()))
 
 
 def status_line(sol) -> str:
