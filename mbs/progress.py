@@ -134,6 +134,7 @@ class Progress:
         self.last_t = 0.0
         self.offset = 0.0  # added to t_now (several runs on one bar, e.g. the demo's modes)
         self.phase_name = ""
+        self._then = None  # the phase from the first step on (phase(..., then=...))
         self.start = time.time() if start is None else float(start)
         self._lock = threading.RLock()
         self._stop = threading.Event()
@@ -177,8 +178,8 @@ class Progress:
         if not self.enabled:
             return
         with self._lock:
-            if self.phase_name.endswith("compiling"):  # the first step: compiled
-                self.phase_name = self.phase_name[:-len("compiling")] + "solving"
+            if self._then is not None:  # the first step: compiled, the model built
+                self.phase_name, self._then = self._then, None
                 if self.bar is not None:
                     self.bar.set_description_str(self._description(), refresh=False)
             self._show()
@@ -191,12 +192,12 @@ class Progress:
                 self.bar.n = n
             self.bar.refresh()
 
-    def phase(self, name: str):
+    def phase(self, name: str, then: str | None = None):
         """Name what runs now ("compiling", "solving", "sampling 64 trajectories",
         "figures", ...): shown in the bar's description; starts the redrawing thread
-        (interactive sessions only). A name ending in "compiling" ends in "solving" from
-        the first step on."""
-        self.phase_name = name
+        (interactive sessions only). ``then``: the name from the next solver step on
+        (``phase("compiling", then="solving")``)."""
+        self.phase_name, self._then = name, then
         if not self.enabled:
             return
         with self._lock:

@@ -26,7 +26,7 @@ import numpy as np
 
 from verified.warmup import finish_background, start_in_background
 
-from ..modes import ALL_MODES, MODE_I, MODE_II, MODES
+from ..modes import ALL_MODES, MODE_I, MODE_II, MODES, get_mode
 from ..progress import Progress, compile_note
 from ..simulate import simulate, system_for
 from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
@@ -109,7 +109,8 @@ def _run(out, t_end, pieces, samples, log, bar) -> int:
     bar.note(cold)
     for k, mode in enumerate(MODES):
         bar.offset = k * t_end  # (one bar over the three modes)
-        bar.phase(f"mode {mode}: " + ("compiling" if cold and k == 0 else "solving"))
+        first = "compiling" if cold and k == 0 else "deriving the model" if get_mode(mode).symbolic else "solving"
+        bar.phase(f"mode {mode}: {first}", then=f"mode {mode}: solving")
         t0 = time.perf_counter()
         sols[mode] = simulate("double_pendulum_paper", x0, t_end, mode=mode, output_dt=DEMO["output_dt"],
                               progress=bar, **kw)

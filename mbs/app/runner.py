@@ -211,7 +211,7 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
     if bar is not None and bar.enabled:  # (the cache is read only for a terminal that shows the note)
         note = compile_note(kernel_families(kw))
         bar.note(note)
-        _phase(bar, "compiling" if note else "solving")
+        bar.phase("compiling" if note else "solving", then="solving")
     try:
         x_sim = x0 if x_user is not None else x0[:len(names)]
         sol = simulate(model, x_sim, t_end, output_dt=dt, progress=progress, max_wall=max_wall, **kw,

@@ -77,7 +77,7 @@ def test_kernel_cache_probe_reads_numba_index_files():
 def test_bar_clock_counts_from_the_start_and_names_the_phase():
     f = io.StringIO()
     bar = progress.Progress(1.0, "mode ii", enabled=True, file=f, start=time.time() - 65)
-    bar.phase("compiling")
+    bar.phase("compiling", then="solving")
     bar(0.25, 1.0)  # the first step: compiled
     bar.phase("sampling 8 trajectories")
     bar.note("a note")
