@@ -154,6 +154,13 @@ def _num(v) -> str:
     return f"{v:.4g}"
 
 
+def _ratio(r) -> str:
+    """A ratio >= 1 to three decimals (1.000, 1.115; 1.2e+03 when large)."""
+    if r is None:
+        return "-"
+    return f"{r:.3f}" if abs(r) < 100 else f"{r:.3g}"
+
+
 def format_tightness(summary: dict) -> str:
     """The table of :func:`tightness` and a line with the worst ratio, e.g.::
 
@@ -161,11 +168,11 @@ def format_tightness(summary: dict) -> str:
           state   enclosure width   sampled spread   ratio
           q1      0.2874            0.2651           1.084
           qd1     0.8277            0.7012           1.180
-        worst ratio: 1.18 (qd1): the enclosure is at most 1.18 times as wide as the true set
+        worst ratio: 1.180 (qd1): the enclosure is at most 1.180 times as wide as the true set
+        (whose width is at least the sampled spread)
     """
     head = ["state", "enclosure width", "sampled spread", "ratio"]
-    rows = [[r["name"], _num(r["width"]), _num(r["spread"]), "-" if r["ratio"] is None else f"{r['ratio']:.4g}"]
-            for r in summary["states"]]
+    rows = [[r["name"], _num(r["width"]), _num(r["spread"]), _ratio(r["ratio"])] for r in summary["states"]]
     size = [max(len(x[i]) for x in rows + [head]) for i in range(len(head))]
     n = summary.get("samples") or 0
     lines = [f"at t = {summary['t']:g} s (method: {summary['method'] or '?'}), "
@@ -173,8 +180,8 @@ def format_tightness(summary: dict) -> str:
     lines += ["  " + "   ".join(c.ljust(w) for c, w in zip(r, size)).rstrip() for r in [head] + rows]
     worst = summary.get("worst")
     if worst is not None:
-        lines.append(f"worst ratio: {worst['ratio']:.4g} ({worst['name']}): the enclosure is at most "
-                     f"{worst['ratio']:.4g} times as wide as the true set (whose width is at least the "
+        lines.append(f"worst ratio: {_ratio(worst['ratio'])} ({worst['name']}): the enclosure is at most "
+                     f"{_ratio(worst['ratio'])} times as wide as the true set (whose width is at least the "
                      f"sampled spread)")
     elif n:
         lines.append("worst ratio: - (the samples do not spread: every state's sampled spread is 0)")

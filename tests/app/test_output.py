@@ -139,7 +139,7 @@ def test_summary_table_gives_width_spread_ratio_and_method(tmp_path, capsys):
     assert tight["worst"] == {"name": worst["name"], "ratio": worst["ratio"]}
     table = printed[printed.index(f"at t = 0.2 s (method: {tight['method']}), against 6 sampled trajectories:"):]
     assert all(w in table.splitlines()[1].split() for w in ("state", "width", "spread", "ratio"))
-    assert f"worst ratio: {worst['ratio']:.4g} ({worst['name']})" in table
+    assert f"worst ratio: {worst['ratio']:.3f} ({worst['name']})" in table
 
 
 def test_tightness_of_point_states_and_without_samples():
@@ -148,7 +148,7 @@ def test_tightness_of_point_states_and_without_samples():
     s = tightness(sol, np.array([0.15, 0.4, 0.0]), samples=5)
     assert [r["ratio"] for r in s["states"]] == [0.3 / 0.15, 1.0, None] and s["worst"]["name"] == "q"
     text = format_tightness(s)
-    assert text.splitlines()[-1].startswith("worst ratio: 2 (q)") and "  t " in text
+    assert text.splitlines()[-1].startswith("worst ratio: 2.000 (q)") and "  t " in text
     none = tightness(sol, None)
     assert none["worst"] is None and all(r["spread"] is None for r in none["states"])
     assert "no sampled trajectories" in format_tightness(none)
