@@ -23,7 +23,7 @@ from ..control import ControlError
 from ..errors import ModelError
 from ..frames import default_frame, default_frame_note
 from ..modes import get_mode
-from ..progress import Progress, compile_note
+from ..progress import Progress, cold_families, compile_note
 from ..simulate import simulate, system_for
 from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
 from .frame_figures import fig_frame_region
@@ -209,9 +209,11 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
         log("uncertain parameters: " + ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in
                                                  ((k, system.params[k]) for k in system.rhs.param_names)))
     if bar is not None and bar.enabled:  # (the cache is read only for a terminal that shows the note)
-        note = compile_note(kernel_families(kw))
-        bar.note(note)
-        bar.phase("compiling" if note else "solving", then="solving")
+        families = kernel_families(kw)
+        cold = cold_families(families)  # (None: numba's cache could not be read)
+        bar.note(compile_note(families) if cold else "")
+        bar.phase("compiling" if cold else "solving" if cold is not None else
+                  "first step (compiling, on a first run)", then="solving")
     try:
         x_sim = x0 if x_user is not None else x0[:len(names)]
         sol = simulate(model, x_sim, t_end, output_dt=dt, progress=progress, max_wall=max_wall, **kw,

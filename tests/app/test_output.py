@@ -111,6 +111,13 @@ def test_runner_says_when_kernels_compile(tmp_path, monkeypatch, capsys):
     text = f.getvalue()
     assert "compiling interval and Taylor-model kernels (first run only, about" in text
     assert "mode i: compiling" in text and "mode i: sampling 2 trajectories" in text
+    # numba's cache unreadable: no note, the phase says what may be happening
+    monkeypatch.setattr(progress, "kernel_cache_warm", lambda module: None)
+    f.seek(0)
+    f.truncate()
+    runner.run_scene(scene, tmp_path / "tty", samples=2, figures=False)
+    text = f.getvalue()
+    assert "kernels (first run only" not in text and "mode i: first step (compiling, on a first run)" in text
 
 
 def test_kernel_families_follow_the_method():
