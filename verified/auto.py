@@ -4,22 +4,32 @@ stronger one exists.
 The ladder (:class:`verified.methods.Auto`): the initial pieces are advanced with the
 first rung (:func:`default_rungs`: second-order sets by composition for systems of up to
 :data:`COMPOSITION_MAX_STATES` states, first-order QR-Lohner sets beyond). A piece whose
-sets cannot be continued is taken up again by the next rung, and after the last rung it
-is split (:func:`split_boxes`: bisected along its widest components) and its parts are
-run with the last rung, until every piece reaches ``t1`` or the pieces would exceed
-``max_pieces``. The pieces that reached ``t1`` are kept as they are (a one-batch run
-goes on with the pieces that did not fail: ``Solution.surviving``). An attempt whose
-first steps are so short that the span would take more than :data:`STALL_STEPS` of them
-is stopped (:class:`StallGuard`) and its pieces go to :data:`FALLBACK` (first-order
-sets), which splits on its own when it must.
+sets cannot be continued is taken up by the next rung from where its sets stopped
+(``Solution.failures``: the sets at the last verified time, :func:`switch_start`), and
+after the last rung its initial box is split (:func:`split_boxes`: bisected along its
+widest components) and its parts are run from ``t0`` with the last rung, until every
+piece reaches ``t1`` or the pieces would exceed ``max_pieces``. (Splitting the sets
+where they failed, or half-way there, was measured on the 3-link arm at +-0.01 rad:
+those sets are already too wide to gain from halving, see ``docs/lab``.) A
+continuation that gets no further than where it started (sets already too wide for
+any method) runs that rung from ``t0`` instead. The pieces that reached ``t1`` are kept
+as they are (a one-batch run goes on with the pieces that did not fail:
+``Solution.surviving``). An attempt whose first steps are so short that the span would
+take more than :data:`STALL_STEPS` of them is stopped (:class:`StallGuard`) and its
+pieces go on with :data:`FALLBACK` (first-order sets), which splits on its own when it
+must.
 
 Soundness: every attempt starts from sets that enclose every true state at its start
-time: a failed piece is taken up again from its own initial box at ``t0`` (the initial
-set itself, exactly), so no state is lost between rungs, and the result is the union
-of the attempts that together cover every initial piece (:func:`verified.parallel.
-merge_solutions`). A piece that fails on every rung keeps the failed attempt's
-enclosure, verified up to where that attempt got, and the run is a break-down at the
-earliest such time, naming what was tried.
+time: a continuation from the failed attempt's own sets at exactly their time (or their
+hull boxes, when the next method advances another kind of set), a restart from the
+piece's own initial box at ``t0``. The Solution of a continued piece is the failed
+attempt's record up to the switch followed by the continuation
+(:func:`verified.parallel.stitch`), and the result is the union of the attempts that
+together cover every initial piece (:func:`verified.parallel.merge_solutions`). A
+piece that fails on every rung keeps the failed attempt's enclosure, verified up to
+where that attempt got, and the run is a break-down at the earliest such time, naming
+what was tried. A run with a consistency test is never continued from sets (they carry
+the test's energy state): its pieces restart from ``t0``.
 
 ``Solution.method_log`` lists the attempts: which method advanced which pieces over
 which span, how it ended, and why the next one was tried.
@@ -36,7 +46,7 @@ import numpy as np
 from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate
 from .methods import Auto, Composition, Lohner, Method
-from .solution import Solution
+from .solution import Failure, Solution, Start
 
 __all__ = ["solve_auto", "default_rungs", "split_boxes", "COMPOSITION_MAX_STATES"]
 
@@ -96,6 +106,34 @@ class _Task:
     rung: int                # index into the rungs
     splits: int = 0          # how often these pieces were split
     parent_t: float = -np.inf  # where the pieces they were split from broke down
+    failure: Failure | None = None  # a continuation: the failed attempt's record and sets to go on from
+
+
+def switch_start(failure: Failure, method: Method) -> Start:
+    """The sets ``method`` continues ``failure``'s pieces from, at exactly its time: the
+    failed attempt's own sets where ``method`` advances sets of that kind, else their
+    hull boxes as ``method``'s initial sets (a box holds every point of the sets it is
+    the hull of; the correlation between the sets' components is lost)."""
+    from .set_kinds import set_kind
+
+    st = method.settings()
+    kind = set_kind(st.get("set_order", 1), st.get("set_step", "mean_value"))
+    sets = failure.start.sets
+    if not isinstance(sets, kind.sets):
+        sets = kind.sets.from_boxes(sets.hull())
+    return Start(sets=sets, t_exact=failure.start.t_exact, h_limit=failure.start.h_limit)
+
+
+def _continuable(failure: Failure, params, n_run: int) -> bool:
+    """Whether a failure's sets can be continued by another method: they carry the run's
+    states only (no state appended by a hook, such as the energy test's ``h``), and the
+    parameters are the same for every piece (per-piece exact parameter rows cannot
+    follow sets that mixed pieces)."""
+    if failure.start is None or failure.start.sets.n_sets == 0:
+        return False
+    if failure.start.sets.hull().shape[-1] != n_run:
+        return False
+    return params is None or not isinstance(params, Interval) or params.ndim == 1
 
 
 def _rows(params, idx):
@@ -248,6 +286,41 @@ def _attempt_hooks(hooks, started: float) -> list:
     return out
 
 
+def _one_batch(common: dict) -> dict:
+    """``common`` for a run continued from sets (``solve(start=)``: one batch here)."""
+    return {**common, "workers": 1, "client": None, "chunks": None, "rechunk": None}
+
+
+def _carried(params) -> int:
+    """How many parameters a run carries as states (all of them when any is uncertain)."""
+    if params is None or not isinstance(params, Interval) or not bool(np.any(params.width() > 0)):
+        return 0
+    return int(params.shape[-1])
+
+
+def _stitched(failure: Failure, start: Start, sol: Solution, outs, t0, n: int) -> Solution:
+    """The failed attempt's record of ``failure``'s pieces up to ``failure.t``, followed
+    by ``sol``, the run continued from ``start`` (those pieces' sets at that time), as one
+    Solution over those pieces (:func:`verified.parallel.stitch`; the status and reason
+    are the continuation's)."""
+    from .parallel import _Piece, stitch
+
+    rec = failure.record
+    X = start.sets.hull()
+    items = [
+        _Piece(family=0, parent=None, lo=np.asarray(rec.boxes[0].lo), hi=np.asarray(rec.boxes[0].hi), params=None,
+               start=None, max_boxes=0, pause_at=None, sol=rec, children=[1]),
+        _Piece(family=0, parent=0, lo=np.asarray(X.lo[:, :n]), hi=np.asarray(X.hi[:, :n]), params=None,
+               start=start, max_boxes=0, pause_at=None, sol=sol),
+    ]
+    out = stitch(items, 0, outs, t0, n)
+    out.pieces = None  # (the attempts are in method_log)
+    out.method = sol.method
+    if out.status != "completed" and sol.status == out.status:
+        out.reason = sol.reason
+    return out
+
+
 def _summary(log) -> str:
     return "auto: " + "; ".join(f"{e['method']} on {e['pieces']} piece(s) {e['status']} to t = {e['t_span'][1]:g}"
                                 for e in log)
@@ -287,14 +360,27 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         task = todo.pop(0)
         rung = rungs[task.rung]
         t_start = time.perf_counter()
-        guard = [] if task.rung == fallback else [StallGuard(t0, t1)]
-        sol = solve(ode, task.boxes, (t0, t1), method=rung, params=task.params, t_eval=t_eval,
-                    consistency=None if consistency is None else copy.deepcopy(consistency),
-                    hooks=_attempt_hooks(hooks, started) + guard, progress=progress, **common)
+        cont = task.failure
+        t_from = float(t0) if cont is None else float(cont.t)
+        guard = [] if task.rung == fallback else [StallGuard(t_from, t1)]
+        if cont is None:
+            sol = solve(ode, task.boxes, (t0, t1), method=rung, params=task.params, t_eval=t_eval,
+                        consistency=None if consistency is None else copy.deepcopy(consistency),
+                        hooks=_attempt_hooks(hooks, started) + guard, progress=progress, **common)
+        else:
+            # continued from the failed attempt's sets at exactly their time (switch_start)
+            start = switch_start(cont, rung)
+            sol = solve(ode, start.sets.hull()[:, :n], (t0, t1), method=rung, params=task.params, t_eval=t_eval,
+                        start=start, hooks=_attempt_hooks(hooks, started) + guard, progress=progress,
+                        **_one_batch(common))
         entry = dict(method=rung.describe(), pieces=int(task.boxes.shape[0]), splits=task.splits,
-                     t_span=(float(t0), float(sol.t_reached)), status=sol.status, reason=sol.reason,
+                     t_span=(t_from, float(sol.t_reached)), status=sol.status, reason=sol.reason,
                      wall_s=time.perf_counter() - t_start)
+        if cont is not None:
+            entry["continued"] = f"from the sets of {task.boxes.shape[0]} piece(s) at t = {t_from:g}"
         log.append(entry)
+        if cont is not None and sol.status != "breakdown":
+            sol = _stitched(cont, start, sol, outs, t0, n)
         if sol.status != "breakdown":  # completed, or stopped / interrupted: nothing more is tried
             done.append((task.boxes, sol))
             if sol.status != "completed":
@@ -303,45 +389,74 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
                     done.append((rest.boxes, None))
                 todo = []
             continue
-        failed = [p.index for p in (sol.piece_results or ()) if p.failed]
-        if not failed or sol.surviving is None:
-            failed = list(range(task.boxes.shape[0]))
-        kept = [i for i in range(task.boxes.shape[0]) if i not in set(failed)]
-        fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
-        last = fallback if task.rung == fallback else fallback - 1  # (the rung splitting continues with)
-        if sol.reason.startswith(STALLED) and task.rung != fallback:
-            # the method crawls here (steps far below the span): the fallback method takes these
-            # pieces over, with splitting of its own
-            nxt = _Task(fb, fp, fallback, task.splits, task.parent_t)
-            entry["next"] = f"{len(failed)} piece(s) to {rungs[fallback].describe()} (stalled)"
-        elif task.rung + 1 < fallback:
-            nxt = _Task(fb, fp, task.rung + 1, task.splits)
-            entry["next"] = f"{len(failed)} piece(s) to {rungs[task.rung + 1].describe()}"
+        if cont is not None and float(sol.t_reached) <= t_from + MIN_GAIN * (t1 - t0):
+            # the sets where the weaker method stopped were too far gone for this one too
+            # (an enclosure already too wide, say): this method takes the pieces from t0
+            todo.append(_Task(task.boxes, task.params, task.rung, task.splits, task.parent_t))
+            entry["next"] = f"the continuation got no further: {rung.describe()} from t0"
+            continue
+        if cont is not None:
+            # a continuation that broke down: its sets mix its pieces, which go back to t0
+            # and are split there (below); the failed attempt's record stands for them
+            failed, failures = list(range(task.boxes.shape[0])), []
+            sol = _stitched(cont, start, sol, outs, t0, n)
         else:
-            parts = split_boxes(fb)
-            per = parts.shape[0] // fb.shape[0]
+            failed = [p.index for p in (sol.piece_results or ()) if p.failed]
+            if not failed or sol.surviving is None:
+                failed = list(range(task.boxes.shape[0]))
+            failures = [f for f in (sol.failures or ()) if _continuable(f, task.params, n + _carried(pv))]
+        kept = [i for i in range(task.boxes.shape[0]) if i not in set(failed)]
+        last = fallback if task.rung == fallback else fallback - 1  # (the rung splitting continues with)
+        stalled = sol.reason.startswith(STALLED) and task.rung != fallback
+        if stalled or (task.rung + 1 < fallback and cont is None):
+            # the next rung takes the failed pieces over: from where their sets stopped
+            # (Solution.failures), else (sets that cannot be continued) from t0
+            to = fallback if stalled else task.rung + 1
+            why = " (stalled)" if stalled else ""
+            covered = set()
+            for f in failures:
+                idx = [int(i) for i in f.pieces]
+                covered |= set(idx)
+                todo.append(_Task(task.boxes[np.asarray(idx)], task.params, to, task.splits, task.parent_t,
+                                  failure=f))
+            rest = [i for i in failed if i not in covered]
+            if rest:
+                todo.append(_Task(task.boxes[np.asarray(rest)], _rows(task.params, rest), to, task.splits,
+                                  task.parent_t))
+            if kept:
+                done.append((task.boxes[np.asarray(kept)], sol.surviving))
+            entry["next"] = f"{len(failed)} piece(s) to {rungs[to].describe()}{why}" + (
+                f", continued from their sets at t = {min(f.t for f in failures):g}" if failures else "")
+            continue
+        fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
+        # splitting: the failed pieces' initial boxes, split, from t0 (splitting the sets
+        # where they failed gained less: docs/lab, issue 40)
+        parts = split_boxes(fb)
+        per = parts.shape[0] // fb.shape[0]
+        if cont is not None:
+            t_fail = float(sol.t_reached)
+        else:
             t_fail = min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=sol.t_reached)
-            why = None
-            if parts.shape[0] == fb.shape[0]:
-                why = "the pieces cannot be split (no component of finite, nonzero width)"
-            elif pieces_total - fb.shape[0] + parts.shape[0] > method.max_pieces:
-                why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {method.max_pieces}"
-            elif t_fail <= task.parent_t + MIN_GAIN * (t1 - t0):
-                # splitting did not take the pieces further: the cause is not the sets' width
-                # (a blow-up, a singularity, a step-size limit), and more pieces will not help
-                why = (f"the split pieces broke down at t = {t_fail:g}, no later than the piece they were "
-                       f"split from (t = {task.parent_t:g})")
-            if why is not None:
-                entry["next"] = f"gave up: {why}"
-                done.append((task.boxes, sol))  # (the failed attempt encloses all its pieces up to its end)
-                give_up = "breakdown"
-                continue
-            pieces_total += parts.shape[0] - fb.shape[0]
-            nxt = _Task(parts, _repeat_rows(fp, per), last, task.splits + 1, t_fail)
-            entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[last].describe()}"
+        why = None
+        if parts.shape[0] == fb.shape[0]:
+            why = "the pieces cannot be split (no component of finite, nonzero width)"
+        elif pieces_total - fb.shape[0] + parts.shape[0] > method.max_pieces:
+            why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {method.max_pieces}"
+        elif t_fail <= task.parent_t + MIN_GAIN * (t1 - t0):
+            # splitting did not take the pieces further: the cause is not the sets' width
+            # (a blow-up, a singularity, a step-size limit), and more pieces will not help
+            why = (f"the split pieces broke down at t = {t_fail:g}, no later than the piece they were "
+                   f"split from (t = {task.parent_t:g})")
+        if why is not None:
+            entry["next"] = f"gave up: {why}"
+            done.append((task.boxes, sol))  # (the failed attempt encloses all its pieces up to its end)
+            give_up = "breakdown"
+            continue
         if kept:
             done.append((task.boxes[np.asarray(kept)], sol.surviving))
-        todo.append(nxt)
+        pieces_total += parts.shape[0] - fb.shape[0]
+        todo.append(_Task(parts, _repeat_rows(fp, per), last, task.splits + 1, t_fail))
+        entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[last].describe()}"
 
     pieces = concatenate([b for b, _ in done], axis=0)
     if len(done) == 1 and done[0][1] is not None:

@@ -39,7 +39,7 @@ from .policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapCon
 from .set_kinds import SetKind, set_kind, set_kind_names
 from .quadratic import QuadraticSets
 from .sets import DoubletonSets, SetView, set_view
-from .solution import PieceResult, Solution, Start, pieces_summary
+from .solution import Failure, PieceResult, Solution, Start, pieces_summary
 from .solver_args import (check_arithmetic, check_graph, check_model_cap, check_params, check_params_per_state,
                           check_settings, initial_boxes)
 from .taylor import TaylorODE
@@ -312,7 +312,7 @@ def solve_batch(
     result.stats["wall_s"] = time.perf_counter() - wall0
     for hook in hook_list:
         hook.after_run(result)  # records and statistics of the hooks
-    result = run.by_pieces(result)
+    result = run.by_pieces(result, continuable=consistency is None)
     result.stats["wall_s"] = time.perf_counter() - wall0
     return result
 
@@ -552,6 +552,8 @@ class _Run:
         self.status, self.reason = "", ""
         self.evaluations = self.rejected = self.splits = self.merges = self.pruned = 0
         self.max_sets = self.sets.n_sets
+        self.resumes = {}  # failure event -> Start of the sets it dropped (fail)
+        self.stop_point = None  # Start of the sets at a break-down of the whole run (stop)
         self.n_state = setup.n_state
         self.wrap = wrap  # the wrapping control (resume_point: a run continued from here keeps its limit)
         # The initial pieces (the rows of ``initial``) and which of them each set may hold
@@ -566,6 +568,10 @@ class _Run:
     def stop(self, reason: str, status: str = "stopped") -> None:
         if not self.status:  # the first reason wins
             self.status, self.reason = status, reason
+            if status == "breakdown" and self.sets.n_sets:
+                # (the sets are those at self.t_exact: every stop comes before a step
+                # replaces them or after it did; Solution.failures continues from here)
+                self.stop_point = self.resume_point()
 
     def resume_point(self) -> Start:
         return Start(sets=self.sets, t_exact=self.t_exact,
@@ -629,6 +635,10 @@ class _Run:
         Returns the mask (B,) of the sets kept, or None when none is (the run stops:
         a break-down)."""
         keep = self.pieces.fail(bad, self.t, reason)
+        # the sets of the failing pieces where they stop, to go on from (Solution.failures)
+        self.resumes[len(self.pieces.events) - 1] = Start(
+            sets=self.sets.take(np.flatnonzero(~keep)), t_exact=self.t_exact,
+            h_limit=math.inf if self.wrap is None else float(self.wrap.h_limit))
         if not keep.any():
             self.stop(reason, "breakdown")
             return None
@@ -725,7 +735,7 @@ class _Run:
             piece_results=self.pieces.results(self.initial, status, tube_t[-1], reason),
         )
 
-    def by_pieces(self, full: Solution) -> Solution:
+    def by_pieces(self, full: Solution, continuable: bool = True) -> Solution:
         """The run's Solution from ``full`` (what :meth:`solution` made, after the hooks'
         ``after_run``): ``full`` itself when no piece broke down on its own; else the
         run up to the first failure, when every piece was still verified (status
@@ -736,7 +746,9 @@ class _Run:
         for p in results:  # (a hook's after_run may have changed the run's own outcome)
             if not p.failed:
                 p.status, p.t_reached, p.reason = full.status, float(full.t_reached), full.reason
+        failures = self._failures(full) if continuable else None
         if not book.events:
+            full.failures = failures
             return full
         T = min(t for t, _ in book.events)
         main = _until(full, T)
@@ -746,7 +758,27 @@ class _Run:
         main.stats["pieces_failed"] = int((~book.alive).sum())
         if full.status != "breakdown" and book.alive.any() and self.sets.n_sets:
             main.surviving = _restricted(full, book.alive, self.out_pieces, self.tube_pieces)
+        main.failures = failures
         return main
+
+    def _failures(self, full: Solution) -> list:
+        """:class:`~verified.solution.Failure` per group of pieces that broke down: each
+        failure event's pieces (their record up to the event, the sets it dropped), and
+        the pieces still alive when the whole run broke down (the sets at the stop)."""
+        book = self.pieces
+        out = []
+        for e, (t, reason) in enumerate(book.events):
+            dead = book.event == e
+            start = self.resumes.get(e)
+            if start is None or not dead.any():
+                continue
+            record = _restricted(_until(full, t), dead, self.out_pieces, self.tube_pieces)
+            out.append(Failure(np.flatnonzero(dead), float(t), reason, start, record))
+        if full.status == "breakdown" and self.stop_point is not None and book.alive.any():
+            record = _restricted(full, book.alive, self.out_pieces, self.tube_pieces) if book.events else full
+            out.append(Failure(np.flatnonzero(book.alive), float(full.t_reached), full.reason, self.stop_point,
+                               record))
+        return out
 
 
 def _until(sol: Solution, T: float) -> Solution:

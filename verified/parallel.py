@@ -553,125 +553,137 @@ class _Pieces:
 
     # ------------------------------------------------------------------ stitching
     def _dfs(self, root: int) -> list[int]:
-        out, stack = [], [root]
-        while stack:
-            i = stack.pop()
-            out.append(i)
-            stack.extend(reversed(self.items[i].children))
-        return out
+        return _dfs(self.items, root)
 
     def families(self, outs, t0):
         """One Solution per initial chunk (None: it never ran): see :func:`_stitch`."""
         return [self._stitch(i, outs, t0) for i in range(len(self.ranges))]
 
     def _stitch(self, root: int, outs, t0):
-        """The pieces of initial chunk ``root`` as one Solution, as if that chunk had run
-        alone: ``t``/``boxes`` the outputs every path of pieces recorded (each output's boxes
-        concatenated over the pieces that recorded it, depth-first order); the tube on the
-        union of the pieces' step times, one box per piece live on each interval (the hull
-        of its step's boxes); ``t_reached``/``status``/``reason`` those of the earliest
-        worst leaf (a piece not cut; one that never ran counts as interrupted at its
-        start); counters summed over the pieces."""
-        items = self.items
-        if items[root].sol is None or not items[root].children:
-            return items[root].sol  # (not re-chunked: the chunk's own Solution)
-        order = self._dfs(root)
-        index_of = {float(t): j for j, t in enumerate(outs)}
-        recorded = {}
+        """See :func:`stitch`."""
+        return stitch(self.items, root, outs, t0, self.n)
+
+
+def stitch(items: list, root: int, outs, t0, n: int):
+    """The pieces of initial chunk ``root`` as one Solution, as if that chunk had run
+    alone. ``items``: the pieces (:class:`_Piece`: ``sol``, ``start``, ``parent``,
+    ``children``, ``lo``), a piece's children continuing from its sets where it stopped
+    (``start``); ``outs``: the run's output times (every child's outputs after its start
+    are among them). ``t``/``boxes``: the outputs every path of pieces recorded (each
+    output's boxes concatenated over the pieces that recorded it, depth-first order);
+    the tube on the union of the pieces' step times, one box per piece live on each
+    interval (the hull of its step's boxes); ``t_reached``/``status``/``reason`` those of
+    the earliest worst leaf (a piece not cut; one that never ran counts as interrupted
+    at its start); counters summed over the pieces. (Also :mod:`verified.auto`: a
+    failed attempt's record continued by a stronger method.)"""
+    if items[root].sol is None or not items[root].children:
+        return items[root].sol  # (not re-chunked: the chunk's own Solution)
+    order = _dfs(items, root)
+    index_of = {float(t): j for j, t in enumerate(outs)}
+    recorded = {}
+    for i in order:
+        sol = items[i].sol
+        if sol is None:
+            recorded[i] = {}
+            continue
+        ts = np.asarray(sol.t, float)
+        first = 0 if items[i].start is None else 1  # a continued piece's t[0] is its start
+        recorded[i] = {index_of[float(t)]: j for j, t in enumerate(ts[first:], first)}
+    leaves = [i for i in order if not items[i].children]
+    worst, reason, t_reached, reason_t = "completed", "", math.inf, math.inf
+    k_f = len(outs)
+    for leaf in leaves:
+        sol = items[leaf].sol
+        if sol is None:
+            st = "interrupted"
+            tr = float(items[leaf].start.t_exact) if items[leaf].start is not None else float(t0)
+            why = "interrupted before this piece ran"
+        else:
+            st, tr, why = sol.status, float(sol.t_reached), sol.reason
+        rank = _STATUS_RANK.get(st, 3)
+        if st != "completed" and (rank > _STATUS_RANK[worst] or (rank == _STATUS_RANK[worst] and tr < reason_t)):
+            worst, reason_t = st, tr
+            reason = why if items[leaf].start is None else f"piece at t = {float(items[leaf].start.t_exact):g}: {why}"
+        t_reached = min(t_reached, tr)
+        got, i = set(), leaf
+        while i is not None:
+            got |= set(recorded[i])
+            i = items[i].parent
+        k = 0
+        while k < len(outs) and k in got:
+            k += 1
+        k_f = min(k_f, k)
+    boxes = []
+    for k in range(k_f):
+        parts = [items[i].sol.boxes[recorded[i][k]] for i in order if k in recorded[i]]
+        boxes.append(concatenate(parts, axis=0))
+    ran = [i for i in order if items[i].sol is not None]
+    grid = np.unique(np.concatenate([np.asarray(items[i].sol.tube_t, float) for i in ran]))
+    grid = grid[grid <= t_reached]
+    tube = []
+    lo_h, hi_h = [], []
+    if grid.size > 1:
+        mids = 0.5 * (grid[:-1] + grid[1:])
+        rows_lo = [[] for _ in mids]
+        rows_hi = [[] for _ in mids]
         for i in order:
             sol = items[i].sol
-            if sol is None:
-                recorded[i] = {}
+            if sol is None or not len(sol.tube):
                 continue
-            ts = np.asarray(sol.t, float)
-            first = 0 if items[i].start is None else 1  # a continued piece's t[0] is its start
-            recorded[i] = {index_of[float(t)]: j for j, t in enumerate(ts[first:], first)}
-        leaves = [i for i in order if not items[i].children]
-        worst, reason, t_reached, reason_t = "completed", "", math.inf, math.inf
-        k_f = len(outs)
-        for leaf in leaves:
-            sol = items[leaf].sol
-            if sol is None:
-                st = "interrupted"
-                tr = float(items[leaf].start.t_exact) if items[leaf].start is not None else float(t0)
-                why = "interrupted before this piece ran"
-            else:
-                st, tr, why = sol.status, float(sol.t_reached), sol.reason
-            rank = _STATUS_RANK.get(st, 3)
-            if st != "completed" and (rank > _STATUS_RANK[worst] or (rank == _STATUS_RANK[worst] and tr < reason_t)):
-                worst, reason_t = st, tr
-                reason = why if items[leaf].start is None else f"piece at t = {float(items[leaf].start.t_exact):g}: {why}"
-            t_reached = min(t_reached, tr)
-            got, i = set(), leaf
-            while i is not None:
-                got |= set(recorded[i])
-                i = items[i].parent
-            k = 0
-            while k < len(outs) and k in got:
-                k += 1
-            k_f = min(k_f, k)
-        boxes = []
-        for k in range(k_f):
-            parts = [items[i].sol.boxes[recorded[i][k]] for i in order if k in recorded[i]]
-            boxes.append(concatenate(parts, axis=0))
-        ran = [i for i in order if items[i].sol is not None]
-        grid = np.unique(np.concatenate([np.asarray(items[i].sol.tube_t, float) for i in ran]))
-        grid = grid[grid <= t_reached]
-        n = self.n
-        tube = []
-        lo_h, hi_h = [], []
-        if grid.size > 1:
-            mids = 0.5 * (grid[:-1] + grid[1:])
-            rows_lo = [[] for _ in mids]
-            rows_hi = [[] for _ in mids]
-            for i in order:
-                sol = items[i].sol
-                if sol is None or not len(sol.tube):
-                    continue
-                tt = np.asarray(sol.tube_t, float)
-                tl, th = _chunk_tube_hulls(sol)
-                js = np.flatnonzero((mids > tt[0]) & (mids < tt[-1]))
-                for j, s in zip(js, np.searchsorted(tt, mids[js], side="right") - 1):
-                    rows_lo[j].append(tl[s])
-                    rows_hi[j].append(th[s])
-            for j in range(mids.size):
-                if not rows_lo[j]:  # every path of pieces covers every interval up to t_reached
-                    raise RuntimeError(f"re-chunking lost the tube on [{grid[j]}, {grid[j + 1]}] (a bug)")
-                lo, hi = np.array(rows_lo[j]), np.array(rows_hi[j])
-                tube.append(Interval._from_bounds(lo, hi))
-                lo_h.append(lo.min(axis=0))
-                hi_h.append(hi.max(axis=0))
-        tube_hull = (Interval._from_bounds(np.array(lo_h), np.array(hi_h)) if tube
-                     else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))))
-        stats = {}
-        for i in ran:
-            for key, v in items[i].sol.stats.items():
-                if key in ("order", "worker_pid", "chunk_task_s", "boxes", "final_boxes", "max_boxes") \
-                        or isinstance(v, bool):
-                    continue
-                if isinstance(v, (int, float, np.integer, np.floating)):
-                    stats[key] = stats.get(key, 0) + v
-        r = items[root].sol
-        stats["order"] = r.stats.get("order")
-        stats["worker_pid"] = r.stats.get("worker_pid")
-        stats["boxes"] = r.stats.get("boxes")
-        done = [items[i].sol for i in leaves if items[i].sol is not None]
-        stats["final_boxes"] = sum(s.stats.get("final_boxes", 0) for s in done)
-        stats["max_boxes"] = sum(s.stats.get("max_boxes", 0) for s in done)  # (approximate: at different times)
-        stats["pieces"] = len(ran)
-        stats["rechunks"] = sum(1 for i in order if items[i].children)
-        sol = Solution(t=np.asarray(outs[:k_f], float), boxes=boxes, hull=stack([hull(b, axis=0) for b in boxes], axis=0),
-                       tube_t=grid, tube=tube, tube_hull=tube_hull, t_reached=float(grid[-1]), status=worst,
-                       reason=reason if worst != "completed" else "", stats=stats, state_names=r.state_names,
-                       consistency=r.consistency if len(ran) == 1 else None)
-        sol.pieces = [dict(parent=items[i].parent, t_start=float(items[i].start.t_exact) if items[i].start else float(t0),
-                           sets=(items[i].lo.shape[0]), status=None if items[i].sol is None else items[i].sol.status,
-                           t_reached=None if items[i].sol is None else float(items[i].sol.t_reached),
-                           steps=None if items[i].sol is None else items[i].sol.stats.get("steps"),
-                           wall_s=None if items[i].sol is None else items[i].sol.stats.get("wall_s"),
-                           worker_pid=None if items[i].sol is None else items[i].sol.stats.get("worker_pid"))
-                      for i in order]
-        return sol
+            tt = np.asarray(sol.tube_t, float)
+            tl, th = _chunk_tube_hulls(sol)
+            js = np.flatnonzero((mids > tt[0]) & (mids < tt[-1]))
+            for j, s in zip(js, np.searchsorted(tt, mids[js], side="right") - 1):
+                rows_lo[j].append(tl[s])
+                rows_hi[j].append(th[s])
+        for j in range(mids.size):
+            if not rows_lo[j]:  # every path of pieces covers every interval up to t_reached
+                raise RuntimeError(f"re-chunking lost the tube on [{grid[j]}, {grid[j + 1]}] (a bug)")
+            lo, hi = np.array(rows_lo[j]), np.array(rows_hi[j])
+            tube.append(Interval._from_bounds(lo, hi))
+            lo_h.append(lo.min(axis=0))
+            hi_h.append(hi.max(axis=0))
+    tube_hull = (Interval._from_bounds(np.array(lo_h), np.array(hi_h)) if tube
+                 else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))))
+    stats = {}
+    for i in ran:
+        for key, v in items[i].sol.stats.items():
+            if key in ("order", "worker_pid", "chunk_task_s", "boxes", "final_boxes", "max_boxes") \
+                    or isinstance(v, bool):
+                continue
+            if isinstance(v, (int, float, np.integer, np.floating)):
+                stats[key] = stats.get(key, 0) + v
+    r = items[root].sol
+    stats["order"] = r.stats.get("order")
+    stats["worker_pid"] = r.stats.get("worker_pid")
+    stats["boxes"] = r.stats.get("boxes")
+    done = [items[i].sol for i in leaves if items[i].sol is not None]
+    stats["final_boxes"] = sum(s.stats.get("final_boxes", 0) for s in done)
+    stats["max_boxes"] = sum(s.stats.get("max_boxes", 0) for s in done)  # (approximate: at different times)
+    stats["pieces"] = len(ran)
+    stats["rechunks"] = sum(1 for i in order if items[i].children)
+    sol = Solution(t=np.asarray(outs[:k_f], float), boxes=boxes, hull=stack([hull(b, axis=0) for b in boxes], axis=0),
+                   tube_t=grid, tube=tube, tube_hull=tube_hull, t_reached=float(grid[-1]), status=worst,
+                   reason=reason if worst != "completed" else "", stats=stats, state_names=r.state_names,
+                   consistency=r.consistency if len(ran) == 1 else None)
+    sol.pieces = [dict(parent=items[i].parent, t_start=float(items[i].start.t_exact) if items[i].start else float(t0),
+                       sets=(items[i].lo.shape[0]), status=None if items[i].sol is None else items[i].sol.status,
+                       t_reached=None if items[i].sol is None else float(items[i].sol.t_reached),
+                       steps=None if items[i].sol is None else items[i].sol.stats.get("steps"),
+                       wall_s=None if items[i].sol is None else items[i].sol.stats.get("wall_s"),
+                       worker_pid=None if items[i].sol is None else items[i].sol.stats.get("worker_pid"))
+                  for i in order]
+    return sol
+
+
+def _dfs(items: list, root: int) -> list[int]:
+    """Piece ``root`` and its descendants, depth first (children in order)."""
+    out, stack = [], [root]
+    while stack:
+        i = stack.pop()
+        out.append(i)
+        stack.extend(reversed(items[i].children))
+    return out
 
 
 # ----------------------------------------------------------------------------- Dask

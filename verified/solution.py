@@ -13,7 +13,7 @@ import numpy as np
 
 from .interval import Interval
 
-__all__ = ["Solution", "Start", "PieceResult", "pieces_summary"]
+__all__ = ["Solution", "Start", "PieceResult", "Failure", "pieces_summary"]
 
 
 @dataclass
@@ -112,6 +112,33 @@ def pieces_summary(results, t_end: float | None = None) -> str:
 
 
 @dataclass
+class Failure:
+    """Where some pieces of one batch run could not be continued, and the sets to go on
+    from (``Solution.failures``; :mod:`verified.auto` continues them with a stronger
+    method or split).
+
+    pieces : (k,) int array
+        The initial pieces (rows of the run's initial boxes) that broke down here.
+    t : float
+        The time up to which they are verified (a step boundary).
+    reason : str
+        Why their sets could not be continued.
+    start : Start
+        Their sets at ``t`` (every solution from those pieces is in them at that exact
+        time), in the run's set kind: ``solve(..., start=failure.start)`` continues them.
+    record : Solution
+        The run restricted to those pieces, up to ``t``: its boxes enclose the solutions
+        from those pieces only.
+    """
+
+    pieces: np.ndarray
+    t: float
+    reason: str
+    start: Start
+    record: "Solution"
+
+
+@dataclass
 class Solution:
     """Result of :func:`verified.solver.solve`.
 
@@ -182,6 +209,11 @@ class Solution:
     method : str
         The method that ran (:mod:`verified.methods`), with the settings that differ
         from its defaults; for ``method="auto"`` the attempts in one line.
+    failures : list of Failure or None
+        One in-process batch run only (None for chunked runs and for runs with a
+        consistency test, which cannot be continued from their sets): per group of pieces
+        that broke down, their record and their sets where they stopped
+        (:class:`Failure`); ``[]`` when none broke down.
     method_log : list of dict or None
         ``method="auto"`` only (:mod:`verified.auto`): per attempt the method, the number
         of pieces, how often they had been split, the span it verified, its status and
@@ -208,6 +240,7 @@ class Solution:
     surviving: "Solution | None" = None
     method: str = ""
     method_log: list | None = None
+    failures: list | None = None
 
     @property
     def success(self) -> bool:

@@ -102,8 +102,9 @@ def test_auto_is_the_default_and_reaches_t_end_where_the_old_default_broke_down(
 
 
 def test_auto_switches_rungs_and_loses_no_state():
-    """A weak first rung fails; the next continues from the failed pieces' own initial
-    boxes: every sampled true state is enclosed after the switch."""
+    """A weak first rung fails with an enclosure already too wide; the next one, continued
+    from those sets, gets no further and takes the pieces from t0: every sampled true
+    state is enclosed after the switch."""
     g = _vdp_like()
     sol = solve(g, BOX, (0.0, 1.5), method=Auto(rungs=("lohner", "composition")))
     assert sol.status == "completed", sol.reason
@@ -192,7 +193,7 @@ def test_a_point_set_landing_on_an_output_time_keeps_stepping():
         assert sol.hull[-1].contains(np.array([np.cos(1.0), -np.sin(1.0)])).all()
 
 
-def test_a_stalled_composition_hands_its_pieces_to_the_fallback():
+def test_a_stalled_composition_hands_its_pieces_to_the_fallback(quick_stall):
     """x' = -p x, p in [0.5, 0.7]: the composition's steps stay near 1.25e-4 s (22,000 steps
     to T = 3, 215 s); auto stops it as stalled and the first-order fallback completes.
     Closed form: x(3) = x0 exp(-3 p) in [exp(-2.1), 2 exp(-1.5)]."""
@@ -202,3 +203,72 @@ def test_a_stalled_composition_hands_its_pieces_to_the_fallback():
     assert sol.method_log[0]["reason"].startswith("stalled") and "stalled" in sol.method_log[0]["next"]
     assert sol.method_log[-1]["method"].startswith("lohner")
     assert sol.hull[-1].lo[0] <= np.exp(-2.1) and sol.hull[-1].hi[0] >= 2 * np.exp(-1.5)
+
+
+def _decay_switch(t_eval):
+    """x' = -p x, p in [0.5, 0.7], x0 in [1, 2]: the composition stalls and the fallback
+    continues from its sets where it stopped."""
+    g = trace(lambda x, p: [-p[0] * x[0]], 1, 1)
+    return solve(g, Interval([1.0], [2.0]), (0.0, 3.0), params=Interval([0.5], [0.7]), t_eval=t_eval)
+
+
+def _decay_states(t):
+    """Closed form x0 exp(-p t) on a grid of (x0, p), (S, len(t))."""
+    x0, p = np.meshgrid(np.linspace(1.0, 2.0, 11), np.linspace(0.5, 0.7, 11))
+    return x0.reshape(-1, 1) * np.exp(-np.outer(p.reshape(-1), np.asarray(t, float)))
+
+
+def _decay_misses(sol) -> int:
+    """Closed-form states outside the enclosure: at every output (union of its boxes) and
+    on every step of the tube (its hull, at the step's ends and midpoint)."""
+    miss = 0
+    for t, b in zip(sol.t, sol.boxes):
+        x = _decay_states([t])[:, 0]
+        miss += int((~((x[:, None] >= b.lo[None, :, 0] - 1e-12) & (x[:, None] <= b.hi[None, :, 0] + 1e-12))
+                     .any(axis=1)).sum())
+    tt = np.asarray(sol.tube_t)
+    for j in range(len(sol.tube)):
+        h = sol.tube_hull[j]
+        x = _decay_states([tt[j], 0.5 * (tt[j] + tt[j + 1]), tt[j + 1]])
+        miss += int(((x < h.lo[0] - 1e-12) | (x > h.hi[0] + 1e-12)).sum())
+    return miss
+
+
+@pytest.fixture
+def quick_stall(monkeypatch):
+    """The stall is judged at step 100, not 1000 (the same verdict here, a tenth of the time)."""
+    monkeypatch.setattr(auto_mod, "STALL_MIN_STEPS", 100)
+
+
+def test_a_switch_continues_from_the_verified_sets_and_loses_no_state(quick_stall):
+    """The fallback goes on from the stalled composition's sets at exactly their time
+    (not from t0): the Solution is the composition's record up to the switch, then the
+    fallback's; every closed-form state is enclosed at every output and on every step,
+    before and after the switch."""
+    sol = _decay_switch(np.linspace(0.0, 3.0, 31))
+    assert sol.status == "completed", sol.reason
+    first, second = sol.method_log[0], sol.method_log[1]
+    assert first["reason"].startswith("stalled") and "continued from their sets" in first["next"]
+    t_switch = first["t_span"][1]
+    assert 0 < t_switch < 3.0 and second["t_span"] == (t_switch, 3.0) and "continued" in second
+    assert sol.tube_t[0] == 0.0 and sol.tube_t[-1] == 3.0 and np.all(np.diff(sol.tube_t) > 0)
+    assert t_switch in set(np.asarray(sol.tube_t, float))  # (the record's steps, then the continuation's)
+    assert list(sol.t) == list(np.linspace(0.0, 3.0, 31))
+    assert _decay_misses(sol) == 0
+
+
+def test_a_switch_that_drops_part_of_a_set_is_caught(monkeypatch, quick_stall):
+    """The oracle bites: a switch that hands the next method only the middle half of the
+    sets where the composition stopped completes, but misses closed-form states."""
+    real = auto_mod.switch_start
+
+    def lossy(failure, method):
+        st = real(failure, method)
+        X = st.sets.hull()
+        mid, rad = X.mid(), 0.25 * X.width()
+        shrunk = type(st.sets).from_boxes(Interval(mid - rad, mid + rad))
+        return type(st)(sets=shrunk, t_exact=st.t_exact, h_limit=st.h_limit)
+    monkeypatch.setattr(auto_mod, "switch_start", lossy)
+    sol = _decay_switch(np.linspace(0.0, 3.0, 7))
+    assert sol.status == "completed"
+    assert _decay_misses(sol) > 0
