@@ -301,7 +301,7 @@ def _initial_box(x0, n: int, name: str) -> Interval:
 
 
 def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.0, output_dt: float | None = None,
-             params=None, method=None, order: int | None = None, tol: float | None = None, subdivision=None,
+             params=None, method=None, subdivision=None,
              energy_rate: str = "unsimplified", test_interval: float | None = None, test_splits: int | None = None,
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
              backward_depth: int = 0, contract: str = "step", prune: bool = True,
@@ -335,9 +335,6 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         ``"composition"``, ``"auto"``) or a :mod:`verified.methods` object: how the sets
         are advanced (:func:`verified.solver.solve`). What ran is ``sol.method`` (for
         ``"auto"``: every attempt, also in ``sol.method_log``).
-    order, tol : the Taylor order and tolerance of the method of the old signature (given
-        without ``method``, they and the other method settings in ``solver_kwargs``, e.g.
-        ``set_order``, select that method as before)
     subdivision : solver setting (see :func:`verified.solver.solve`)
     energy_rate : "unsimplified" or "simplified"
         Which of the symbolic model's ``dH/dt`` mode iii integrates (modes i and ii
@@ -429,7 +426,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
             if subdivision is not None and not isinstance(subdivision, (int, np.integer)):
                 subdivision = list(subdivision) + [1] * (system.n - len(list(subdivision)))
         params = system.params
-        if "arithmetic" not in solver_kwargs and _legacy_method(method, order, tol, solver_kwargs):
+        if "arithmetic" not in solver_kwargs and _legacy_method(method, solver_kwargs):
             # measured: a 2-link arm under computed torque (q, qd +- 1e-3, T = 1): interval
             # arithmetic breaks down at 0.26 s ("qr") / 0.89 s ("auto"), affine completes
             # with widths 1e-3..4e-3; the controller doubles the graph's depth
@@ -455,8 +452,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
                                 else params)
     if param_subdivision:
         box, ode_params = _split_params(box, ode_params, system, param_subdivision, subdivision)
-    if "error_basis" not in solver_kwargs and ode_params is not None and _legacy_method(method, order, tol,
-                                                                                         solver_kwargs):
+    if "error_basis" not in solver_kwargs and ode_params is not None and _legacy_method(method, solver_kwargs):
         # measured: with parameters the "qr" error basis breaks down early (paper URDF
         # double pendulum, payload mass [0.2, 0.3]: 0.27 s against completed to 0.3 s
         # with "auto", 3.7x narrower q1; even with point parameters: example-robot-data's
@@ -491,10 +487,6 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         progress = bar if bar.enabled else None
     try:
         with ctrl_c:
-            if order is not None:
-                solver_kwargs["order"] = order
-            if tol is not None:
-                solver_kwargs["tol"] = tol
             sol = solve(system.rhs, box, (t0, t_end), t_eval=t_eval, params=ode_params, method=method,
                         subdivision=subdivision, consistency=test, progress=progress, **solver_kwargs)
     finally:
@@ -682,23 +674,22 @@ def _params_record(system: System, ode_params) -> dict:
     return {k: (float(a), float(b)) for k, a, b in zip(names, lo, hi)}
 
 
-def _legacy_method(method, order, tol, solver_kwargs: dict) -> bool:
+def _legacy_method(method, solver_kwargs: dict) -> bool:
     """Whether the run names its method by the old signature's settings (``order``,
     ``set_order``, ...; no ``method``): then the defaults that method needs with a
     controller or parameters are filled in as before (the methods of
     :mod:`verified.methods` carry their own)."""
-    return method is None and (order is not None or tol is not None
-                               or any(k in solver_kwargs for k in METHOD_FIELDS))
+    return method is None and any(k in solver_kwargs for k in METHOD_FIELDS)
 
 
 def _check_solver_kwargs(kwargs: dict):
     """Unknown keyword arguments name :func:`simulate` (not the solver it calls)."""
     ours = set(inspect.signature(simulate).parameters) - {"solver_kwargs"}
     sig = inspect.signature(verified.solver.solve)  # (mbs.simulate.solve may be a test's wrapper)
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values()):
-        return
-    theirs = set(sig.parameters) - {"ode", "x0", "t_span", "t_eval", "params", "order", "tol",
-                                    "subdivision", "consistency", "progress", "method"}
+    # (solve's **method_settings: the old signature's method settings, METHOD_FIELDS)
+    theirs = {k for k, p in sig.parameters.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}
+    theirs = (theirs | set(METHOD_FIELDS)) - {"ode", "x0", "t_span", "t_eval", "params", "subdivision",
+                                              "consistency", "progress", "method"}
     # names users bring from scipy's solve_ivp and what they are called here
     known = {"t_eval": "output_dt", "rtol": "tol", "atol": "tol", "t_span": "t_end"}
     for k in kwargs:

@@ -42,7 +42,7 @@ import numpy as np
 
 from .auto import solve_auto
 from .batch import MODEL_CAPS, VerifiedODE, solve_batch
-from .methods import Auto, as_method, from_settings
+from .methods import METHOD_FIELDS, Auto, as_method, from_settings
 from .parallel import auto_workers, solve_parallel
 from .solution import Solution, Start
 
@@ -59,8 +59,6 @@ def solve(
     method=None,
     params=None,
     t_eval=None,
-    order: int | None = None,
-    tol: float | None = None,
     subdivision=None,
     h_max: float | None = None,
     h_min: float = 1e-9,
@@ -71,14 +69,6 @@ def solve(
     max_boxes: int = 4096,
     wrap_target: float = 0.03,
     merge_slack: float | None = None,
-    error_basis: str | None = None,
-    arithmetic: str | None = None,
-    set_order: int | None = None,
-    set_step: str | None = None,
-    model_degree: int | None = None,
-    model_caps: dict | None = None,
-    absorb: bool | None = None,
-    params_per_state: int | None = None,
     consistency=None,
     hooks=(),
     progress=None,
@@ -87,6 +77,7 @@ def solve(
     chunks=None,
     rechunk=None,
     start: Start | None = None,
+    **method_settings,
 ) -> Solution:
     """Verified enclosure of all solutions of ``x' = f(x, p)`` from ``x0``.
 
@@ -102,22 +93,21 @@ def solve(
         first-order QR-Lohner sets), ``"second_order"``, ``"composition"`` or ``"auto"``
         (:class:`~verified.methods.Auto`, :mod:`verified.auto`: chosen from the problem;
         a piece that cannot be continued is taken up by a stronger method, then split).
-        None: ``"auto"``, unless one of the method settings below (``order``, ``tol``,
-        ``error_basis``, ``arithmetic``, ``set_order``, ``set_step``, ``model_degree``,
-        ``model_caps``, ``absorb``, ``params_per_state``) is given: they select the
-        method as before methods were objects (at the old defaults: order 12, tol 1e-10,
-        first-order sets), and beside ``method=`` they are an error (they are the
-        method's fields). What ran is ``Solution.method`` (and, for ``"auto"``,
+        A method's settings (Taylor order, tolerance, error basis, arithmetic, ...) are
+        the fields of its object, checked there: ``method=Lohner(order=8)``. None:
+        ``"auto"``. What ran is ``Solution.method`` (and, for ``"auto"``,
         ``Solution.method_log``).
+    **method_settings : the settings of the signature before methods were objects
+        (``order``, ``tol``, ``error_basis``, ``arithmetic``, ``set_order``,
+        ``set_step``, ``model_degree``, ``model_caps``, ``absorb``,
+        ``params_per_state``: :data:`verified.methods.METHOD_FIELDS`). Still accepted
+        without ``method=``: they select the method they describe
+        (:func:`verified.methods.from_settings`) at the old defaults (order 12, tol
+        1e-10, first-order sets); beside ``method=`` they are an error. A run
+        continued from ``start`` or on a prepared VerifiedODE also runs that way.
     params : Interval or floats, shape (p,) (or (B, p) per initial box)
     t_eval : sorted (non-decreasing) finite output times in [t0, t1] (default: t1 only;
         t0 is always included; repeated times are reported once)
-    order : Taylor order K (default 12)
-    tol : target size of the order-K term per step (absolute, state units; default
-        1e-10). Defaults chosen from the double pendulum's work-precision table
-        (benchmarks/bench_solver.py --work-precision): higher orders with loose
-        tolerances take long steps over which the Jacobian of a wide set varies
-        too much.
     subdivision : int >= 1 or a sequence of n ints >= 1: split each initial box into a
         uniform grid (pieces per state)
     h_max, h_min : step-size bounds (h_max None: t1 - t0; 0 < h_min < h_max); a step
@@ -134,105 +124,6 @@ def solve(
         (default None: never). Off by default: on the double pendulum merging turned
         linear parts into wrapped error boxes and made enclosures wider
         (T = 1, 64 pieces adaptive: worst ratio 1.010 unmerged, 5.9 with slack 0.1).
-    error_basis : "qr" (Lohner's QR basis for the error part; default) or "auto"
-        (per set and step, the QR basis or a plain box, whichever is tighter now).
-        Measured on the double pendulum: "auto" gives tighter short-horizon results
-        (T = 1, 256 pieces: worst ratio 1.004 vs 1.012; single box verified to 0.635
-        vs 0.465) but breaks down on long horizons where "qr" does not (T = 2,
-        256 pieces: break-down at 1.93 vs ratio 1.23).
-    arithmetic : "interval" (default), "affine" or "taylor_model": how the Taylor coefficients of the
-        solution and of the variational equations are enclosed over boxes.
-        "affine" carries every coefficient as an affine form in the box's own
-        symbols (:mod:`verified.affine_taylor`), so first-order dependence through a
-        deep model graph (a robot's crba/rnea and elimination) is kept instead of
-        compounding order by order. Measured: a 3-link arm from a box of radius 1e-6
-        is verified to T = 2 (interval: break-down at 0.69 s); the double pendulum,
-        256 pieces, T = 1: worst ratio 1.003 in 15 s against 1.012 in 3-4 s.
-        "taylor_model": as "affine", but the Jacobian of each step over the set (the
-        variational equations, and the second ones with ``set_order=2``) in degree-2
-        Taylor models over the set's parameters (:mod:`verified.taylor_model`), so
-        that second-order effects cancel exactly instead of being bounded operation
-        by operation; its spread is what the error part grows by every step.
-        Measured with ``absorb=True`` (3-link arm, q0 +- eps, order 8, tol 1e-10):
-        eps = 1e-4 verified to 1.73 s against 1.04 s affine, eps = 1e-3 0.44 against
-        0.38 s, eps = 0.01 0.27 against 0.17 s; UR5 (eps = 1e-3) 0.51 against
-        0.46 s at ~3.5x the wall time. For few sets of deep graphs (robots): the
-        models are evaluated one set at a time.
-        A VerifiedODE carries its own (a different value given here is an error).
-    set_order : 1 (default) or 2: the sets carried from step to step. 1: QR-Lohner
-        doubletons ``c + C r0 + Q r`` (:mod:`verified.sets`). 2: the same plus a
-        quadratic term in the initial box (:mod:`verified.quadratic`), so the flow's
-        curvature is carried instead of wrapped every step; costs the second
-        variational equations (n (n + 1) / 2 more directions). With ``adaptive=True``
-        a set is split along the parameter or error component that gives it the most
-        width (:meth:`verified.quadratic.QuadraticSets.split`). With a consistency test
-        the energy state ``h`` is carried in the sets, they are contracted with
-        ``H(x) - h = 0`` and branched and pruned in their own parameters (not the
-        backward test, not ``reset_h``).
-    set_step : "mean_value" (default) or "composition": how a second-order set
-        (``set_order=2``) is advanced. "mean_value": by the Taylor map's derivatives at
-        the centre (second variational equations) plus the Hessian's spread over the
-        set (:mod:`verified.quadratic`). "composition": the Taylor map is composed with
-        the set written as a Taylor model over its own parameters, and the step's
-        Taylor coefficients, its a-priori enclosure and the step-size choice are taken
-        over that model instead of the set's hull box (:mod:`verified.tm_flow`): no
-        variational equations, higher-order effects bounded where they arise. Measured
-        (``python benchmarks/bench_robots.py --only 8,9``): UR5, q0 +- 1e-3,
-        ``params_per_state=12``: T = 1 verified in 55 s at ratio 1.24 ("mean_value":
-        0.4 s in 150 s); the pendulum over the top from one box to T = 10 (the C++
-        QR-Lohner solver breaks down at 3.67 s); the double pendulum from one box to
-        1.46 s; 3-link arm +- 0.01: 0.38 s in 4 s ("mean_value": 0.38 s in 60 s).
-    model_degree : 2, 3 or 4 (default 3; only with ``set_step="composition"``): the degree
-        of the Taylor-model arithmetic the composition runs in
-        (:mod:`verified.taylor_model`). At 3, products keep their cubic terms in the
-        set's widest parameters (``verified.tm_flow.CUBIC_CAP`` of them) and bound only
-        the fourth order and up, where degree 2 bounds the third (the sets themselves stay
-        second order). Measured on the UR5's right-hand side over +- 0.05 in all states:
-        remainder 13x smaller; UR5 q0 +- 1e-3 to T = 1: ratio 1.24 in 55 s, against a
-        break-down at 0.66 s at degree 2 with the same settings. At 4, products also keep
-        their quartic terms in the widest ``verified.tm_flow.QUARTIC_CAP`` parameters:
-        the UR5 to T = 1 at ratio 1.21 in 51 s (855 steps against 1065), the 3-link arm
-        +- 1e-3 to 1.30 s (ratio 1.25 at 1.2 s, against 1.27 s and 1.33), the double
-        pendulum from one box to 1.54 s (against 1.46 s) at 1.3x the wall time.
-    model_caps : dict or None (only with ``set_step="composition"``): how many of a set's
-        widest symbols get quadratic, cubic, quartic and star monomials in the
-        composition's Taylor models, e.g. ``{"quadratic": 32, "cubic": 16}``, and
-        ``"pool"``: how many symbols the remainders born inside the model graph may claim
-        (``verified.tm_flow``, module docstring; 0 turns them off); keys among
-        :data:`MODEL_CAPS`, each an int >= 0, missing ones at the defaults
-        (``verified.tm_flow``: quadratic 32 and cubic 16 for up to 9 states, else 16 and 6;
-        quartic 4, star 6, pool 128). More monomials mean fewer terms bounded at every operation at
-        a higher cost per step. Measured (q0 +- 1e-3, degree 3), 32 / 16 against 16 / 6:
-        the planar 4-link chain to T = 1 at ratio 1.29 in 20 s (break-down at 0.95 s), the
-        3-link arm to T = 2 at ratio 1.21 (1.35) in 2.5x the time, the double pendulum
-        from one box to 1.70 s (1.54 s): hence the default for small systems; the 5-, 6-,
-        7-link chains to 0.78 / 0.65 / 0.49 s (0.71 / 0.59 / 0.37 s) at 3-4x the time and
-        the UR5 to T = 1 at the same ratio (1.13) in 3.7x the time.
-    absorb : False (default) or True. With
-        ``set_order=1``, turn the error part ``Q r`` into new parameters of the set once
-        it is 10 % of the exactly carried part (:meth:`verified.sets.DoubletonSets.absorb_error`;
-        at 8 parameters per state the least wide are merged into n covering ones,
-        :meth:`~verified.sets.DoubletonSets.merge_params`, and absorbed parameters are
-        recentred), so that
-        accumulated errors are carried by the float matrix of the set instead of being
-        wrapped by the interval Jacobian every step. Measured: a 3-link arm from
-        ``q +- 1e-6`` to T = 2, worst ratio 16.97 -> 1.35; the double pendulum, 256
-        pieces, T = 3: break-down at 2.3 s -> ratio 1.035; 1024 pieces: 1.052 -> 1.001
-        at the same cost. Off by default because with affine Jacobians a 2-link arm
-        under computed-torque control (tests/mbs/test_frames.py) breaks down at 0.51 s
-        instead of completing 0.6 s (with ``arithmetic="taylor_model"`` it completes,
-        with or without absorbing). Not supported with a consistency test,
-        states appended by a hook or adaptive splitting (which then splits along
-        absorbed errors without end).
-        Second-order sets absorb their own way (:mod:`verified.quadratic`).
-    params_per_state : int >= 1 or None: how many parameters per state a set may carry
-        when it absorbs its error part (``set_order=2``, or ``absorb=True``); beyond it
-        the least wide are merged. None: 4 for ``set_order=2``, 8 for ``absorb``. More
-        parameters carry more of the accumulated error exactly, at a cost that grows
-        with their number (second-order sets: with its square). Measured on the double
-        pendulum from one box (``set_order=2``, ``error_basis="auto"``,
-        ``arithmetic="taylor_model"``, order 6): 4 per state break down at 0.949 s,
-        8 at 1.002 s, 12 at 1.012 s.
     consistency : verified.consistency.EnergyTest or None
         Energy (Hamiltonian) consistency test, further constraints and the backward
         test (paper sec. 4): branch and prune at the first local maximum of the
@@ -291,10 +182,10 @@ def solve(
     TypeError
         when ``ode`` is not a Graph or VerifiedODE.
     """
-    method, flags = _method_settings(method, ode, start, dict(
-        order=order, tol=tol, error_basis=error_basis, arithmetic=arithmetic, set_order=set_order,
-        set_step=set_step, model_degree=model_degree, model_caps=model_caps, absorb=absorb,
-        params_per_state=params_per_state))
+    unknown = sorted(set(method_settings) - set(METHOD_FIELDS))
+    if unknown:
+        raise TypeError(f"solve() got an unexpected keyword argument {unknown[0]!r}")
+    method, flags = _method_settings(method, ode, start, {k: method_settings.get(k) for k in METHOD_FIELDS})
     if isinstance(method, Auto):
         return solve_auto(
             solve, ode, x0, t_span, method=method, params=params, t_eval=t_eval, subdivision=subdivision,
