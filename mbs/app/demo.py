@@ -1,9 +1,11 @@
 """``python -m mbs demo``: the paper's double pendulum in its three simulation modes.
 
-The scene ``models/scenes/double_pendulum_paper.toml`` (eq. 22, initial box 25, x1(0)
-split into 256 pieces, ``error_basis="auto"``) runs in modes (i) numeric model without
-test, (ii) numeric model with the energy consistency test, (iii) symbolic model with
-the energy test, each with the same solver settings. The demo prints the comparison
+The scene ``models/scenes/double_pendulum_paper.toml`` (eq. 22, initial box 25, its
+energy-test settings) runs in the paper's configuration (:data:`DEMO`: QR-Lohner sets
+with ``error_basis="auto"``, x1(0) split into 256 pieces; the scene itself leaves the
+method to ``auto``) in modes (i) numeric model without test, (ii) numeric model with the
+energy consistency test, (iii) symbolic model with the energy test, each with the same
+solver settings. The demo prints the comparison
 table (time reached, widths at common output times, pruned boxes, wall time), checks
 every enclosure against densely sampled DOP853 trajectories, and writes the paper's
 figures (Fig. 5 for the three modes with the sampled trajectories overlaid and their
@@ -24,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from verified.methods import METHOD_FIELDS, Lohner
 from verified.warmup import finish_background, start_in_background
 
 from ..modes import ALL_MODES, MODE_I, MODE_II, MODES, get_mode
@@ -34,11 +37,11 @@ from .runner import check_samples, kernel_families, pruned_anything
 from .sampling import line_points, sample_trajectories
 from .scene import load_scene
 
-#: demo settings. 256 pieces with the scene's error_basis="auto": every mode reaches
-#: T = 1 (16 pieces broke down at 0.53 s in modes i/ii, 64 pieces at 0.63 s; with the
-#: "qr" basis even 256 pieces break down at 0.97 s in mode i); the three modes together
-#: take about 45 s of CPU time (see README)
-DEMO = dict(t_end=1.0, output_dt=0.05, pieces=256, samples=401)
+#: demo settings: the paper's first-order sets, error_basis "auto", x1(0) in 256 pieces
+#: (every mode reaches T = 1; fewer pieces or the "qr" basis break down before it,
+#: docs/lab/measurements.md)
+DEMO = dict(t_end=1.0, output_dt=0.05, pieces=256, samples=401,
+            method=Lohner(order=12, tol=1e-10, error_basis="auto"))
 
 
 def settings(pieces=None):
@@ -51,6 +54,9 @@ def settings(pieces=None):
     x0 = scene.initial_box(names)
     kw = scene.simulate_kwargs(names)
     kw.pop("mode")
+    for k in METHOD_FIELDS:  # (the demo runs its own method, whatever the scene names)
+        kw.pop(k, None)
+    kw["method"] = DEMO["method"]
     kw["subdivision"] = [DEMO["pieces"] if pieces is None else pieces, 1, 1, 1]
     return x0, kw
 

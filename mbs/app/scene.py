@@ -557,18 +557,13 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
             solver[k] = _typed(v, _SOLVER[k], f"{where} {k}", positive=True)
     if "method" in solver:
         solver["method"] = _scene_method(solver, where)
-    if "error_basis" in solver and solver["error_basis"] not in ("qr", "auto"):
-        raise SceneError(f"{where} error_basis: {solver['error_basis']!r} is not 'qr' or 'auto'")
-    if "arithmetic" in solver and solver["arithmetic"] not in ("interval", "affine", "taylor_model"):
-        raise SceneError(f"{where} arithmetic: {solver['arithmetic']!r} is not 'interval', 'affine' or 'taylor_model'")
-    if "order" in solver and not 2 <= solver["order"] <= MAX_ORDER:
-        raise SceneError(f"{where} order: must be in [2, {MAX_ORDER}], got {solver['order']}")
-    if "set_order" in solver and solver["set_order"] not in (1, 2):
-        raise SceneError(f"{where} set_order: {solver['set_order']!r} is not 1 or 2")
-    if "set_step" in solver and solver["set_step"] not in ("mean_value", "composition"):
-        raise SceneError(f"{where} set_step: {solver['set_step']!r} is not 'mean_value' or 'composition'")
-    if "model_degree" in solver and solver["model_degree"] not in (2, 3, 4):
-        raise SceneError(f"{where} model_degree: {solver['model_degree']!r} is not 2, 3 or 4")
+    elif any(k in solver for k in ("target_ratio", "max_pieces")):
+        # (the fields of method "auto", the default: a tightness goal and a budget of pieces)
+        solver["method"] = _scene_method({"method": "auto", **solver}, where)
+        for k in ("target_ratio", "max_pieces"):
+            solver.pop(k, None)
+    else:
+        _scene_legacy_method(solver, where)
 
     # [consistency]
     where = f"{source}: [consistency]"
@@ -688,6 +683,21 @@ def _typed(v, typ, where: str, positive: bool):
             raise SceneError(f"{where}: expected a string, got {v!r}")
         return v
     return _number(v, where, typ, positive=positive)
+
+
+def _scene_legacy_method(solver: dict, where: str) -> None:
+    """The method settings of a scene without ``method`` (``order``, ``set_order``,
+    ...: the old signature's selection of a method), checked by the method they
+    describe (:func:`verified.methods.from_settings`); they stay in ``solver`` for
+    :func:`mbs.simulate.simulate`, which runs that method as before."""
+    from verified.methods import METHOD_FIELDS, from_settings
+    given = {k: solver[k] for k in METHOD_FIELDS if k in solver}
+    if not given:
+        return
+    try:
+        from_settings(**given)
+    except (TypeError, ValueError) as e:
+        raise SceneError(f"{where} {e}") from None
 
 
 def _scene_method(solver: dict, where: str):

@@ -201,7 +201,7 @@ def test_solver_set_step():
          "not 'mean_value' or 'composition'")
     kw = loads_scene(text.replace("set_order = 2\n", "set_order = 2\nmodel_degree = 2\n")).simulate_kwargs(NAMES)
     assert kw["model_degree"] == 2
-    _err(text.replace("set_order = 2\n", "set_order = 2\nmodel_degree = 5\n"), "model_degree", "not 2, 3 or 4")
+    _err(text.replace("set_order = 2\n", "set_order = 2\nmodel_degree = 5\n"), "model_degree", "must be 2, 3 or 4")
 
 
 def test_solver_energy_shell_and_params_per_state():

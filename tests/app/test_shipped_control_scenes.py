@@ -1,5 +1,5 @@
-"""The shipped UR5 quintic scene (models/scenes/ur5_quintic.toml: second-order sets by
-composition) run as the CLI runs it, on a short horizon, against the sampled oracle of
+"""The shipped UR5 quintic scene (models/scenes/ur5_quintic.toml: no solver settings,
+method "auto") run as the CLI runs it, on a short horizon, against the sampled oracle of
 benchmarks/bench_control.py: Pinocchio aba with the sampled payload on the plant, the
 controller in floats, DOP853; tool positions by Pinocchio's forward kinematics."""
 import sys
@@ -18,11 +18,9 @@ def test_shipped_ur5_quintic_scene_encloses_the_sampled_closed_loop(monkeypatch)
     row = bench_control.run_case("quintic", "ur5_quintic", 120.0, None, None, samples=12)
     assert row["status"] == "completed" and row["t_reached"] == pytest.approx(0.3)
     assert row["inside"] and row["frame_inside"]
-    # the scene as shipped runs the composition step (the setting that reaches T = 2)
+    # the scene as shipped names no method: "auto" picks the composition step
     from mbs.app.scene import load_scene
-    from verified.methods import Composition
-    solver = load_scene("ur5_quintic").solver
-    assert solver["method"] == Composition(order=8, params_per_state=12)
+    assert load_scene("ur5_quintic").solver == {}
 
 
 @pytest.mark.slow
