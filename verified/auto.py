@@ -24,7 +24,7 @@ time: a continuation from the failed attempt's own sets at exactly their time (o
 hull boxes, when the next method advances another kind of set), a restart from the
 piece's own initial box at ``t0``. The Solution of a continued piece is the failed
 attempt's record up to the switch followed by the continuation
-(:func:`verified.parallel.stitch`), and the result is the union of the attempts that
+(:func:`verified.time_chain.chain_in_time`), and the result is the union of the attempts that
 together cover every initial piece (:func:`verified.parallel.merge_solutions`). A
 piece that fails on every rung keeps the failed attempt's enclosure, verified up to
 where that attempt got, and the run is a break-down at the earliest such time, naming
@@ -301,24 +301,10 @@ def _carried(params) -> int:
 def _stitched(failure: Failure, start: Start, sol: Solution, outs, t0, n: int) -> Solution:
     """The failed attempt's record of ``failure``'s pieces up to ``failure.t``, followed
     by ``sol``, the run continued from ``start`` (those pieces' sets at that time), as one
-    Solution over those pieces (:func:`verified.parallel.stitch`; the status and reason
-    are the continuation's)."""
-    from .parallel import _Piece, stitch
+    Solution over those pieces (:func:`verified.time_chain.chain_in_time`)."""
+    from .time_chain import chain_in_time
 
-    rec = failure.record
-    X = start.sets.hull()
-    items = [
-        _Piece(family=0, parent=None, lo=np.asarray(rec.boxes[0].lo), hi=np.asarray(rec.boxes[0].hi), params=None,
-               start=None, max_boxes=0, pause_at=None, sol=rec, children=[1]),
-        _Piece(family=0, parent=0, lo=np.asarray(X.lo[:, :n]), hi=np.asarray(X.hi[:, :n]), params=None,
-               start=start, max_boxes=0, pause_at=None, sol=sol),
-    ]
-    out = stitch(items, 0, outs, t0, n)
-    out.pieces = None  # (the attempts are in method_log)
-    out.method = sol.method
-    if out.status != "completed" and sol.status == out.status:
-        out.reason = sol.reason
-    return out
+    return chain_in_time([failure.record, sol])
 
 
 def _summary(log) -> str:

@@ -378,9 +378,10 @@ def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, sets_type=Double
 
 def _resume(setup: RunSetup, start: Start, boxes: Interval, kind: SetKind, consistency):
     """``(setup, boxes)`` continuing from ``start`` (``solve(start=)``): its sets and
-    time instead of the sets made from ``x0``, after the checks that they fit."""
-    if consistency is not None:
-        raise ValueError("start= does not continue a consistency test")
+    time instead of the sets made from ``x0``, after the checks that they fit. A
+    consistency test starts afresh there: the sets hold the run's states only, and the
+    test appends its energy state ``h`` to them at the start time, as at ``t0``
+    (``h = H(x)`` holds along every true trajectory at every time)."""
     sets = start.sets
     if not isinstance(sets, kind.sets):
         raise ValueError(f"start.sets must be {kind.sets.__name__} for this set_order/set_step, "

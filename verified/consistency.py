@@ -72,6 +72,10 @@ __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRAT
            "EnergyClaimWarning", "prove_energy_rate"]
 
 
+#: the reason of a run stopped by an idle energy test (EnergyTest.suspend_after)
+IDLE = "energy test idle"
+
+
 def _renamed(value, old_value, name: str, old_name: str, default):
     """The value of a keyword given under its name or its old name (not both)."""
     if old_value is not None:
@@ -172,6 +176,15 @@ class EnergyTest(Hook):
         True (default): prove and refute a declared ``energy_rate`` (above). False:
         use it as given, unproven and unrefuted (the caller vouches for it: a wrong
         rate removes true states).
+    suspend_after : int or None
+        After this many tests in a row that pruned nothing (and contractions between them
+        that narrowed nothing), the run without the test is cheaper: the energy state
+        ``h`` is dropped, the run goes on without the test for a while, and the test
+        resumes with ``h`` restarted from ``H`` over the sets (:mod:`verified.energy_cadence`;
+        only in one in-process batch, which continues the run from its sets). 0: never.
+        None: 2 on second-order sets where ``h`` integrates the derived rate
+        ``grad H . f`` (there it costs most: the rate runs through the composition's
+        Taylor models), else 0 (doubletons; a declared rate such as ``dH/dt = 0``).
     test_backoff : int or None
         The same for the tests at ``RA``'s peaks (``t*``): after a test that pruned
         nothing, the next 1, 2, 4, ... (at most this many) steps' peaks are passed by;
@@ -186,7 +199,7 @@ class EnergyTest(Hook):
                  backward_depth: int = 0, max_boxes: int = 4096, contract: str = "step",
                  prune: bool = True, align=None, check_claim: bool = True, reset_h: bool = False,
                  max_interval: float | None = None, splits: int | None = None, contract_backoff: int | None = None,
-                 test_backoff: int | None = None, strategy: str | None = None):
+                 test_backoff: int | None = None, strategy: str | None = None, suspend_after: int | None = None):
         # one name per knob (issue 15): test_interval / test_splits / split_strategy as everywhere else;
         # the old names are accepted so that existing callers keep working, and the
         # error messages below name whichever the caller used
@@ -230,12 +243,18 @@ class EnergyTest(Hook):
         self.backward_depth = int(backward_depth)
         self.max_boxes = int(max_boxes)
         self.contract = contract
-        for name, value in (("contract_backoff", contract_backoff), ("test_backoff", test_backoff)):
+        for name, value in (("contract_backoff", contract_backoff), ("test_backoff", test_backoff),
+                            ("suspend_after", suspend_after)):
             if value is not None and (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer))
                                       or value < 0):
                 raise ValueError(f"{name} must be an integer >= 0 or None, got {value!r}")
         self.contract_backoff = contract_backoff
         self.test_backoff = test_backoff
+        self.suspend_after = suspend_after
+        #: set by verified.energy_cadence, the only driver that continues a suspended run
+        self.can_suspend = False
+        #: where the run stopped because the test was idle (a Start with the sets and h), or None
+        self.idle_point = None
         self.prune = bool(prune)
         if align is not None and not callable(getattr(align, "set_direction", None)):
             raise ValueError("align must be an error-basis policy with set_direction "
@@ -259,6 +278,9 @@ class EnergyTest(Hook):
         graph = self.prepare(setup.user_graph, setup.graph, setup.n_state, setup.params, t0=setup.t0)
         # (see contract_backoff, test_backoff)
         self._set_waits(0 if isinstance(setup.sets, DoubletonSets) else 16)
+        derived = (isinstance(self.energy_rate, str) and self.energy_rate == "derive") or self._lifted.rate_unproven
+        if self.suspend_after is None and not derived:
+            self._suspend_after = 0  # (a declared rate, e.g. dH/dt = 0: h costs little, nothing to save)
         self._refute_claim(setup.sets.hull(), setup.sets.c, setup.t0)
         self._warn_unproven()
         # "a test at least every test_interval seconds" (contraction alone needs no cap:
@@ -276,6 +298,13 @@ class EnergyTest(Hook):
                 with np.errstate(all="ignore"):
                     g = self._lifted.jac(self._lifted.residual, point(final.c))[:, 0, :].mid()
             self.align.set_direction(g)
+        if (self.can_suspend and self._suspend_after and self._idle_tests >= self._suspend_after
+                and not run.status and not run.landed_on_last_output(step)):
+            # idle: the run stops here and verified.energy_cadence goes on without the test
+            final = sets if out is None else out
+            self.idle_point = replace(run.resume_point(), sets=final)
+            self.stats["suspensions"] = self.stats.get("suspensions", 0) + 1
+            run.stop(f"{IDLE}: {self._idle_tests} tests in a row pruned and narrowed nothing", "stopped")
         return out
 
     @property
@@ -316,6 +345,7 @@ class EnergyTest(Hook):
         elif self.contract == "step" and self._contraction is not None:
             sets, ch, narrowed = self._contract(sets)
             self._contract_wait.done(narrowed)
+            self._narrowed_since_test |= narrowed
             changed |= ch
             if sets.n_sets == 0:
                 run.stop("the energy contraction removed every set (inconsistent model or energy rate?)",
@@ -352,7 +382,10 @@ class EnergyTest(Hook):
                 sets = type(sets).concatenate([sets.take(np.flatnonzero(~only)), tested])
             else:
                 sets = self.apply(step.t, step.t_enclosure, sets, prev, trigger=trigger)
-            self._test_wait.done(self.stats["pruned_boxes"] > pruned_before)
+            gained = self.stats["pruned_boxes"] > pruned_before
+            self._test_wait.done(gained)
+            self._idle_tests = 0 if gained or self._narrowed_since_test else self._idle_tests + 1
+            self._narrowed_since_test = False
         else:
             self._tracker.tested(step.t)
         if sets.n_sets == 0:
@@ -415,11 +448,15 @@ class EnergyTest(Hook):
 
     def _set_waits(self, default_cap: int):
         """The back-offs of the contraction and the RA-peak tests: the caps given, or
-        ``default_cap`` where None was (0 on doubletons, 16 on second-order sets)."""
+        ``default_cap`` where None was (0 on doubletons, 16 on second-order sets); the
+        idle tests before a suspension likewise (0 on doubletons, 2 on second-order sets)."""
         def cap(value):
             return default_cap if value is None else value
         self._contract_wait = BackOff(cap(self.contract_backoff))
         self._test_wait = BackOff(cap(self.test_backoff))
+        self._suspend_after = (2 if default_cap else 0) if self.suspend_after is None else int(self.suspend_after)
+        self._idle_tests = 0
+        self._narrowed_since_test = False
 
     def initial_sets(self, sets):
         """Append ``h(0) = H(x0)`` to the initial sets, correlated with ``r0``

@@ -42,6 +42,7 @@ import numpy as np
 
 from .auto import solve_auto
 from .batch import MODEL_CAPS, VerifiedODE, solve_batch
+from .interval import Interval
 from .methods import METHOD_FIELDS, Auto, as_method, from_settings
 from .parallel import auto_workers, solve_parallel
 from .solution import Solution, Start
@@ -276,6 +277,26 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
         return solve_parallel(ode, x0, t_span, workers=workers, client=client, chunks=chunks, **kw)
     if rechunk is not None and not isinstance(rechunk, (bool, np.bool_)):
         raise ValueError(f"rechunk must be None, True or False, got {rechunk!r}")
+    if start is None and getattr(consistency, "can_suspend", None) is not None and (
+            params is None or not isinstance(params, Interval) or params.ndim == 1):
+        # an energy test that may be suspended while idle (verified.energy_cadence)
+        from .energy_cadence import solve_with_cadence
+        from .solver_args import check_graph
+
+        n_state = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode).n_inputs
+        carried = params.shape[-1] if isinstance(params, Interval) and bool(np.any(params.width() > 0)) else 0
+
+        def run(X, st, test, hks):
+            return solve_batch(
+                ode, X, t_span, params=params, t_eval=t_eval, order=order, tol=tol,
+                subdivision=subdivision if st is None else None, h_max=h_max, h_min=h_min, max_steps=max_steps,
+                max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
+                wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, arithmetic=arithmetic,
+                set_order=set_order, set_step=set_step, model_degree=model_degree, model_caps=model_caps,
+                absorb=absorb, params_per_state=params_per_state, consistency=test, hooks=hks,
+                progress=progress, start=st)
+        return solve_with_cadence(run, x0, t_span, consistency, hooks, n_state, n_state + carried,
+                                  consistency.test_interval)
     return solve_batch(
         ode, x0, t_span, params=params, t_eval=t_eval, order=order, tol=tol, subdivision=subdivision, h_max=h_max,
         h_min=h_min, max_steps=max_steps, max_width=max_width, adaptive=adaptive, split_ratio=split_ratio,

@@ -201,7 +201,8 @@ def test_scene_runner_reports_the_solver_error(no_work, tmp_path):
     from mbs.app.runner import run_scene
     from mbs.app.scene import SceneError, load_scene, scene_dir
     text = (scene_dir() / "pendulum_paper.toml").read_text()
-    text = (text + "\n[solver]\nh_min = 0.5\nh_max = 0.1\n").replace('mode = "ii"', 'mode = "i"')
+    text = text.replace("[solver]\n", "[solver]\nh_min = 0.5\nh_max = 0.1\n").replace('mode = "ii"', 'mode = "i"')
+    assert "h_min = 0.5" in text
     path = tmp_path / "bad.toml"
     path.write_text(text)
     scene = load_scene(path)
