@@ -129,7 +129,9 @@ def solve(
         Energy (Hamiltonian) consistency test, further constraints and the backward
         test (paper sec. 4): branch and prune at the first local maximum of the
         reduction area RA(t), at least every ``test_interval`` seconds. Its record
-        (RA(t), H_H, H_V, every test) is returned as ``Solution.consistency``.
+        (RA(t), H_H, H_V, every test) is returned as ``Solution.consistency``. In one
+        in-process batch, a test that gains nothing steps aside for a while
+        (``EnergyTest.suspend_after``, :mod:`verified.energy_cadence`).
     hooks : sequence of hook objects (:mod:`verified.hooks`)
         Called before the run, after every accepted step (with the step's
         :class:`~verified.stepper.StepResult` and the sets; a hook may replace the sets
@@ -163,8 +165,9 @@ def solve(
         of from ``x0`` at ``t_span[0]`` (``x0`` must be their hull boxes over the
         ``n`` states; ``params`` as the run that made them got them, or their hull).
         The Solution's first output is the start itself (``t[0] = float(t_exact)``),
-        then the outputs of ``t_eval`` after it; ``tube_t[0] = float(t_exact)``. No
-        consistency test.
+        then the outputs of ``t_eval`` after it; ``tube_t[0] = float(t_exact)``. A
+        consistency test starts afresh there (the sets hold the states only; the test
+        appends its energy state ``h = H(x)`` at the start time).
 
     Returns
     -------
