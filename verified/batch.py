@@ -36,12 +36,11 @@ from .interval import Interval, concatenate, hull, stack_hulls
 from .linalg import SingularMatrixError
 from .lohner import LohnerStepper
 from .policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
-from .set_kinds import SetKind, set_kind, set_kind_names
+from .set_kinds import SetKind, set_kind
 from .quadratic import QuadraticSets
 from .sets import DoubletonSets, SetView, set_view
 from .solution import Failure, PieceResult, Solution, Start, pieces_summary
-from .solver_args import (check_arithmetic, check_graph, check_model_cap, check_params, check_params_per_state,
-                          check_settings, initial_boxes)
+from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from .taylor import TaylorODE
 from .taylor_model import TaylorModelODE
 from .variational import params_as_states, second_variational_graph, variational_graph
@@ -181,23 +180,9 @@ def solve_batch(
         t_span=t_span, t_eval=t_eval, order=order, tol=tol, h_max=h_max, h_min=h_min, max_steps=max_steps,
         max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
         wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, progress=progress)
-    orders, steps = set_kind_names()
-    if set_order not in orders or isinstance(set_order, bool):
-        raise ValueError(f"set_order must be {' or '.join(map(str, orders))}, got {set_order!r}")
-    if set_step not in steps:
-        raise ValueError(f"set_step must be {' or '.join(map(repr, steps))}, got {set_step!r}")
-    if set_step == "composition" and set_order != 2:
-        raise ValueError("set_step='composition' advances second-order sets: it needs set_order=2")
-    if model_degree is not None:
-        if isinstance(model_degree, (bool, np.bool_)) or model_degree not in (2, 3, 4):
-            raise ValueError(f"model_degree must be 2, 3 or 4, got {model_degree!r}")
-        if set_step != "composition":
-            raise ValueError("model_degree is the degree of set_step='composition''s Taylor models: "
-                             "it needs set_order=2, set_step='composition'")
-    model_caps = _check_model_caps(model_caps, set_step)
-    if not isinstance(absorb, (bool, np.bool_)):
-        raise ValueError(f"absorb must be True or False, got {absorb!r}")
-    params_per_state = check_params_per_state(params_per_state)
+    # (the method settings were checked by the method they describe, verified.methods,
+    # before solve handed them here: only what depends on the run is checked below)
+    model_caps = None if model_caps is None else dict(model_caps)
     if absorb and (set_order != 1 or adaptive or consistency is not None):
         # (a consistency test's contraction works on sets with one parameter per state;
         # adaptive splitting would split along absorbed errors without end)
@@ -862,18 +847,3 @@ def _stepper(kind: SetKind, prob: VerifiedODE, order, params, error_basis, absor
 #: star monomials in the composition's Taylor models, and the pool of symbols for the
 #: remainders born inside the graph (verified.tm_flow.TaylorModelFlowStepper)
 MODEL_CAPS = ("quadratic", "cubic", "quartic", "star", "pool")
-
-
-def _check_model_caps(model_caps, set_step):
-    if model_caps is None:
-        return None
-    if set_step != "composition":
-        raise ValueError("model_caps are the caps of set_step='composition''s Taylor models: "
-                         "it needs set_order=2, set_step='composition'")
-    if not isinstance(model_caps, dict):
-        raise ValueError(f"model_caps must be a dict with keys among {', '.join(MODEL_CAPS)}, got {model_caps!r}")
-    for k, v in model_caps.items():
-        if k not in MODEL_CAPS:
-            raise ValueError(f"model_caps: unknown key {k!r} (known: {', '.join(MODEL_CAPS)})")
-        check_model_cap(k, v)
-    return dict(model_caps)

@@ -297,9 +297,11 @@ def from_settings(**flags) -> Method:
     set_order = flags.pop("set_order", 1)
     set_step = flags.pop("set_step", "mean_value")
     if set_order not in (1, 2) or isinstance(set_order, bool):
-        raise ValueError(f"set_order: {set_order!r} is not 1 or 2")
+        raise ValueError(f"set_order must be 1 or 2, got {set_order!r}")
     if set_step not in ("mean_value", "composition"):
-        raise ValueError(f"set_step: {set_step!r} is not 'mean_value' or 'composition'")
+        raise ValueError(f"set_step must be 'mean_value' or 'composition', got {set_step!r}")
+    if set_step == "composition" and set_order != 2:
+        raise ValueError("set_step='composition' advances second-order sets: it needs set_order=2")
     flags = {k: v for k, v in flags.items() if v is not None}
     if set_order == 1 and set_step == "mean_value":
         cls = Lohner

@@ -43,7 +43,7 @@ import numpy as np
 from .auto import solve_auto
 from .batch import MODEL_CAPS, VerifiedODE, solve_batch
 from .interval import Interval
-from .methods import METHOD_FIELDS, Auto, as_method, from_settings
+from .methods import METHOD_FIELDS, METHODS, Auto, as_method, from_settings
 from .parallel import auto_workers, solve_parallel
 from .solution import Solution, Start
 
@@ -255,6 +255,18 @@ def _method_settings(method, ode, start, flags: dict):
             return method, None
         return method, {**_LEGACY_DEFAULTS, **method.settings()}
     if given or start is not None or isinstance(ode, VerifiedODE):
+        # (checked by the method they describe: the methods own these settings' checks)
+        try:
+            # (an error-basis policy object, verified.policies, is the driver's own: not a method field)
+            from_settings(**{k: v for k, v in given.items()
+                             if not (k == "arithmetic" and isinstance(ode, VerifiedODE))
+                             and not (k == "error_basis" and not isinstance(v, str))})
+        except ValueError as e:  # (named by the setting, as the caller named it: no method prefix)
+            msg = str(e)
+            for name in METHODS:
+                if msg.startswith(f"{name}: "):
+                    msg = msg[len(name) + 2:]
+            raise ValueError(msg) from None
         return None, {**_LEGACY_DEFAULTS, **given}
     return Auto(), None
 

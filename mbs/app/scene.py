@@ -117,7 +117,6 @@ from models.registry import NAMES, SYSTEMS
 from verified.energy_rate import MODEL_RATES
 from verified.exact import enclose_fraction, enclose_pi_multiple
 from verified.interval import Interval
-from verified.solver_args import MAX_ORDER
 
 from ..dh import chain_from_dh
 from ..urdf import chain_from_urdf

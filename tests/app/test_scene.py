@@ -190,7 +190,7 @@ def test_solver_set_order_and_merge_slack():
     text = GOOD.replace("order = 12\n", "order = 12\nset_order = 2\nmerge_slack = 0.1\n")
     kw = loads_scene(text).simulate_kwargs(NAMES)
     assert kw["set_order"] == 2 and kw["merge_slack"] == 0.1
-    _err(GOOD.replace("order = 12\n", "order = 12\nset_order = 3\n"), "set_order", "not 1 or 2")
+    _err(GOOD.replace("order = 12\n", "order = 12\nset_order = 3\n"), "set_order", "must be 1 or 2")
 
 
 def test_solver_set_step():
@@ -198,7 +198,7 @@ def test_solver_set_step():
     kw = loads_scene(text).simulate_kwargs(NAMES)
     assert kw["set_step"] == "composition" and kw["set_order"] == 2
     _err(GOOD.replace("order = 12\n", 'order = 12\nset_step = "taylor"\n'), "set_step",
-         "not 'mean_value' or 'composition'")
+         "must be 'mean_value' or 'composition'")
     kw = loads_scene(text.replace("set_order = 2\n", "set_order = 2\nmodel_degree = 2\n")).simulate_kwargs(NAMES)
     assert kw["model_degree"] == 2
     _err(text.replace("set_order = 2\n", "set_order = 2\nmodel_degree = 5\n"), "model_degree", "must be 2, 3 or 4")

@@ -72,7 +72,7 @@ def test_solve_absorb_arguments():
     lo, hi = pd.initial_box()
     with pytest.raises(ValueError, match="absorb must be True or False"):
         solve(g, Interval(lo, hi), (0.0, 0.1), absorb="yes")
-    with pytest.raises(ValueError, match="absorb=True needs set_order=1"):
+    with pytest.raises(ValueError, match="absorb is not a setting of method 'second_order'"):
         solve(g, Interval(lo, hi), (0.0, 0.1), absorb=True, set_order=2)
 
 

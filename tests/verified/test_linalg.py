@@ -62,7 +62,11 @@ def test_solve_contains_all_sampled_solutions(n, radius, seed):
     x = solve(a, b)
     assert x.shape == (4, n)
     for pa, pb in zip(samples_inside(rng, a, 40), samples_inside(rng, b, 40)):
-        assert x.contains(np.linalg.solve(pa, pb[..., None])[..., 0]).all()
+        # (LAPACK's float solution is itself off by a few ulps: at a corner sample the exact
+        # solution is on the enclosure's edge, n = 1, radius 0.0078, seed 882 fell 1 ulp out)
+        v = np.linalg.solve(pa, pb[..., None])[..., 0]
+        slack = 8 * np.spacing(np.abs(v))
+        assert ((x.lo <= v + slack) & (v - slack <= x.hi)).all()
 
 
 def test_solve_contains_arb_solution_and_is_tight_for_point_systems():

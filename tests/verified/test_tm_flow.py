@@ -207,7 +207,7 @@ def test_set_step_arguments_are_checked():
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_step="composition")
     with pytest.raises(ValueError, match="model_degree must be 2, 3 or 4"):
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, set_step="composition", model_degree=5)
-    with pytest.raises(ValueError, match="model_degree is the degree"):
+    with pytest.raises(ValueError, match="model_degree is not a setting of method 'second_order'"):
         solve(g, Interval([0.5], [0.6]), (0.0, 0.1), set_order=2, model_degree=3)
 
 
