@@ -338,6 +338,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
     hooks = list(hooks)
 
     todo = [_Task(boxes, pv, 0)]
+    first = None
     done: list[tuple[Interval, Solution]] = []
     log: list[dict] = []
     pieces_total = boxes.shape[0]
@@ -365,6 +366,9 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         if cont is not None:
             entry["continued"] = f"from the sets of {task.boxes.shape[0]} piece(s) at t = {t_from:g}"
         log.append(entry)
+        if first is None and cont is None and task.boxes.shape[0] == boxes.shape[0] and task.rung == 0 \
+                and task.splits == 0:
+            first = sol  # (the first attempt, on every initial piece)
         if cont is not None and sol.status != "breakdown":
             sol = _stitched(cont, start, sol, outs, t0, n)
         if sol.status != "breakdown":  # completed, or stopped / interrupted: nothing more is tried
@@ -454,6 +458,14 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         result = merge_solutions([s for _, s in done], ranges, initial, outs, t0,
                                  tuple(graph.input_names[:n]), interrupted=give_up == "interrupted")
         result.chunks = None  # (the attempts are in method_log)
+    if result.status != "completed" and first is not None and first.t_reached > result.t_reached:
+        # the later attempts ended earlier than the first one, which ran every initial
+        # piece (stopped by a wall-clock cap while splitting, say): its enclosure of the
+        # whole initial set, verified further, is the result
+        why = result.reason
+        result = first
+        result.reason = f"{first.reason} (later attempts: {why})"
+        give_up = give_up or result.status
     if result.status == "breakdown" and give_up == "breakdown":
         tried = ", ".join(dict.fromkeys(e["method"] for e in log))
         result.reason = (f"{result.reason} (auto tried {tried} on up to {pieces_total} pieces; "

@@ -272,3 +272,37 @@ def test_a_switch_that_drops_part_of_a_set_is_caught(monkeypatch, quick_stall):
     sol = _decay_switch(np.linspace(0.0, 3.0, 7))
     assert sol.status == "completed"
     assert _decay_misses(sol) > 0
+
+
+class _StopSecondAttempt:
+    """A hook that stops the second run it is given at its first step (a wall-clock cap
+    that strikes while auto splits, made deterministic)."""
+
+    def __init__(self):
+        self.runs = 0
+
+    def before_run(self, setup):
+        self.runs += 1
+        return None
+
+    def after_step(self, step, sets, run):
+        if self.runs == 2:
+            run.stop("stopped by the test", "stopped")
+        return None
+
+    def after_run(self, solution):
+        return None
+
+
+def test_a_stop_while_splitting_keeps_the_first_attempts_further_enclosure():
+    """The first attempt (one box) breaks down at about 1.8 s; the split attempt is
+    stopped at once: the result is the first attempt's enclosure of the whole initial
+    set to where it got, not the split attempt's few steps."""
+    sol = solve(_vdp_like(), BOX, (0.0, 3.0), hooks=[_StopSecondAttempt()])
+    assert sol.method_log[0]["status"] == "breakdown" and sol.method_log[1]["status"] == "stopped"
+    assert sol.t_reached == pytest.approx(sol.method_log[0]["t_span"][1]) and sol.t_reached > 1.0
+    assert "stopped by the test" in sol.reason
+    t = sol.tube_t[-1]
+    states = np.array([dop853(_f, p, t, dense=False).y[:, -1] for p in
+                       np.random.default_rng(1).uniform(BOX.lo, BOX.hi, (60, 2))])
+    assert _inside_union(states, sol.tube[-1]).all()
