@@ -276,8 +276,27 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
                       arithmetic, set_order, set_step, model_degree, model_caps, absorb, params_per_state,
                       consistency, hooks, progress, workers, client, chunks, rechunk, start) -> Solution:
     """One method's run: chunked (:mod:`verified.parallel`) or one batch here."""
-    if workers is None and client is None and chunks is None:
-        # None: every core when worthwhile (verified.parallel.auto_workers), else one batch here
+    asked_auto = isinstance(workers, str) and workers == "auto"
+    sol = _one_method_run(ode, x0, t_span, params=params, t_eval=t_eval, order=order, tol=tol,
+                          subdivision=subdivision, h_max=h_max, h_min=h_min, max_steps=max_steps,
+                          max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
+                          wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis,
+                          arithmetic=arithmetic, set_order=set_order, set_step=set_step, model_degree=model_degree,
+                          model_caps=model_caps, absorb=absorb, params_per_state=params_per_state,
+                          consistency=consistency, hooks=hooks, progress=progress, workers=workers, client=client,
+                          chunks=chunks, rechunk=rechunk, start=start)
+    if asked_auto and "backend" not in sol.stats:  # ("auto" that chose this process: said as before)
+        sol.stats.update(chunks=1, workers=1, backend="inprocess")
+    return sol
+
+
+def _one_method_run(ode, x0, t_span, *, params, t_eval, order, tol, subdivision, h_max, h_min, max_steps,
+                    max_width, adaptive, split_ratio, max_boxes, wrap_target, merge_slack, error_basis,
+                    arithmetic, set_order, set_step, model_degree, model_caps, absorb, params_per_state,
+                    consistency, hooks, progress, workers, client, chunks, rechunk, start) -> Solution:
+    if (workers is None or (isinstance(workers, str) and workers == "auto")) and client is None and chunks is None:
+        # None / "auto": every core when worthwhile (verified.parallel.auto_workers), else one
+        # batch here (which, unlike one chunk of a chunked run, can suspend an idle energy test)
         if start is not None:
             workers = 1
         elif auto_workers(ode, x0, subdivision) is None:

@@ -328,6 +328,9 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
     log(f"{status_line(sol)}; {st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")
     if getattr(sol, "method", ""):
         log(f"method: {sol.method}")
+    if st.get("energy_test_off_s"):
+        log(f"energy test: stepped aside for {st['energy_test_off_s']:.3g} s of the run while it pruned "
+            f"nothing ({st.get('energy_test_phases')} phases; verified.energy_cadence)")
     if "invariant_from" in st:
         rates = [float(r) for _, lam in st.get("decay_rates", [])[:1] for r in lam]
         log(f"every time after {st['invariant_from']:g} s proven at once by the closed loop's energy"
