@@ -167,11 +167,8 @@ class EnergyTest(Hook):
         With ``contract="step"``: after a contraction that narrowed nothing, skip the
         next 1, 2, 4, ... steps' contractions, at most this many in a row; any
         narrowing resets the wait. (Skipping a contraction is always sound: it only
-        narrows.) None: 16 on second-order sets, 0 (every step) on doubletons.
-        Measured on second-order sets (``set_order=2, set_step="composition"``): the
-        row's mean-value remainder is wider than what the sets leave to cut, and on the
-        UR5 (q +- 1e-3, T = 1) none of 358 contractions narrowed anything, at 4.9 s of
-        a 64-s run.
+        narrows.) None: 16 on second-order sets, where contractions rarely narrow
+        anything (docs/lab/code_notes.md), 0 (every step) on doubletons.
     check_claim : bool
         True (default): prove and refute a declared ``energy_rate`` (above). False:
         use it as given, unproven and unrefuted (the caller vouches for it: a wrong

@@ -57,10 +57,8 @@ class EnergyClaimWarning(UserWarning):
 
 
 #: the most terms (numerator plus denominator) any intermediate rational function of
-#: :func:`prove_claim` may have before the proof gives up. Measured (2 shared cores):
-#: the shipped proofs stay below 250 (the paper's double pendulum ~100, the 2-link
-#: URDF double pendulum's chain-rule rate 248, 0.3 s); the symbolic planar3 chain
-#: passes 1000 within ~2 s and needs 7255 (107 s) to finish.
+#: :func:`prove_claim` may have before the proof gives up: above the shipped proofs,
+#: below the sizes that take minutes (docs/lab/code_notes.md)
 PROOF_MAX_TERMS = 1000
 
 #: claim graphs with more nodes are not tried (the sympy expressions alone take long)

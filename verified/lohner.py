@@ -76,9 +76,8 @@ class LohnerStepper:
         self.order = int(order)
         self.n = taylor.n
         # absorb: turn the error part into parameters (DoubletonSets.absorb_error) when it
-        # exceeds absorb_ratio of the carried part in some component, up to max_params.
-        # Measured (3-link arm, q +- 1e-6, affine, T = 2): worst ratio 16.97 -> 1.19 at
-        # the same cost.
+        # exceeds absorb_ratio of the carried part in some component, up to max_params:
+        # parameters are carried exactly, a wrapped error box is not (docs/lab/code_notes.md).
         self.absorb = bool(absorb)
         self.absorb_ratio = self.ABSORB_RATIO
         #: the first states, which decide absorbing (None: all); states past them were
@@ -192,8 +191,7 @@ class LohnerStepper:
         error part absorbed into parameters where it has grown to ``absorb_ratio`` of the
         carried part (per batch: all sets or none, so that the batch keeps one parameter
         count), up to ``max_params`` parameters (then the error stays in ``r``).
-        Measured (3-link arm, q +- 1e-4, affine): break-down 0.73 s -> 0.96 s at 8 per
-        state; 1.02 s at 16 with 20 % more cost."""
+        Absorbing lets runs go on longer at little cost (docs/lab/code_notes.md)."""
         m = sets.C.shape[2]
         at_cap = m + self.n > self.max_params
         if at_cap and not (self.merge and hasattr(sets, "merge_params")):

@@ -51,9 +51,7 @@ def scaled_basis(A: np.ndarray, widths: np.ndarray, scale: np.ndarray) -> np.nda
 
     Why: a robot's set is 5-30x wider in qd (rad/s) than in q (rad); an orthonormal
     basis of raw columns mixes a qd-sized range into q when a zonotope is wrapped into
-    a parallelepiped. Measured on the 3-link arm +- 0.01 at 0.5 s, merging all but the
-    6 widest of 72 parameter columns into 6: q3's width x3.0 with the raw basis, x1.20
-    with this one.
+    a parallelepiped; scaling keeps the narrow states narrow (docs/lab/code_notes.md).
     Any invertible basis is sound here: the callers enclose ``B^-1`` rigorously."""
     scale = np.asarray(scale, dtype=float)
     scale = np.where(np.isfinite(scale), scale, 0.0)
@@ -80,8 +78,7 @@ class QRBasis:
         # Lohner's ordering: by the error each column carries. Before any error has
         # accumulated (r = 0, the first step) use the error arriving now instead: the
         # column norms alone can put a parameter's column first and smear the error
-        # across axes. (Adding the arriving error at every step was measured to be
-        # much worse on long horizons: T = 3 ratio 7.2 instead of 1.23.)
+        # across axes. (Not at every step: that is worse on long horizons; docs/lab/code_notes.md.)
         r_w = r.width()
         arriving = np.einsum("bij,bi->bj", np.abs(Q), incoming.width())
         carried = np.where((r_w.sum(axis=1) > 0)[:, None], r_w, arriving) + 1e-300
@@ -274,9 +271,8 @@ class StepControl:
             if validated is not None:
                 # Remainder control: h was chosen from the order-K coefficient over the
                 # hull X, but the Lagrange remainder takes it over the wider a-priori
-                # enclosure E. Over a deep model graph that can be many orders larger
-                # (measured: 7e-4 instead of 1e-10 on a 3-link arm's first step), and a
-                # remainder far above tol wrecks a narrow set for good.
+                # enclosure E. Over a deep model graph that can be many orders larger,
+                # and a remainder far above tol wrecks a narrow set for good.
                 rem = float(np.max(validated[1][:, K, :self.steer].mag())) * h**K
                 if not rem > self.remainder_slack * self.tol or h < self.h_min:
                     return Validated(validated, h, evaluations, rejected)
