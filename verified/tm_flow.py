@@ -42,13 +42,9 @@ Two things keep those bounds from feeding on themselves over a long run:
   is computed, its remainder becomes the coefficient of a symbol of its own
   (:meth:`verified.taylor_model.TaylorModelODE._run`), so the later orders of the
   recursion carry it linearly, with its cancellations, instead of multiplying a
-  radius through every operation of the graph. The remainders of the high orders had
-  grown about 2000x per order on a 4-link chain, and the step-size cut
-  (:meth:`TaylorModelFlowStepper.suggest_step`) held the steps at 1e-4 s where
-  DOP853 takes 1e-2 s. The step bounds those symbols' terms with the rest of the
-  error. Measured (``benchmarks/bench_robots.py`` case 8, star monomials on in both):
-  the 3-link arm +- 1e-3 to T = 2 in 507 steps and 7.5 s instead of 4814 steps and
-  51 s (ratio 1.32 against 1.43); the UR5 to T = 1 in 270 steps instead of about 1070.
+  radius through every operation of the graph. The step bounds those symbols' terms with the
+  rest of the error. Without them the high orders' remainders grow with every order and
+  the step-size cut holds the steps short (docs/lab/code_notes.md).
 * *Star monomials* (``star_cap``, :mod:`verified.taylor_model`): the widest symbols'
   products with every other symbol of the set are kept, not bounded. A set that
   absorbs its error gathers dozens of narrow parameters past the quadratic cap; their
@@ -64,14 +60,8 @@ Two things keep those bounds from feeding on themselves over a long run:
   carried linearly through the rest of the graph (the tube's coefficients, order 0). On a robot the
   remainder of ``qdd`` is born in the bias products, spread over every joint's torque
   and recombined by the mass-matrix solve, where the values cancel and independent
-  radii did not: on the 3-link arm's set at 0.5 s the remainder of ``qdd`` is 5x
-  smaller. The step bounds these symbols' terms with the fresh ones. Measured (degree 3,
-  q0 +- 1e-3 unless said, one-off runs of case 8's settings): the 3-link arm +- 0.01
-  from 0.61 s to 0.96 s, the planar chains n = 5 / 6 / 7 from 0.71 / 0.59 / 0.37 s to
-  0.99 / 0.83 / 0.65 s, the 4-link chain to T = 1 at ratio 1.20 (1.29), the 3-link arm
-  to T = 2 at 1.18 (1.21), the UR5 to T = 1 at 1.12 (1.14); the Panda (0.46 s), the
-  double pendulum from one box (1.71 s) and the pendulum over the top as before
-  (order 0 alone with 64 symbols: ``POOL``).
+  radii did not. The step bounds these symbols' terms with the fresh ones. Robots reach
+  further with them, other systems as before (docs/lab/code_notes.md).
 
 Rigor: the input models enclose the set (every float product's rounding is added
 to the remainder), the model kernel is checked against arb
@@ -115,12 +105,8 @@ QUADRATIC_CAP = 16
 
 #: the caps (quadratic, cubic) for systems of at most ``SMALL_SYSTEM`` states (up to 4
 #: degrees of freedom, plus an appended energy state), where the step's products are
-#: cheap: measured (degree 3, q0 +- 1e-3 unless said): the planar 4-link chain to T = 1 at
-#: ratio 1.29 in 20 s (QUADRATIC_CAP / CUBIC_CAP: break-down at 0.95 s in 18 s), the
-#: 3-link arm to T = 2 at ratio 1.21 (1.35) in 2.5x the time, +- 0.01 to 0.61 s (0.55 s),
-#: the double pendulum from one box to 1.70 s (1.54 s) in 822 steps (1318) and less time.
-#: Above (the 5-link chain: 10 % further at 3x the time; the UR5: the same ratio at 3.7x
-#: the time) the smaller caps stay.
+#: cheap: there larger caps reach further or tighter at moderate cost; above, the
+#: smaller caps stay (docs/lab/code_notes.md)
 SMALL_SYSTEM_CAPS = (32, 16)
 SMALL_SYSTEM = 9
 
@@ -132,9 +118,8 @@ STAR_CAP = 6
 
 #: the Taylor models in which the a-priori test takes ``x_[K]`` over the candidate tube
 #: (:func:`tube_coefficients`): the tube's widest symbols (the step's motion first) with
-#: quadratic monomials, the widest of them cubic ones. Measured on the Panda +- 1e-3
-#: (order 8): ``x_[K]`` over the tube 140x narrower than in affine arithmetic with 8 / 2,
-#: 20x with 4 / 0; without the per-state remainder symbols 4x, and 16 / 6 no better.
+#: quadratic monomials, the widest of them cubic ones: ``x_[K]`` over the tube much
+#: narrower than in affine arithmetic (docs/lab/code_notes.md)
 TUBE_QUADRATIC_CAP = 8
 TUBE_CUBIC_CAP = 2
 
@@ -315,10 +300,8 @@ def tube_coefficients(models, tube: np.ndarray, M: int, mq: int, order: int, par
     caps change only which products are kept. ``pool``: symbols for the remainders born
     inside the graph at order 0 (:meth:`~verified.taylor_model.TaylorModelODE._run`).
 
-    Measured on the Panda +- 1e-3 (order 8, ``benchmarks/bench_robots.py`` case 8):
-    ``x_[8]`` over the tube a median 140x narrower than in affine arithmetic with fresh
-    symbols per order, at about the same cost (0.020 s against 0.022 s per call); the
-    steps to 0.35 s 1.6x longer (138 instead of 216)."""
+    Against fresh symbols per order in affine arithmetic: ``x_[K]`` over the tube much
+    narrower at about the same cost, hence longer steps (docs/lab/code_notes.md)."""
     F = models_to_forms(tube, M, mq)  # (n, B, M + 2)
     n, nb, _ = F.shape
     rem = np.zeros((n, nb, n))
@@ -391,34 +374,24 @@ class TaylorModelFlowStepper(LohnerStepper):
     :class:`verified.taylor_model.TaylorModelODE` of the same graph; ``degree`` (2, 3 or
     4) that of the arithmetic, with ``cubic_cap`` symbols carrying cubic monomials
     (``quadratic_cap`` / ``cubic_cap`` None: ``SMALL_SYSTEM_CAPS`` for at most
-    ``SMALL_SYSTEM`` states, else ``QUADRATIC_CAP`` / ``CUBIC_CAP``; the measurements are
-    at those constants)
-    (measured on the UR5 +- 1e-3 to T = 1, absorbing at 10 %: ratio 2.68 / 2.69 / 2.68
-    with 6 / 8 / 10, at 1.0 / 1.4 / 1.8x the time) and, at degree 4, ``quartic_cap``
-    of them quartic ones (3-link arm +- 0.01 with 2 parameters per state: 0.662 s with
-    4, 0.668 s with 9 cubic and 6 quartic at 1.5x the time). The error part is absorbed
+    ``SMALL_SYSTEM`` states, else ``QUADRATIC_CAP`` / ``CUBIC_CAP``; larger caps cost
+    more for next to nothing, docs/lab/code_notes.md) and, at degree 4, ``quartic_cap``
+    of them quartic ones. The error part is absorbed
     into parameters as :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``,
     up to ``max_params``, default 12 per state, then merged).
 
     ``star_cap``: the widest symbols that get star monomials (default ``STAR_CAP`` = 6;
-    0: none). Measured with fresh symbols: the 3-link arm +- 1e-3 reaches T = 2 with 6
-    (ratio 1.32) and breaks down at 1.34 s with 0; the UR5 to T = 1 ratio 1.16 against
-    1.22 at the same cost; chains n = 5 / 7 0.70 / 0.23 s against 0.57 / 0.21 s in
-    60 s. ``fresh_symbols`` (None: ``FRESH_SYMBOLS``, True): see the module docstring.
+    0: none); without them robots break down early (docs/lab/code_notes.md).
+    ``fresh_symbols`` (None: ``FRESH_SYMBOLS``, True): see the module docstring.
     ``pool_cap`` (None: ``POOL`` = 128; 0: off): the symbols the remainders born inside
     the model graph may claim (module docstring; needs ``fresh_symbols``).
 
     ``absorb_ratio`` None (default): 1 % of the carried width for systems of 6 states or
     more, 10 % (as the mean-value step) below. Why early on robots: the error part is a
     box in a basis, wrapped every step, and over a thousand steps of a robot the
-    wrapping, not the injected error, is what grows it (UR5 +- 1e-3: the error part
-    4.5x wider from 0.60 s to 0.66 s while 5e-6 was injected); parameters are carried
-    exactly. Measured on the UR5 to T = 1: ratio 2.59 at 10 %, 1.24 at 1 % (max 1.42) in
-    1.2x the time; 0.1 %, or 1 % with a cap of 4 per state, reach the cap and merge,
-    and break down at 0.93 s / 0.99 s. The 3-link arm +- 1e-3: ratio 1.33 at 1.2 s with
-    1 %, 3.45 at 1.3 s with 10 %. Small systems lose by it: the double pendulum from one
-    box reaches 1.46 / 1.14 / 1.03 s at 10 / 3 / 1 % (every absorbed parameter past the
-    quadratic cap is one more symbol whose products are bounded)."""
+    wrapping, not the injected error, is what grows it; parameters are carried
+    exactly. Small systems lose by it: every absorbed parameter past the quadratic cap
+    is one more symbol whose products are bounded (docs/lab/code_notes.md)."""
 
     def __init__(self, taylor, models, order: int, params=None, error_basis="qr", max_params: int | None = None,
                  quadratic_cap: int | None = None, degree: int = 3, cubic_cap: int | None = None,
@@ -488,9 +461,8 @@ class TaylorModelFlowStepper(LohnerStepper):
         """``ranges`` (B, K + 1, N) intersected with the coefficients over the models'
         affine forms from the box evaluator, where it takes forms (affine arithmetic with
         fresh symbols per order): a degree-2 model's remainder grows with every order of
-        the recursion, the fresh symbols' does not as fast. Measured on the UR5 at
-        0.6 s: the order-8 coefficient over the set's models 1e15-1e16 against ~1e10 at
-        its centre."""
+        the recursion, the fresh symbols' does not as fast. On robots the coefficients
+        over the models are far wider (docs/lab/code_notes.md)."""
         if not hasattr(self.taylor, "series"):
             return ranges
         aff = self.taylor.series(models_to_forms(Xm, M, mq), K, self._params(Xm.shape[1]))
@@ -518,25 +490,14 @@ class TaylorModelFlowStepper(LohnerStepper):
         as ``h -> 0``: with ``e_k`` the remainders of the coefficient models (with fresh
         symbols: those symbols' coefficients), the step adds about ``sum_k e_k h^k``,
         and ``e_k`` grows with ``k`` (a degree-2 model bounds more at every order of
-        the recursion), so long steps add more per second than short ones. Measured on
-        the 3-link arm +- 1e-3 before fresh symbols (affine cross-check of the
-        coefficients on): break-down at 0.71 s without the cut (steps 4x longer), 0.80 / 0.88 / 0.98 s
-        with 4 / 2 / 1.2 (7.8 / 12 / 30 s); UR5 +- 1e-3 to T = 1: ratio at 1 s 45 with
-        1.2 in 95 s, break-down at 0.80 s with 2; 1.05 reached 0.70 s in 200 s with ratios
-        within 15 % of 1.2's. With the pool's symbols (``POOL``) the order-1 remainder
-        fell 5x on robots and 1.2 cut their steps 1.4-2x for nothing; 1.5 is the
-        default since (3-link arm +- 1e-3 to T = 2: 329 steps, ratio 1.18, against 527
-        and 1.18 with 1.2; the 4-link chain to T = 1: 330 against 620 steps, 1.21 both;
-        the UR5: 215 against 276 steps, 1.12 against 1.15). The one loss: the pendulum
-        over the top to T = 10 ends 13 % / 20 % wider in q / qd in 1013 steps instead of
-        1789 (2 gives 914 steps and 14 % / 23 %).
+        the recursion), so long steps add more per second than short ones. The factor
+        trades reach against steps; 1.5 is the default (docs/lab/code_notes.md).
 
         Where the leading remainders are only the floats' rounding (the right-hand side
         is a polynomial the models carry exactly: x' = x^2 at degree 4), the rate is
         taken from the first order ``j`` whose remainder is more than that (``e_k >
         2^-30`` times the coefficient's magnitude), as ``sum_{k >= j} e_k h^(k - j)``
-        against ``e_j``: a rounding-level floor would cut the step to nothing (x' = x^2
-        at degree 4: steps of 4e-6 instead of 0.007-0.03)."""
+        against ``e_j``: a rounding-level floor would cut the step to nothing."""
         h = super().suggest_step(cX, tol, components)
         cur = getattr(self, "_cur", None)
         if cur is None or not np.isfinite(h) or h <= 0:
