@@ -22,8 +22,8 @@ direction, so ``rd(r) <= z <= ru(r)``. This is about 10x cheaper than
 ``np.nextafter`` and gives results at most two ulps wider than the exact ones.
 
 For ``exp log sin cos tan atan`` we rely on the platform libm (glibc on Linux,
-which documents errors of at most 1-2 ulp; measured against python-flint in the
-tests: at most 0.65 ulp). We allow ``|r| 2^-49 + 4*2^-1074`` (8 ulps plus four
+which documents errors of at most 1-2 ulp; the tests check it against python-flint,
+docs/lab/code_notes.md). We allow ``|r| 2^-49 + 4*2^-1074`` (8 ulps plus four
 subnormal steps) on top of the libm result: :func:`rd_t`, :func:`ru_t`.
 """
 

@@ -604,7 +604,7 @@ def _sqrconv(Z, F, u, k, j0, b, m):
 # Every helper below takes forms as first rows z, x, y of A (result z = "Z"), works on
 # lanes 0..cb-1 and touches entries 0..L and m + 1 only.
 # --------------------------------------------------------------------------
-_VEC_MIN = 8  # from this many lanes on, lanes innermost (measured: equal at 8 lanes)
+_VEC_MIN = 8  # from this many lanes on, lanes innermost (break-even, docs/lab/code_notes.md)
 _CHUNK = 32  # lanes per chunk (SIMD width times enough independent work)
 _CHUNK_BYTES = 256 * 2**20  # at most this much working memory per chunk (fewer lanes then)
 
@@ -1423,8 +1423,8 @@ class AffineTaylorODE:
         args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order, m0, self.n_fresh)
         if X.shape[1] == 1 and self.n_fresh == 0:
             # one box, no fresh symbols (the variational series of a single set): nothing
-            # to skip and no lanes to fill, and on big tapes (a 6-dof arm's variational
-            # graph: 28k slots) the per-box reference measured 1.2-1.4x faster. Same bits.
+            # to skip and no lanes to fill, and on big tapes the per-box reference is
+            # faster (docs/lab/code_notes.md). Same bits.
             F, _ = _affine_kernel_reference(*args, sel, sel_base)
             return np.ascontiguousarray(F.transpose(2, 1, 0, 3))
         lanes = _lanes(t, order, X.shape[2] - 2, self.n, X.shape[1])

@@ -428,10 +428,8 @@ class QuadraticStepper(LohnerStepper):
         # absorb_ratio times the carried part in some component, up to max_params
         # parameters (default 4n). Why: an interval error vector is multiplied by |J|
         # every step, and a strongly non-normal J (a robot's Coriolis shear) grows it
-        # ~2x per step on a 3-link arm where the exactly carried part stays within
-        # 1.05x of the true hull; absorbed, it is carried exactly. Measured on the
-        # double pendulum, T = 2, 64 pieces: worst ratio 1.0068 -> 1.0016 at the
-        # same cost; one box (error_basis="auto") 0.77 -> 0.83 s.
+        # fast where the exactly carried part stays near the true hull; absorbed, it
+        # is carried exactly (docs/lab/code_notes.md).
         self.absorb_ratio = float(absorb_ratio)
         self.max_params = 4 * self.n if max_params is None else int(max_params)
         self.second = second
@@ -447,10 +445,8 @@ class QuadraticStepper(LohnerStepper):
         # rest of v (the other columns, q) is paired with the interval Hessian over the
         # hull, and the Jacobian's mean-value form loses the Hessian over the set. Pays
         # where the full second variational system is large, hence only from
-        # directional_min_states states on. Measured (set_order=2): UR5 q +- 1e-3 (p = 6
-        # of n = 12), affine, 60 s: 0.407 s reached against 0.260 s; 3-link arm (n = 6)
-        # +- 0.01 with Taylor models: 0.316 s in 70 s against 0.324 s in 39 s, +- 1e-4
-        # affine: ratio 1.42 in 25 s against 1.39 in 37 s at T = 2.
+        # directional_min_states states on: below, it costs more than it gains
+        # (docs/lab/code_notes.md).
         self.second_directional = second_directional
         self.max_directions = int(max_directions)
         self.directional_min_states = 8

@@ -211,8 +211,8 @@ class DoubletonSets:
         exactly carried ``C r0`` stayed within 1.2x of the true hull. Absorbed, the
         error is carried by the float matrix ``C`` (``C' = mid(J C)``) and wraps no
         more. (Folding the least wide absorbed columns back into ``r`` to bound their
-        number, a zonotope's order reduction, was measured worse than stopping at a
-        cap: 3-link arm, q +- 1e-4, 3.5x the steps for 8 % more reach.)
+        number, a zonotope's order reduction, costs far more steps for little reach:
+        stopping at a cap is better; docs/lab/code_notes.md.)
         """
         nb, n = self.c.shape
         eye = np.broadcast_to(np.eye(n), (nb, n, n)).copy()

@@ -18,16 +18,12 @@ over ``m`` symbols ``eps_i in [-1, 1]``, with the quadratic monomials kept for t
 first ``mq`` symbols (the set's own, widest ones), the cubic ones for the first
 ``m3 <= mq`` (``m3 = 0``: degree 2) and a rigorous remainder radius ``e >= 0``. Kept
 terms are carried exactly, so their cancellations are exact; only the higher orders,
-products with symbols past the caps and rounding are bounded. The degree-2 prototype
-measured 1.02x on ``qdd`` and 1.03-1.05x on ``d qdd / dq`` at ``+- 0.01`` (1.2x and
-1.4-1.9x at ``+- 0.05``). Degree 3 exists because a robot's graph cancels most of its
-cubic terms too: bounded per operation at degree 2, the remainder of the UR5's qdd
-over +- 0.01-0.05 in all states was 100-250x its true non-quadratic part; degree 3
-makes it 13-80x smaller (``test_degree_three_is_tighter_on_the_arm`` shows it on the
-3-link arm). Degree 4 (quartic monomials in the first ``m4 <= m3`` symbols) exists for
-the same reason one order up: sums such as a rotated vector's components cancel their
-fourth-order terms, which degree 3 bounds term by term (3-link arm, sets at 0.1 / 0.2 /
-0.3 s into a run: the remainder of qdd 30x / 11x / 3.4x smaller with 4 quartic symbols).
+products with symbols past the caps and rounding are bounded. Degree 3 exists because
+a robot's graph cancels most of its cubic terms too, which degree 2 bounds per
+operation (``test_degree_three_is_tighter_on_the_arm`` shows it on the 3-link arm);
+degree 4 (quartic monomials in the first ``m4 <= m3`` symbols) for the same reason one
+order up: sums such as a rotated vector's components cancel their fourth-order terms
+(docs/lab/code_notes.md).
 
 *Star* monomials ``eps_i eps_j`` with ``i < ms <= mq`` and ``j >= mq`` (the first ``ms``
 symbols times every symbol past the quadratic block) keep, exactly, the cross terms of
@@ -260,7 +256,7 @@ def _abs_sum(x, lo, hi):
     with the rounding of that product. No other operation may be reassociated: the
     model coefficients' rounding bounds depend on the order of their operations. It
     must not be inlined by numba (``inline="always"``), which would compile it with the
-    caller's flags. Measured: 12x faster than the sequential sum over 1,484 terms."""
+    caller's flags. Reassociation is what makes it fast (docs/lab/code_notes.md)."""
     t = 0.0
     for i in range(lo, hi):
         t += abs(x[i])
@@ -831,13 +827,10 @@ class TaylorModelODE:
     parameters come first in :meth:`verified.sets.DoubletonSets.affine_forms`) get
     quadratic monomials; the others stay linear. Cost per product grows as its square.
     ``cubic_symbols``: at most this many of those also get cubic monomials (0: degree 2);
-    cost per product grows as its cube. Measured on the UR5's right-hand side over a box
-    of +- 0.05 in all 12 states: remainder of qdd 0.08-0.26 at degree 2, 0.01-0.02 at
-    degree 3 (all symbols cubic); at +- 0.01: 5e-4-1.8e-3 against 7e-6-2.2e-5.
+    cost per product grows as its cube, and on robots the remainder falls by an order
+    of magnitude or more from degree 2 (docs/lab/code_notes.md).
     ``quartic_symbols``: at most this many of the cubic ones also get quartic monomials
-    (0: degree 3 or less); cost per product grows as its fourth power. Measured on the
-    3-link arm's right-hand side over +- 0.05 in all 6 states, all cubic: remainder of
-    qdd 0.012-0.033 at degree 3, 7.3-7.9x smaller with 4 quartic symbols, 15-16x with 6.
+    (0: degree 3 or less); cost per product grows as its fourth power.
     ``star_symbols``: at most this many of the quadratic ones also get star monomials
     with every symbol past the quadratic ones (module docstring); cost per product
     grows as its product with the number of symbols.
@@ -904,12 +897,9 @@ class TaylorModelODE:
         linearly and its cancellations are kept. A remainder born in one product and
         spread over many results (a bias force transmitted to every joint's torque, then
         the mass-matrix solve's preconditioned rows) then cancels where the values do,
-        instead of adding up as independent radii. Measured on a 3-link arm's set at
-        0.5 s (69 parameters, 16 of them with quadratic monomials): the remainder of qdd
-        0.24 / 0.69 / 0.97 without, 0.04 / 0.12 / 0.19 with a pool of 64 (the graph has
-        208 slots; 256 gives the same). Sound for the same reason as ``fresh``: a
-        slot's true value is its polynomial plus ``e delta`` for some ``delta`` in
-        ``[-1, 1]``, which every later operation treats as a symbol."""
+        instead of adding up as independent radii (docs/lab/code_notes.md). Sound for the
+        same reason as ``fresh``: a slot's true value is its polynomial plus ``e delta``
+        for some ``delta`` in ``[-1, 1]``, which every later operation treats as a symbol."""
         t = self._tape
         PA, PB, PC = product_table(m, mq, m3, m4, ms, ns)
         L = model_length(m, mq, m3, m4, ms, ns)
