@@ -12,13 +12,11 @@ to less than ``cut`` (default 0.9) of its width in some component reaches past w
 physics allows (wrapping over a long horizon, a fold near a saddle): the hook replaces
 it by the contracted box (a fresh set: centre, diagonal parameters). That loses the
 set's correlations, so it is done only where the cut is worth it; every other set is
-left as it is. Measured on the pendulum over the top (one box, T = 3 / T = 10; 64 x 64
-pieces, T = 3): cut 0.5 widths 36.2 / 21.9, 178 / 14.8, 17.8 / 34.0; cut 0.7 29.5 /
-14.8, 145 / 17.3; cut 0.9 25.7 / 13.0, 126 / 13.0, 15.3 / 15.5. A set whose box holds
-no state of the shell holds no true state and is dropped. The result is bounded and
-sound where the plain run breaks down "too wide": the paper's pendulum over the top
-(one box) keeps ``|qd| <= 6.5`` instead of growing to widths of 5000
-(docs/energy_contraction.md). First- and second-order sets (``set_order=2``, both
+left as it is; 0.9 was the narrowest of the cuts tried (docs/lab/code_notes.md).
+A set whose box holds no state of the shell holds no true state and is dropped. The
+result is bounded and sound where the plain run breaks down "too wide": the paper's
+pendulum over the top (one box) keeps ``|qd| <= 6.5`` instead of growing to widths of
+5000 (docs/energy_contraction.md). First- and second-order sets (``set_order=2``, both
 ``set_step``s) are held alike: a reset set is the contracted box, a fresh set of the
 batch's kind with as many parameters as the others (the new ones 0).
 

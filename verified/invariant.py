@@ -631,8 +631,7 @@ class QuadraticLyapunov:
         ``B`` for the level ``1.001 v1`` lies in ``R``. Then no solution leaves ``B``: while
         in ``R`` its ``V~`` does not rise above ``v1`` (``v1`` above the floor
         ``gamma / lam``), so it stays in the box of level ``v1``, which lies inside ``B``.
-        (Measured on the UR5 PD scene at t = 1 s: the energy box is 0.75 rad wide in the
-        wrist, too wide to certify the outer payload pieces.)"""
+        (On robots the energy box alone can be too wide to certify; docs/lab/code_notes.md.)"""
         candidates = []
         for k in (1, 2, 3):  # the region whole and cut in 8 and 27: the narrowest at the horizon
             c = self.certify(region, k)

@@ -168,22 +168,15 @@ HANDSHAKE_GRACE = 5.0
 #: as Ctrl-C stops it (a scenario batch runs them in threads, where no signal arrives)
 _INTERRUPT = threading.Event()
 #: default chunk size aimed at (boxes): below ~128 boxes per batch the fixed cost of a
-#: step (~2-4 ms of Python per step and chunk) shows; measured on the double pendulum,
-#: T = 1, 256 boxes in 1/2/4/8/16 chunks on one core: 5.7/4.9/5.5/7.0/9.0 s
+#: step (Python per step and chunk) shows (docs/lab/code_notes.md)
 CHUNK_TARGET = 512
 #: at most this many chunks per worker by default (load balance against fixed costs)
 MAX_CHUNKS_PER_WORKER = 4
 #: the default plan never makes a chunk smaller than this (boxes). A step of the batched
 #: solver costs ~2 ms of Python whatever the batch size plus ~0.15 ms per box, so a
-#: small batch split in two pays the fixed cost twice. Double pendulum, one core, one
-#: batch against the same boxes in 2 chunks, CPU: 16 boxes (chunks of 8) 1.38-1.48x,
-#: 32 (of 16) 1.23-1.27x, 128 (of 64) 0.70-0.97x, T = 0.5; 256 boxes, T = 1, in chunks
-#: of 128/64/32/16: 0.86/0.96/1.23/1.58x. From 64 boxes per chunk splitting costs no
-#: extra CPU, so a run split by default is not slower than one batch by more than
-#: Dask's own per-call cost (~10 ms a round trip here) even when the other cores are
-#: busy; 16 pieces in 2 chunks on 2 idle workers cost 1.22-1.29x (T = 2) and 1.7x
-#: (T = 0.5) of one in-process batch. The price: 64-127 boxes are not split (2 chunks of
-#: 32 would be ~0.6x on idle cores; ask with ``chunks=2``). An explicit ``chunks=`` is
+#: small batch split in two pays the fixed cost twice; from 64 boxes per chunk splitting
+#: costs no extra CPU (docs/lab/code_notes.md). The price: 64-127 boxes are not split
+#: (ask with ``chunks=2``). An explicit ``chunks=`` is
 #: not bound by it
 MIN_CHUNK_BOXES = 64
 #: ``workers="auto"`` uses a cluster only from this many boxes on (and >= 2 per worker):
@@ -315,8 +308,7 @@ def _tune_malloc():
     """Once per worker process: let glibc keep freed memory (trim above 256 MB, mmap
     only blocks above 32 MB). Dask's nannies start workers with
     MALLOC_TRIM_THRESHOLD_=65536, which returns every large temporary array to the OS
-    and faults it back in on the next step: measured 1.6 s of CPU against 1.0-1.15 s
-    for 512 double-pendulum boxes to T = 0.5 (the same in this process)."""
+    and faults it back in on the next step, at a clear cost in CPU (docs/lab/code_notes.md)."""
     global _MALLOC_TUNED
     if _MALLOC_TUNED:
         return
