@@ -55,6 +55,13 @@ __all__ = ["solve_auto", "default_rungs", "split_boxes", "COMPOSITION_MAX_STATES
 #: paper's pendulum, Laub-Loomis, x'' = -x - 2 x^2 x') it went further than first-order
 #: sets at a similar or lower cost; its Taylor models grow with the square of the states
 COMPOSITION_MAX_STATES = 24
+#: from this many states on (a 5-DOF robot and up) the composition runs at order
+#: LARGE_ORDER with LARGE_PARAMS_PER_STATE parameters per state: shorter Taylor series
+#: of a deep graph, more of the accumulated error carried exactly (the robots' best
+#: setting in benchmarks/bench_robots.py; docs/lab/auto.md)
+LARGE_STATES = 10
+LARGE_ORDER = 8
+LARGE_PARAMS_PER_STATE = 12
 #: at most this many components are bisected at once when a piece is split (a piece of a
 #: 7-state box bisected in every component would become 128)
 SPLIT_DIMS = 3
@@ -69,6 +76,8 @@ def default_rungs(graph, boxes: Interval, params=None) -> tuple[Method, ...]:
     # (uncertain parameters are carried as constant states)
     p_wide = 0 if params is None else int(np.count_nonzero(np.any(np.atleast_2d(params.width()) > 0, axis=0)))
     if n + p_wide <= COMPOSITION_MAX_STATES:
+        if n + p_wide >= LARGE_STATES:
+            return (Composition(order=LARGE_ORDER, params_per_state=LARGE_PARAMS_PER_STATE),)
         return (Composition(),)
     return (Lohner(arithmetic="affine"), Lohner(arithmetic="affine", error_basis="auto"))
 
