@@ -277,9 +277,8 @@ class PD(Controller):
         ``Kd = 2 zeta w M_nom(q_ref(0))`` (``gains="mass_matrix"``, default: the
         closed loop linearized at the reference is ``e'' + 2 zeta w e' + w^2 e = 0``
         for every joint) or their diagonals (``gains="diagonal"``: independent joint
-        loops, coupled through M).  Measured (UR5, q, qd +- 1e-3, w = 3, T = 5, no
-        payload): "mass_matrix" verified to T = 5 in 9 s with widths 1e-4..4e-4;
-        "diagonal" breaks down at 1.25 s (its enclosure grows from 1 s on).
+        loops, coupled through M); on robots "mass_matrix" verifies much further
+        (docs/lab/code_notes.md).
     q_ref : None (the centre of the initial q box), n numbers / {joint: number}, or a
         :class:`Reference` such as :class:`Quintic`.
     gravity_compensation : add ``g_nom(q)`` of the nominal model.

@@ -26,9 +26,8 @@ import time
 __all__ = ["Progress", "interactive", "kernel_cache_warm", "cold_families", "compile_note", "KERNEL_FAMILIES"]
 
 #: kernel families: the modules of their numba kernels (``@njit(cache=True)``) and about
-#: how long they take to compile from a cold cache on a 2-core machine [s] (measured:
-#: the interval kernels 25-40 s in the paper's pendulum, the affine ones 50 s in its frame
-#: enclosures, the Taylor-model ones 40-70 s in its composition run)
+#: how long they take to compile from a cold cache on a 2-core machine [s], rounded
+#: from runs (docs/lab/code_notes.md)
 KERNEL_FAMILIES = {
     "interval": (("verified._kernels", "verified.taylor", "verified.linalg"), 30),
     "Taylor-model": (("verified.taylor_model", "verified.tm_flow"), 60),

@@ -372,9 +372,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     param_subdivision : {parameter name: pieces} or None
         Split uncertain parameters (e.g. ``{"payload.mass": 4}``) into equal pieces,
         one initial set per piece (a single initial box, no ``subdivision``).
-        Measured (UR5 under PD, payload 1 kg +- 10%, T = 5, 60 s): 1 piece reaches
-        0.96 s (steps ~3 ms: the affine remainder grows with the parameter's width),
-        4 pieces 1.9 s (steps ~30 ms).
+        Narrower pieces allow longer steps and reach further (docs/lab/code_notes.md).
     invariant_after : float or None
         With a PD controller holding a pose: from this time (s) on, end the integration
         as soon as every set lies in a verified invariant box of the closed-loop energy
@@ -389,9 +387,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         ``H`` over the initial box): a set the shell cuts by more than 10 % in some
         component is replaced by its contracted box. Sound for a chain without control inputs and
         without uncertain parameters (its energy never rises: damping only takes it
-        away); anything else is a ValueError. Measured on the paper's pendulum over the
-        top, one box, ``error_basis="auto"``: worst ratio at T = 3 417 -> 1.81, T = 10
-        completed at 3.2 (without: break-down at 4.12 s). Default False: on enclosures
+        away); anything else is a ValueError. It keeps wide enclosures (the pendulum over
+        the top) from breaking down (docs/lab/code_notes.md). Default False: on enclosures
         that stay narrow it only costs time.
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
         an unknown keyword raises ``TypeError`` naming ``simulate()``. ``workers``: as in
@@ -427,9 +424,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
                 subdivision = list(subdivision) + [1] * (system.n - len(list(subdivision)))
         params = system.params
         if "arithmetic" not in solver_kwargs and _legacy_method(method, solver_kwargs):
-            # measured: a 2-link arm under computed torque (q, qd +- 1e-3, T = 1): interval
-            # arithmetic breaks down at 0.26 s ("qr") / 0.89 s ("auto"), affine completes
-            # with widths 1e-3..4e-3; the controller doubles the graph's depth
+            # a controller doubles the graph's depth; interval arithmetic breaks down early
+            # where affine completes (docs/lab/code_notes.md)
             solver_kwargs["arithmetic"] = "affine"
     else:
         system, masses = _system_and_chain(model, mode, energy_rate, params)
@@ -453,11 +449,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     if param_subdivision:
         box, ode_params = _split_params(box, ode_params, system, param_subdivision, subdivision)
     if "error_basis" not in solver_kwargs and ode_params is not None and _legacy_method(method, solver_kwargs):
-        # measured: with parameters the "qr" error basis breaks down early (paper URDF
-        # double pendulum, payload mass [0.2, 0.3]: 0.27 s against completed to 0.3 s
-        # with "auto", 3.7x narrower q1; even with point parameters: example-robot-data's
-        # double pendulum, damping 0.05 as a parameter: 0.098 s, as a constant or with
-        # "auto" completed to 0.3 s)
+        # with parameters the "qr" error basis breaks down early, "auto" does not
+        # (docs/lab/code_notes.md)
         solver_kwargs["error_basis"] = "auto"
     if not isinstance(energy_shell, (bool, np.bool_)):
         raise ValueError(f"energy_shell must be True or False, got {energy_shell!r}")
@@ -842,8 +835,8 @@ def _prove_mass_matrix(masses, sol: Solution):
 #: singularity from the width of the set (the centre and corners come first)
 _DIAGNOSIS_SAMPLES = 512
 #: a sampled pivot below this fraction of M's largest diagonal entry counts as a (near)
-#: singular configuration of the model (samples rarely hit the exact one); measured: the
-#: gimbal near q2 = pi/2 gives 2e-11, the UR5 over a box of +-1 rad 5e-3
+#: singular configuration of the model (samples rarely hit the exact one); it lies
+#: between a true singularity's pivots and a wide box's (docs/lab/code_notes.md)
 _NEAR_SINGULAR = 1e-6
 
 

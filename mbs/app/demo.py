@@ -102,8 +102,8 @@ def _run(out, t_end, pieces, samples, log, bar) -> int:
     samples = DEMO["samples"] if samples is None else samples
     x0, kw = settings(pieces)
     # one process: the background warm-up has the second core, and on a first run the
-    # fresh workers of a local cluster would each compile the kernels again (measured on
-    # a clean venv: mode i 202 s on the cluster against 24 s here)
+    # fresh workers of a local cluster would each compile the kernels again
+    # (docs/lab/code_notes.md)
     kw["workers"] = 1
     log(f"Double pendulum of the paper (eq. 22, box 25), x1(0) split into {pieces} pieces "
         f"(error basis {kw.get('error_basis', 'qr')!r}), T = {t_end:g} s,")
