@@ -74,6 +74,27 @@ def _is_plain(x) -> bool:
     return False
 
 
+#: :meth:`NumericModel.acceleration` at one float point runs compiled float code from
+#: this call on (tracing and compiling it costs about as much as 10-50 calls of the
+#: recursion: not worth it for a single call)
+FLOAT_CODE_AFTER = 3
+
+
+def _scalar_floats(q, qd, tau, n: int) -> bool:
+    """Whether q, qd (and tau unless None) are n plain floats each (not arrays of points,
+    intervals, sympy or graph values)."""
+    for v in (q, qd) + (() if tau is None else (tau,)):
+        if isinstance(v, np.ndarray):
+            if v.dtype.kind not in "fiu" or v.shape != (n,):
+                return False
+            continue
+        if not isinstance(v, (list, tuple)) or len(v) != n:
+            return False
+        if not all(isinstance(e, (float, int, np.floating, np.integer)) and not isinstance(e, bool) for e in v):
+            return False
+    return True
+
+
 def _seq(x, n, what):
     if isinstance(x, np.ndarray):
         if x.shape[:1] != (n,):
@@ -306,7 +327,18 @@ class NumericModel:
 
     def acceleration(self, q, qd, tau=None):
         """qdd = M(q)^{-1} (tau - D qd - c(q, qd) - g(q)) (forward dynamics, like
-        Pinocchio ``aba`` with damping added)."""
+        Pinocchio ``aba`` with damping added).
+
+        At one float point (every argument a float per joint), from the third such call
+        on, the same operations run as straight-line float code compiled from their
+        graph (:meth:`float_acceleration`); a point where a pivot of M is not above
+        rounding level runs the recursion, which raises the error that names the joint."""
+        if _scalar_floats(q, qd, tau, self.n):
+            self._float_calls = getattr(self, "_float_calls", 0) + 1
+            if self._float_calls >= FLOAT_CODE_AFTER:
+                qdd = self._compiled_acceleration(q, qd, tau)
+                if qdd is not None:
+                    return qdd
         q = _seq(q, self.n, "q"); qd = _seq(qd, self.n, "qd")
         tt = self._total_tau(qd, tau)
         X = self.joint_transforms(q)
@@ -319,6 +351,41 @@ class NumericModel:
             raise self._singular_error(e, q) from None
         qdd = solve_mass_matrix(M, U, D, rhs, self.linear_solve)
         return _plain_out(qdd, q, qd, tt)
+
+    def float_acceleration(self):
+        """A :class:`verified.float_code.FloatFunction` of ``x = (q, qd, tau)`` (3n) ->
+        ``(qdd, D, diag M)`` (3n): :meth:`acceleration`'s float operations (LDL^T
+        substitution, the pivots ``D`` of M unchecked, M's diagonal for the pivot
+        threshold), traced once into a graph and written as Python code."""
+        if getattr(self, "_float_fn", None) is None:
+            from verified.float_code import compile_float
+            n = self.n
+
+            def fn(x, p):
+                x = list(x)
+                q, qd, tau = x[:n], x[n:2 * n], x[2 * n:]
+                tt = self._total_tau(qd, tau)
+                X = self.joint_transforms(q)
+                b = self._rnea(X, qd, [0] * n)
+                M = self._crba(X)
+                U, D = ldl_factor(M, check=False)
+                qdd = ldl_substitute(U, D, [sub(t, bb) for t, bb in zip(tt, b)])
+                return list(qdd) + list(D) + [M[k][k] for k in range(n)]
+            self._float_fn = compile_float(trace(fn, 3 * n, 0))
+        return self._float_fn
+
+    def _compiled_acceleration(self, q, qd, tau):
+        """qdd at one float point by :meth:`float_acceleration`, or None where a pivot is
+        not above the threshold of :func:`ldl_factor` (or not finite)."""
+        n = self.n
+        x = np.concatenate([np.asarray(q, float).reshape(n), np.asarray(qd, float).reshape(n),
+                            np.zeros(n) if tau is None else np.asarray(tau, float).reshape(n)])
+        out = self.float_acceleration()(x)
+        qdd, D, diag = out[:n], out[n:2 * n], out[2 * n:]
+        tol = PIVOT_TOL * n * np.max(np.abs(diag)) if n else 0.0
+        if not (np.all(np.isfinite(out)) and np.all(D > tol)):
+            return None
+        return qdd
 
     # ------------------------------------------------------------------ singular M
     def mass_matrix_pivots(self, q):
