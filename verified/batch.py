@@ -65,23 +65,22 @@ class VerifiedODE:
         self.arithmetic = check_arithmetic(arithmetic)
         if arithmetic in ("affine", "taylor_model"):
             # fresh symbols for the errors of the solution's own coefficients only: for
-            # the variational series they cost 2.5x and changed nothing measurable
+            # the variational series they cost more and change nothing (docs/lab/code_notes.md)
             self.taylor = AffineTaylorODE(graph)
             if arithmetic == "affine":
                 self.variational = AffineTaylorODE(variational_graph(graph), fresh_symbols=0)
                 if self.variational._tape.op.size >= self.DEEP_TAPE:
                     # fresh symbols for the errors of the slots that create the most error
                     # in the Jacobian (AffineTaylorODE fresh_slots; one set at a time):
-                    # UR5 PD payload scene, one payload piece, to T = 2 at the same CPU
-                    # time, final widths 2-5x narrower; capped runs reach 3.41 s instead
-                    # of 2.56 s. A fixed count, so that an inert extra state (a
-                    # controller's time) changes nothing.
+                    # narrower at the same cost on deep robot graphs (docs/lab/code_notes.md).
+                    # A fixed count, so that an inert extra state (a controller's time)
+                    # changes nothing.
                     self.variational.fresh_slots = self.FRESH_SLOTS
             else:
                 # the Jacobian over a set in degree-2 Taylor models (verified.taylor_model):
-                # its spread is what the QR-Lohner error part grows by every step (3-link
-                # arm, q0 +- 0.01: d qdd / dq 1.1x the sampled spread against 2-3.4x
-                # affine). The solution's own coefficients stay affine: with fresh symbols
+                # its spread is what the QR-Lohner error part grows by every step, and
+                # it is tighter than affine (docs/lab/code_notes.md). The solution's own
+                # coefficients stay affine: with fresh symbols
                 # per order they are tighter at high orders than models without.
                 self.variational = TaylorModelODE(variational_graph(graph))
         else:
@@ -201,8 +200,8 @@ def solve_batch(
         prob = VerifiedODE(setup.graph, prob.arithmetic)
         if setup.graph.n_inputs > setup.n_steer and isinstance(error_basis, str):
             # appended states keep a box of their own in the error basis: rotated into the
-            # states' basis, h's error widened the states (docs/energy_contraction.md;
-            # second-order sets too: the UR5 quintic in mode ii, q3 at 2 s 0.141 -> 0.132)
+            # states' basis, h's error widened the states, second-order sets too
+            # (docs/energy_contraction.md, docs/lab/code_notes.md)
             error_basis = BlockBasis(error_basis, setup.n_steer)
     if absorb and appended:
         raise ValueError("absorb=True needs set_order=1, adaptive=False, no consistency test and no "

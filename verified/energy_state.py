@@ -65,8 +65,8 @@ def reset_h(lifted, sets):
     """``(sets, resets)``: ``h`` restarted from ``H`` over the set where ``H_V`` has
     become wider than ``H_H`` (the integrated ``h`` then carries no information and
     only grows; with the unsimplified ``dH/dt`` over wide sets it grew past the
-    solver's width limit and ended the run before the states did: pendulum, T = 3,
-    4 x 4 pieces, break-down at 1.56 s with the test, 1.94 s without). ``resets`` is
+    solver's width limit and ended the run before the states did,
+    docs/lab/code_notes.md). ``resets`` is
     how many sets were restarted; ``sets`` is changed in place (:func:`assign`).
 
     Sound: every true trajectory has ``h(t) = H(x(t))`` (eq. (12) is an identity

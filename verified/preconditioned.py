@@ -1,8 +1,9 @@
 """Linear solves ``M x = b`` written so that interval-type evaluators stay tight.
 
-Plain Gaussian elimination over intervals multiplies widths through every pivot: for a
-3-link arm over a +-0.01 rad box the enclosure of ``qdd = M(q)^-1 b`` is 50-100x the
-true range (cond(M) ~ 234). Interval linear algebra avoids this by preconditioning with
+Plain Gaussian elimination over intervals multiplies widths through every pivot: on a
+robot's ill-conditioned mass matrix over a small box the enclosure of
+``qdd = M(q)^-1 b`` is many times the true range (docs/lab/code_notes.md). Interval
+linear algebra avoids this by preconditioning with
 a point approximation of the inverse (Hansen 1965; Neumaier, *Interval Methods for
 Systems of Equations*, ch. 4; the Krawczyk and Hansen-Bliek methods). For the
 symmetric positive definite mass matrices here, the preconditioner is a congruence:
@@ -209,8 +210,8 @@ def solve(M: Sequence[Sequence], b: Sequence, *, spd: bool = True) -> list:
 
     (A first version used ``(C M)^-1 C b`` with ``C = mid(M)^-1``: as tight near the
     midpoint, but ``C M`` is not symmetric and its leading minors can vanish inside a
-    wide box -- cond(M) ~ 230 on a 3-link arm makes a 0.5% spread of M enough -- which
-    ended runs with 'division by an interval containing zero'.)
+    wide box -- on an ill-conditioned M a small spread is enough, docs/lab/code_notes.md
+    -- which ended runs with 'division by an interval containing zero'.)
 
     Parameters
     ----------

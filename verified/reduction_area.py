@@ -124,8 +124,8 @@ class ReductionArea:
         # t*: the first local maximum of the recorded RA (the largest per-set value)
         # after the previous test; RA(t0) = 0 (H_V(0) is H_H(0)), so the first step can
         # be one too. Tested then: the sets with overestimation (per-set RA > 0) at t*.
-        # (Testing every set at its own maximum tested at almost every step with 256
-        # sets: mode ii of the demo 3x slower, no narrower.)
+        # (Not every set at its own maximum: with many sets that tests at almost every
+        # step, slower and no narrower; docs/lab/code_notes.md.)
         ra_hist, t_hist = self._ra, self._ra_t
         if len(ra_hist) >= 2 and t_hist[-2] > self.last_test_t:
             before = ra_hist[-3] if len(ra_hist) >= 3 and t_hist[-3] > self.last_test_t else 0.0

@@ -122,9 +122,8 @@ def solve(
     max_boxes : adaptive splitting stops (break-down) beyond this many boxes
     merge_slack : with ``adaptive``, merge neighbouring sets when one set covering
         both is at most ``1 + merge_slack`` times as wide as their union's hull
-        (default None: never). Off by default: on the double pendulum merging turned
-        linear parts into wrapped error boxes and made enclosures wider
-        (T = 1, 64 pieces adaptive: worst ratio 1.010 unmerged, 5.9 with slack 0.1).
+        (default None: never). Off by default: merging turns linear parts into wrapped
+        error boxes and makes enclosures wider (docs/lab/code_notes.md).
     consistency : verified.consistency.EnergyTest or None
         Energy (Hamiltonian) consistency test, further constraints and the backward
         test (paper sec. 4): branch and prune at the first local maximum of the
