@@ -12,8 +12,7 @@ Why: a first-order (doubleton) step bounds the curvature of the flow over the se
 ``(J(X) - J(c)) C u``, as an interval and wraps it into ``r`` every step. That term
 is quadratic in the set's size, and once wrapped it is multiplied by the interval
 Jacobian again and again: on robot arms and over the pendulum's top it grows into a
-finite-time blow-up (issue 17: a 3-link arm from q +- 1e-3 breaks down at 0.31 s
-with the set itself within 1.2x of the true hull at 0.2 s). Here the quadratic part
+finite-time blow-up (issue 17; docs/lab/code_notes.md). Here the quadratic part
 of the flow is carried exactly in ``S``; only third-order terms are wrapped. This is
 a Taylor model of order 2 in the initial conditions (Makino & Berz; COSY-VI,
 TaylorModels.jl carry higher orders).
@@ -165,8 +164,7 @@ class QuadraticSets:
         """Interval hull of each set, shape (B, n): ``C u + q(u)`` per parameter as one
         quadratic in ``u_j`` (its exact range: ends and vertex), the cross terms
         ``u_j u_k`` bounded, plus ``c + Q r``. (Bounding ``C u`` and ``q(u)`` apart lost
-        the cancellation between ``a u_j`` and ``s u_j^2``: on x' = x^2 from [0.5, 1.5],
-        2.8 % of the width at t = 0.1.)"""
+        the cancellation between ``a u_j`` and ``s u_j^2``; docs/lab/code_notes.md.)"""
         return _linear_quadratic_range(self.C, self.S, self.r0) + linalg.matvec(self.Q, self.r) + self.c
 
     def affine_forms(self, extra: int = 0, own_symbols: int | None = None) -> np.ndarray:
@@ -256,7 +254,7 @@ class QuadraticSets:
         # the width each parameter gives the first ``steer`` states (None: all): linear,
         # and through the quadratic terms it is in. A state a hook appended (the
         # energy's h, in J) must not decide: with it, the UR5 tracking a quintic in mode
-        # ii merged away what its joints needed (q1 0.025 wide at 2 s against 0.0018)
+        # ii merged away what its joints needed (docs/lab/code_notes.md)
         w = (np.abs(self.C[:, :steer]).sum(axis=1) * self.r0.width()
              + np.einsum("bijk,bk->bj", np.abs(self.S[:, :steer]), mag) * mag)
         w[:, :keep_first] = np.inf
@@ -435,7 +433,7 @@ class QuadraticStepper(LohnerStepper):
         self.second = second
         # an affine evaluator of the second variational equations takes the set's own
         # forms for the Hessian in the Lagrange term (over the hull box, interval
-        # Taylor coefficients of the Hessian were ~100x too wide on a 3-link arm)
+        # Taylor coefficients of the Hessian are far too wide on robots; docs/lab/code_notes.md)
         self.second_over_set = second_over_set
         self.pairs = pair_index(self.n)
         # second_directional(p): an evaluator over the set's forms of the second
@@ -556,7 +554,8 @@ class QuadraticStepper(LohnerStepper):
         J = self.set_jacobian(sets, X.hull(V + sets.c), h)
         # ... and in second-order mean value form, J(x) = DP(c) + H(xi)[x - c]: its spread
         # is |H| |x - c| where the first-order enclosure's compounds through the graph
-        # (3-link arm: the error part grew 2.6x per step with the first alone)
+        # (on robots the error part grew fast per step with the first alone;
+        # docs/lab/code_notes.md)
         # xi - c on [c + v, c + v + w] lies in the hull of V (every v, and 0) and the set - c
         # (r need not hold 0, so c + v itself need not be in the set)
         d = (sets.hull() - sets.c).hull(V)

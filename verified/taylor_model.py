@@ -4,11 +4,10 @@ Affine arithmetic (:mod:`verified.affine_taylor`) carries the first-order depend
 of every intermediate on the set's noise symbols exactly and bounds every product's
 quadratic part by its full range. In a robot's model graph those quadratic parts
 cancel (entries of ``K M K^T`` near 0 at the centre, differences of large torques),
-but their bounds add up: for the 3-link arm over ``q0 +- 0.01`` the enclosure of
-``qdd`` came out 1.8x the sampled range and that of ``d qdd / dq`` 1.9-3.3x (at
-``+- 0.05``: 6.7x and 8-23x), and inside the solver the Jacobian's spread over a set
-was 5-1000x the true one, which made the QR-Lohner error part grow ~10 % per step
-whatever the step size. Here every value is a *Taylor model* of degree 2 (COSY-VI,
+but their bounds add up: on a robot the enclosures of ``qdd`` and ``d qdd / dq`` come
+out several times the sampled range, and inside the solver the Jacobian's spread over
+a set, many times the true one, made the QR-Lohner error part grow every step
+whatever the step size (docs/lab/code_notes.md). Here every value is a *Taylor model* of degree 2 (COSY-VI,
 Flow*, TaylorModels.jl; Makino & Berz 2003)::
 
     x  =  c + sum_i a_i eps_i + sum_{i <= j < mq} q_ij eps_i eps_j
@@ -30,9 +29,9 @@ symbols times every symbol past the quadratic block) keep, exactly, the cross te
 the wide symbols with the many narrow ones a long run accumulates (the error a set
 absorbs into parameters). Bounded per operation instead, those cross terms were linear
 in the narrow symbols' size and, amplified through a deep graph, fed the error they
-came from: on the 3-link arm +- 1e-3 the remainder per step grew from 1e-9 (6
-parameters) to 2e-5 (72) at an unchanged set width, and the run broke down at 1.27 s;
-with every pair of symbols kept it completes T = 2 at 1e-8 per step. The star keeps the
+came from: the remainder per step grew with the number of parameters at an unchanged
+set width and robot runs broke down early; with every pair of symbols kept they
+complete (docs/lab/code_notes.md). The star keeps the
 pairs that matter at ``ms (m - mq)`` monomials instead of ``m^2 / 2`` (or fewer: ``ns``
 symbols past the quadratic ones instead of all). A star monomial
 is off-diagonal (``eps_i eps_j`` in ``[-1, 1]``) and of degree 2: products that would
@@ -294,8 +293,8 @@ def _acc_mul(T, x, y, PA, PB, PC, w):
     ``s`` so far, so the pairs' sum of ``|T_s'|`` is at most ``_MAX_HITS`` (the most
     pairs into one monomial, checked by :func:`product_table`) times ``sum |T_s| + sum
     |q|``. Bounding the rounding from these sums, not term by term, keeps the loops
-    free of sequential float reductions (numba vectorizes them): 2.4x faster on a
-    Panda-sized model (1,484 coefficients, 2,500 pairs)."""
+    free of sequential float reductions (numba vectorizes them), which makes them
+    faster (docs/lab/code_notes.md)."""
     E = T.size - 1
     x0 = x[0]
     y0 = y[0]
@@ -606,7 +605,7 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
     ``F`` (slots, order + 1, B, L) and ``REC`` (slots, B, L) are the caller's work
     arrays, any contents: every entry the loop reads is written first, except the
     orders >= 1 of constant slots, which are zeroed here. (Fresh arrays per call cost
-    the page faults of 70-300 MB on a Panda, a third of the kernel's time.)
+    page faults, a large share of the kernel's time on robots; docs/lab/code_notes.md.)
 
     Returns (n, order + 1, B, L). The loop is the one of
     :func:`verified.affine_taylor._affine_kernel_reference`, with model operations.

@@ -5,7 +5,7 @@ by the Taylor map's derivatives at the centre (second variational equations) and
 bounds the third-order rest by the Hessian's spread over the set,
 ``1/2 (H(U) - H(c))[v, v]``. Over a deep model graph that spread is taken in affine
 or degree-2 Taylor-model arithmetic over the whole set, and it is what stops the
-robots (issue 17: on a 3-link arm at 0.35 s, 33-209x the sampled spread).
+robots (issue 17: many times the sampled spread; docs/lab/code_notes.md).
 
 Here the step is the composition itself, as COSY-VI, Flow* and TaylorModels.jl do
 it: the set is written as a degree-2 Taylor model over its own symbols,
@@ -30,9 +30,9 @@ step's Jacobian acting on the error, a float matrix) carries the error part into
 new basis (Lohner's QR or a plain box, by ``error_basis``), and the rest (remainder,
 cubic terms, quadratic terms in ``delta``, the Lagrange term) is the error the step
 injects. Degree 3 pays because a robot's graph cancels most of its cubic terms:
-bounded operation by operation at degree 2, they made the remainder 100-250x the true
-non-quadratic part of the UR5's qdd over a box of +- 0.01-0.05 (``python
-benchmarks/bench_robots.py --only 8``). No variational equations are integrated and
+bounded operation by operation at degree 2, they made the remainder of a robot's qdd
+many times its true non-quadratic part (docs/lab/code_notes.md). No variational
+equations are integrated and
 no Jacobian or Hessian is enclosed over the set: higher-order effects are bounded
 where they arise, operation by operation, on the set's own symbols.
 
@@ -49,8 +49,7 @@ Two things keep those bounds from feeding on themselves over a long run:
   products with every other symbol of the set are kept, not bounded. A set that
   absorbs its error gathers dozens of narrow parameters past the quadratic cap; their
   cross terms with the wide ones, bounded per operation, fed the error they came from
-  (3-link arm +- 1e-3: the remainder per step 1e-9 with 6 parameters, 2e-5 with 72 at
-  the same width, break-down at 1.27 s; with star monomials T = 2).
+  and ended robot runs early (docs/lab/code_notes.md).
 
 * *Symbols for the remainders born inside the graph* (``pool_cap``, default ``POOL`` =
   128; ``solve(model_caps={"pool": ...})``): at the first ``POOL_ORDERS`` = 3 orders of
@@ -163,8 +162,8 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
     ``steer``: the widths that order the symbols are taken over the first ``steer``
     states only (None: all). A state appended by a hook (the energy test's ``h``, in
     J) would otherwise give its own parameters and its error the monomials the states
-    need: the paper's double pendulum from one box broke down at 1.25 s in mode ii
-    instead of 1.53 s without the test."""
+    need: the paper's double pendulum from one box broke down earlier in mode ii than
+    without the test (docs/lab/code_notes.md)."""
     nb, n = sets.c.shape
     rho = sets.r0.mag()  # r0 within [-rho, rho]: u = rho eps covers it
     reach = np.abs(sets.C) * rho[:, None, :] + np.einsum("bijk,bk->bij", np.abs(sets.S), rho) * rho[:, None, :]
@@ -432,8 +431,8 @@ class TaylorModelFlowStepper(LohnerStepper):
     def begin(self, sets: QuadraticSets) -> None:
         """Called by the driver before each step: the sets' models and their Taylor
         coefficients ``x_[0..K]`` as models, which the step suggestion, the a-priori
-        enclosure and the step itself use (instead of coefficients over the hull box:
-        on a 3-link arm at 0.3 s the order-8 coefficient over the hull was 1e15-1e36)."""
+        enclosure and the step itself use (instead of coefficients over the hull box,
+        which on robots are many orders wider; docs/lab/code_notes.md)."""
         K = self.order
         nb = sets.n_sets
         work = sets.recentred() if self.recentre else sets
@@ -534,13 +533,9 @@ class TaylorModelFlowStepper(LohnerStepper):
 
     #: symbols for the remainders born inside the model graph at the first
     #: ``POOL_ORDERS`` orders of the recursion (see TaylorModelODE._run's ``pool`` and
-    #: the module docstring), and the relative size that claims one. Order 0 alone, 64
-    #: symbols: the 3-link arm +- 0.01 to 0.914 s, chains n = 5 / 6 / 7 to 0.872 /
-    #: 0.667 / 0.454 s; orders 0-2 with 128 (the default): 0.955 s (ratio at 0.9 s 2.05
-    #: against 4.89), 0.990 / 0.826 / 0.647 s, the UR5 at T = 1 1.118 (1.124), the arm
-    #: +- 1e-3 1.176 (1.179), the 4-link chain 1.198 (1.205), at the same cost per step;
-    #: all 8 orders with 256: the arm 0.958 s. The Panda, the one-box double pendulum and
-    #: the pendulum over the top do not move
+    #: the module docstring), and the relative size that claims one. Orders 0-2 with
+    #: 128 reach further on robots than order 0 alone at the same cost per step; more
+    #: orders or symbols gain next to nothing (docs/lab/code_notes.md)
     POOL = 128
     POOL_TOL = 1e-8
     POOL_ORDERS = 3
@@ -551,10 +546,7 @@ class TaylorModelFlowStepper(LohnerStepper):
     #: intersect the coefficients over the set with the affine evaluation over the set's
     #: affine forms (:meth:`_tighter`), one more evaluation per step. It paid before the
     #: models had fresh symbols per coefficient; with them (the default) it changes no
-    #: step: the same steps and widths on the UR5 to T = 1 (226), the Panda to 0.35 s,
-    #: the 3-link arm +- 1e-3 to T = 2 (369) and +- 0.01 (162, the same break-down),
-    #: chain n = 4 (358), at 10-25 % less time; the pendulum over the top to T = 3 the
-    #: same steps, widths within 0.1 %.
+    #: step and costs time (docs/lab/code_notes.md).
     SET_AFFINE_CHECK = False
 
     #: the first a-priori candidate's remainder box: this many times the last step's
@@ -565,14 +557,14 @@ class TaylorModelFlowStepper(LohnerStepper):
     #: last one, the Lagrange term, is used):
     #:
     #: * ``"tube_models"`` (default): :func:`tube_coefficients`, Taylor models made for
-    #:   the tube. Panda +- 1e-3 to 0.35 s: 138 steps in 12.3 s against 216 in 22.9 s
-    #:   with ``"affine"``, the same widths (the step suggestion's cut for x_[K] over the
-    #:   tube, ``_widen``, is what the tighter bound lifts);
+    #:   the tube: fewer steps than ``"affine"`` at the same widths (the step
+    #:   suggestion's cut for x_[K] over the tube, ``_widen``, is what the tighter bound
+    #:   lifts; docs/lab/code_notes.md);
     #: * ``"affine"``: affine arithmetic with fresh symbols per order over the tube's
     #:   affine forms (the box evaluator's ``series``);
     #: * ``"set_models"``: the set's own Taylor models and caps, intersected with
-    #:   ``"affine"`` (UR5 +- 1e-3 to T = 1: the same steps and widths as ``"affine"``
-    #:   in twice the time).
+    #:   ``"affine"`` (the same steps and widths as ``"affine"`` at a higher cost;
+    #:   docs/lab/code_notes.md).
     APRIORI = "tube_models"
 
     def apriori(self, X: Interval, cX: Interval, h: float, tries: int = 4):
@@ -621,9 +613,9 @@ class TaylorModelFlowStepper(LohnerStepper):
         widen = getattr(self, "_widen", None)
         if widen is not None and widen.shape[0] == cX.shape[2]:
             # x_[K] over the tube is wider than over the set (by the last step's ratio,
-            # _widen): start there, so that the first candidate validates (UR5: 294 of
-            # 300 a-priori tests took two affine evaluations without it). Any candidate
-            # is sound: the test below decides.
+            # _widen): start there, so that the first candidate validates (without it
+            # nearly every a-priori test took two evaluations; docs/lab/code_notes.md).
+            # Any candidate is sound: the test below decides.
             # (symmetric: over the tube x_[K] may change sign where it kept one over the set)
             g = first.mag() * (widen * self.APRIORI_GUESS)[None, :]
             first = Interval._from_bounds(-g, g).hull(first)
