@@ -18,8 +18,8 @@ IEEE 754 ``+ - * /`` and ``sqrt`` round to nearest, so the exact result ``z`` of
 one such operation with result ``r`` satisfies ``|z - r| <= ulp(r)/2 <= |r| 2^-53``
 (plus half a subnormal step on underflow). :func:`rd` and :func:`ru` move ``r``
 outward by ``|r| 2^-52 + 2^-1074`` which always reaches the next float in that
-direction, so ``rd(r) <= z <= ru(r)``. This is about 10x cheaper than
-``np.nextafter`` and gives results at most two ulps wider than the exact ones.
+direction, so ``rd(r) <= z <= ru(r)``. This is much cheaper than
+``np.nextafter`` (docs/lab/code_notes.md) and gives results at most two ulps wider than the exact ones.
 
 For ``exp log sin cos tan atan`` we rely on the platform libm (glibc on Linux,
 which documents errors of at most 1-2 ulp; the tests check it against python-flint,
@@ -398,10 +398,10 @@ def imax(a, b, c, d):
 # --------------------------------------------------------------------------
 # Array loops: flat endpoint arrays in, results written to flat ``lo, hi``.
 # The caller allocates the outputs with numpy, which asks the kernel for huge
-# pages on big arrays: allocating inside numba made 1e6-element operations 6x
-# slower through page faults.
-# One explicit loop per operation: a shared loop that switches on an op code ran
-# 2.3x slower, and numba cannot cache loops made by a factory function.
+# pages on big arrays: allocating inside numba is slower through page faults.
+# One explicit loop per operation: a shared loop that switches on an op code runs
+# slower, and numba cannot cache loops made by a factory function
+# (docs/lab/code_notes.md).
 # --------------------------------------------------------------------------
 @njit(cache=_CACHE)
 def _add_careful(a, b, c, d, lo, hi):

@@ -3,8 +3,8 @@
 Plain interval evaluation of a deep model graph (a robot's crba/rnea followed by an
 elimination) over a box forgets that every intermediate depends on the same few
 initial values, and through the Taylor recursion that loss compounds order by order:
-for a 3-link arm over a box of radius 1e-4 the 12th coefficient came out 10^7 times
-wider than its value at the centre. Here every coefficient of every tape slot is an
+the high coefficients come out orders of magnitude wider than their values at the
+centre (docs/lab/code_notes.md). Here every coefficient of every tape slot is an
 *affine form* in ``m`` noise symbols ``eps_i in [-1, 1]`` (kv's affine ODE solver;
 Comba & Stolfi's affine arithmetic)::
 
@@ -1335,15 +1335,15 @@ class AffineTaylorODE:
     (:func:`_weighted_attribution`, from a first pass over the same forms) become symbols
     of their own. A lumped error radius propagates through every later operation by
     absolute values; as a symbol it propagates with its signs, and the paths that carry
-    it to an output cancel as the true derivatives do. Why: over a set of the UR5 PD
-    payload scene the Jacobian of a step came out 10x its sampled spread, and nearly half
-    of the widest entry's error (0.13 of 0.29) came from the small errors of ``sin`` and
-    ``cos`` of two joint angles, carried to the output along hundreds of paths; with fresh symbols for 16 / 24 / 32 slots 4.5x / 4.1x / 3.6x at ~1.2-1.4x
-    the cost (degree-2 Taylor models: 2.4x at 2.2x; ``benchmarks/bench_jacobian_spread.py``).
+    it to an output cancel as the true derivatives do. Why: on a robot much of a step's
+    Jacobian error comes from the small errors of a few slots (``sin`` and ``cos`` of
+    joint angles) carried to the output along hundreds of paths, and fresh symbols for
+    them make it several times narrower at a moderate cost
+    (``benchmarks/bench_jacobian_spread.py``, docs/lab/code_notes.md).
     Only for batches of at most ``fresh_slots_batch`` sets (default 1): the fresh symbols
     make every later form as long as the longest, which the batched kernel otherwise
-    avoids; the UR5 PD scene's batch of 4 payload pieces paid 1.9x per step for 1.4x
-    longer steps (1.30 s reached in 60 s against 1.72 s without).
+    avoids, and on a batch the longer steps did not pay for the cost per step
+    (docs/lab/code_notes.md).
     """
 
     def __init__(self, graph, fresh_symbols=None, fresh_slots: int = 0, fresh_slots_batch: int = 1):

@@ -38,7 +38,7 @@ keeps them for every chunk; a worker new to it also takes one warm-up step first
 chunks are ordinary tasks, so Dask's scheduler retries a chunk whose worker died (up to
 ``distributed.scheduler.allowed-failures`` times) and the result is complete. Each
 worker process lets glibc keep freed memory (:func:`_tune_malloc`: Dask's
-``MALLOC_TRIM_THRESHOLD_=65536`` cost 40-60% more CPU per chunk).
+``MALLOC_TRIM_THRESHOLD_=65536`` costs CPU per chunk; docs/lab/code_notes.md).
 
 Re-chunking (``rechunk``; with ``adaptive`` the sets a chunk's splitting creates): a
 chunk runs until it holds ``RECHUNK_GROWTH`` (2) times as many sets as it started with
@@ -180,8 +180,8 @@ MAX_CHUNKS_PER_WORKER = 4
 #: not bound by it
 MIN_CHUNK_BOXES = 64
 #: ``workers="auto"`` uses a cluster only from this many boxes on (and >= 2 per worker):
-#: below, the default plan is one chunk, which runs in this process anyway (it was 32,
-#: with the cluster's start of ~2-3 s once per process the reason)
+#: below, the default plan is one chunk, which runs in this process anyway (the
+#: cluster's start, once per process, is the reason; docs/lab/code_notes.md)
 AUTO_MIN_PIECES = 2 * MIN_CHUNK_BOXES
 #: what ``workers=None`` means: True, every core when worthwhile (:func:`auto_workers`);
 #: False, one in-process batch (the benchmarks that time one core against one core,
@@ -1006,10 +1006,8 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
                                                        else backend != "inprocess")
     if backend == "dask-local" and len(ranges) == 1 and not (rechunk_on and rechunk):
         # one chunk on a local cluster runs on the same cores as this process, only later
-        # (a Dask round trip, ~10 ms here) and, on a first call, after the cluster's
-        # start (1-3 s): run it here. 16 pieces with workers=2 went from 1.14-1.55x (T = 2)
-        # and 1.52-1.66x (T = 0.5) of one in-process batch (bench_parallel overhead, two
-        # runs, other jobs on the machine) to this batch itself
+        # (a Dask round trip) and, on a first call, after the cluster's start: run it
+        # here (docs/lab/code_notes.md)
         backend, n_workers = "inprocess", 1
     cluster_start_s = None
     if backend == "dask-local" and workers is None:

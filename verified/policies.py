@@ -29,7 +29,7 @@ __all__ = ["QRBasis", "AutoBasis", "EnergyAlignedBasis", "BlockBasis", "error_ba
 #: a step is retried smaller when its remainder exceeds this many times ``tol``
 REMAINDER_SLACK = 10.0
 #: a step may grow by this factor to land on an output time instead of stopping just short
-#: of it (UR5 PD scene, output_dt 0.25: one step in five was a sliver of 0.002-0.02 s)
+#: of it (else many steps are slivers; docs/lab/code_notes.md)
 LANDING_STRETCH = 1.2
 
 
@@ -49,7 +49,7 @@ def scaled_basis(A: np.ndarray, widths: np.ndarray, scale: np.ndarray) -> np.nda
     (:func:`orthonormal_basis`) of ``D^-1 A``: a basis that is orthonormal in the state
     space measured in units of ``scale`` (the set's extent per state), not in raw units.
 
-    Why: a robot's set is 5-30x wider in qd (rad/s) than in q (rad); an orthonormal
+    Why: a robot's set is often much wider in qd (rad/s) than in q (rad); an orthonormal
     basis of raw columns mixes a qd-sized range into q when a zonotope is wrapped into
     a parallelepiped; scaling keeps the narrow states narrow (docs/lab/code_notes.md).
     Any invertible basis is sound here: the callers enclose ``B^-1`` rigorously."""
@@ -171,8 +171,8 @@ class BlockBasis:
     leading block's update is exactly the one without the appended states: their
     error (``h``'s can be large: the unsimplified ``dH/dt`` over a wide set) is never
     rotated into the states' basis. (With one QR basis over all states it was, and
-    the energy test's run broke down earlier than the run without it: pendulum,
-    T = 3, 4 x 4 pieces, 1.56 s against 1.94 s.) Sound for any ``inner`` policy: the
+    the energy test's run broke down earlier than the run without it;
+    docs/lab/code_notes.md.) Sound for any ``inner`` policy: the
     trailing part ``J_hx Q_x r_x + J_hh r_h + incoming_h`` is enclosed directly.
     """
 

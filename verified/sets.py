@@ -160,9 +160,8 @@ class DoubletonSets:
         symbol of their own: the first ``n`` (the initial box) and the absorbed ones
         giving the set the most width; the others share ``n`` symbols, one per state
         (their box in state coordinates). What the forms feed (Jacobian enclosures)
-        costs in proportion to the symbols: UR5, 8 parameters per state, 14.9 s ->
-        9.7 s with every absorbed parameter sharing (3-link arm, q +- 1e-4: break-down
-        0.96 s -> 0.92 s that way, hence the widest keep their own).
+        costs in proportion to the symbols; sharing all of them costs reach, hence the
+        widest keep their own (docs/lab/code_notes.md).
         """
         nb, n = self.c.shape
         m = self.C.shape[2]
@@ -206,9 +205,9 @@ class DoubletonSets:
 
         Why: ``r`` is an interval vector multiplied by ``|Q'^-1 J Q|`` every step; in an
         orthonormal basis that wraps at the rate of ``||J||``, not of the flow's growth.
-        A robot's Jacobian is strongly non-normal (3-link arm: ``||J|| = 42`` against
-        eigenvalues of modulus <= 5.5, 1/s), so ``r`` grew ~30 % per step while the
-        exactly carried ``C r0`` stayed within 1.2x of the true hull. Absorbed, the
+        A robot's Jacobian is strongly non-normal (``||J||`` far above its eigenvalues'
+        moduli), so ``r`` grows fast while the exactly carried ``C r0`` stays near the
+        true hull (docs/lab/code_notes.md). Absorbed, the
         error is carried by the float matrix ``C`` (``C' = mid(J C)``) and wraps no
         more. (Folding the least wide absorbed columns back into ``r`` to bound their
         number, a zonotope's order reduction, costs far more steps for little reach:
@@ -248,7 +247,7 @@ class DoubletonSets:
 
         Why not fold them into the error part ``Q r`` instead: ``r`` is multiplied by
         ``|Q'^-1 J Q|`` every step, which for a robot's strongly non-normal Jacobian
-        grows at the rate of ``||J||`` (3-link arm: 42 /s against eigenvalues <= 5.5 /s);
+        grows at the rate of ``||J||``, far above its eigenvalues (docs/lab/code_notes.md);
         a parameter is carried by ``mid(J C)``, whose rounding is all that wraps.
         Returns ``m - count + n`` parameters per set (``count >= n`` to shrink)."""
         nb, n = self.c.shape
