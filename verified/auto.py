@@ -214,7 +214,7 @@ def solve_auto(solve, ode, x0, t_span, *, method: Auto, params=None, t_eval=None
 
 #: how much one split is taken to cut a piece's excess width (ratio - 1) by, at least:
 #: second-order sets leave an excess about quadratic in a piece's width, and halving
-#: the widest components cut it 5-9x on the double pendulum (2.94 -> 1.22 -> 1.04 -> 1.005)
+#: the widest components cut it several-fold on the double pendulum (docs/lab/code_notes.md)
 SPLIT_GAIN = 6.0
 
 
@@ -280,8 +280,8 @@ def _ratio(sol, spread) -> float:
 #: the method that takes over the pieces of an attempt that stalled
 FALLBACK = Lohner(arithmetic="affine", error_basis="auto")
 #: an attempt stalls when its first STALL_MIN_STEPS steps would need more than
-#: STALL_STEPS steps for the whole span (UR5 to T = 1: ~220-860 steps; a 3-link
-#: arm piece to T = 2: ~400)
+#: STALL_STEPS steps for the whole span (far more than the robots' runs take;
+#: docs/lab/code_notes.md)
 STALL_MIN_STEPS = 1000
 STALL_STEPS = 20_000
 STALLED = "stalled"
@@ -359,8 +359,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         error_basis="qr", progress=progress)
     rungs = list(method.rungs or default_rungs(graph, boxes, pv))
     # the method a stalled attempt's pieces go to: first-order sets take long steps where
-    # the composition's remainders keep its steps tiny (x' = -p x, p in [0.5, 0.7]:
-    # 1.25e-4 s steps against one step of 0.3 s)
+    # the composition's remainders keep its steps tiny (docs/lab/code_notes.md)
     rungs.append(FALLBACK)
     fallback = len(rungs) - 1
     for r in rungs:
