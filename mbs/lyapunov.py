@@ -105,8 +105,8 @@ def _potential_difference(loop, nom):
     compensation). Where the nominal model has the plant's kinematics, it is written as the
     potential of the inertia difference, ``-sum_i g . (dm_i p_i(q) + R_i(q) dh_i)``
     (``V`` is linear in the masses and first moments): the two gravity models then cancel
-    term by term instead of being enclosed separately and subtracted (over a box of 0.1 rad
-    that subtraction left an interval Hessian some 10x wider than the payload's own)."""
+    term by term instead of being enclosed separately and subtracted (that subtraction
+    left an interval Hessian much wider than the payload's own; docs/lab/code_notes.md)."""
     if nom is not None and not _same_kinematics(loop, nom):
         return lambda q, p: sub(loop._plant(p).potential_energy(q), nom.potential_energy(q))
     mn, hn = _inertial_data(nom) if nom is not None else (None, None)

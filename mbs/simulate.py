@@ -742,8 +742,8 @@ def _proven(graph, lo: np.ndarray, hi: np.ndarray, depth: int = _BISECTIONS) -> 
         ok[finite] = np.all(D.lo > 0, axis=-1)
     retry = np.flatnonzero(~ok & finite)
     if retry.size:
-        # affine arithmetic keeps the pivots' dependence on q (5-link arm, q +- 1e-3:
-        # interval [-0.29, 0.39], affine > 0), so a run verified with it is not cut back
+        # affine arithmetic keeps the pivots' dependence on q (where an interval pivot
+        # contains 0; docs/lab/code_notes.md), so a run verified with it is not cut back
         D = affine_range(graph, Interval(lo[retry], hi[retry]))
         ok[retry] = np.all(D.lo > 0, axis=-1)
     if depth == 0:

@@ -122,7 +122,8 @@ class _BoundModel(NumericModel):
     exactly, so the bodies keep their constant inertia and only the (small) payload,
     the damping and the torques are divided by ``s``; ``H`` and ``dH/dt`` are
     multiplied by ``s``.  (Scaling M and b by an interval [s] entry by entry would
-    lose their correlation: on an ill-conditioned M, +-1% became a 2x wider qdd.)
+    lose their correlation, which widens qdd on an ill-conditioned M;
+    docs/lab/code_notes.md.)
     :meth:`mass_matrix` then returns ``M / s`` (same LDL^T pivot signs)."""
 
     energy_scale = 1

@@ -120,9 +120,8 @@ def fig_consistency_plane(sol, energy, path, test_index=None, pair=None, grid=16
 
     ``test_index``: which of ``sol.consistency.tests`` to draw; None (default): the
     one that pruned the most sub-boxes, the earliest of those (the paper's figure shows
-    a test that cut something; the first test of a run usually cuts nothing: the
-    pendulum scene's first test, at 0.1 s, keeps all 224 sub-boxes; the one at 1 s
-    prunes 186 of 1764). ``energy``: the Graph x -> [H] (H_H). ``pair``: the two state indices to plot
+    a test that cut something; the first test of a run usually cuts nothing;
+    docs/lab/code_notes.md). ``energy``: the Graph x -> [H] (H_H). ``pair``: the two state indices to plot
     (default: the first position and its rate, (0, n/2)). Shaded: cells of a
     ``grid`` x ``grid`` partition of the tested box where the interval enclosure of
     H over the cell (all other states ranging over the tested box) misses [H_V(t*)]:
