@@ -186,8 +186,8 @@ class EnergyTest(Hook):
         The same for the tests at ``RA``'s peaks (``t*``): after a test that pruned
         nothing, the next 1, 2, 4, ... (at most this many) steps' peaks are passed by;
         a test due by ``test_interval`` always runs. None: 16 on second-order sets, 0 on
-        doubletons. (On the UR5 run above ``RA`` peaked 99 times, every test pruned
-        nothing and each one rolled the run back a step.)
+        doubletons. (On robots tests at the peaks can prune nothing while each rolls
+        the run back a step; docs/lab/code_notes.md.)
     """
 
     def __init__(self, energy: Graph | None = None, energy_rate="derive", constraints=(), *,

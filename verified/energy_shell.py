@@ -14,9 +14,8 @@ it by the contracted box (a fresh set: centre, diagonal parameters). That loses 
 set's correlations, so it is done only where the cut is worth it; every other set is
 left as it is; 0.9 was the narrowest of the cuts tried (docs/lab/code_notes.md).
 A set whose box holds no state of the shell holds no true state and is dropped. The
-result is bounded and sound where the plain run breaks down "too wide": the paper's
-pendulum over the top (one box) keeps ``|qd| <= 6.5`` instead of growing to widths of
-5000 (docs/energy_contraction.md). First- and second-order sets (``set_order=2``, both
+result is bounded and sound where the plain run breaks down "too wide", as on the
+paper's pendulum over the top (docs/energy_contraction.md, docs/lab/code_notes.md). First- and second-order sets (``set_order=2``, both
 ``set_step``s) are held alike: a reset set is the contracted box, a fresh set of the
 batch's kind with as many parameters as the others (the new ones 0).
 
@@ -127,7 +126,7 @@ class EnergyShellHook(Hook):
         hull = sets.hull()
         # only sets whose hull reaches past the shell can be cut: H over the hull (one
         # interval evaluation per set) sorts out the rest before the dearer contraction
-        # (64 x 64 pendulum pieces: 27 of 4096 sets were ever reset)
+        # (few sets are ever reset; docs/lab/code_notes.md)
         H = eval_interval(self.shell.graph, hull[:, :nq2], self.params)[..., 0]
         near = ~(H.hi <= self.hmax)
         if not near.any():

@@ -77,8 +77,8 @@ def _second_order_upper(gy: Graph, grad: Graph, c, A, R) -> np.ndarray:
     """Upper bounds of ``g(c + A r)``, ``r in R``, from Taylor's theorem to second order:
     ``g(c) + grad g(c) A r + 1/2 r^T A^T H A r`` with ``H`` the interval Hessian over
     ``X = c + A hull(R, 0)`` (every segment from ``c``). Near a minimum of ``g``, where the
-    mean-value form's first-order spread dominates, this is the tight one (UR5 PD scene at
-    t = 1 s: 8e-4..1.7e-3 against 0.027 J)."""
+    mean-value form's first-order spread dominates, this is the tight one
+    (docs/lab/code_notes.md)."""
     B, N = c.shape
     m = A.shape[2]
     C = _I(c)
@@ -349,8 +349,8 @@ class QuadraticLyapunov:
         ``W``'s lower bound is the better of its Taylor expansions about ``u_ref``
         (``rho . E + 1/2 E^T H E``) and, given ``centre`` (:meth:`_centre_terms`), about the
         centre ``u_c(p)`` (``l_c + b . D + 1/2 D^T H D``, ``D = U - u_c(P)``): with a centre
-        that tracks the equilibria, ``rho`` is the second-order offset ``-H e*`` (UR5 PD
-        scene: its term ~5e-3 J, the largest part of the slack) while ``b`` nearly vanishes."""
+        that tracks the equilibria, ``rho`` is the second-order offset ``-H e*`` (on robots
+        the largest part of the slack; docs/lab/code_notes.md) while ``b`` nearly vanishes."""
         iu = self.iu
         U = Y[:, iu]
         Yx = self._with_u(Y, np.minimum(U.lo, self.u_ref), np.maximum(U.hi, self.u_ref))
@@ -379,9 +379,8 @@ class QuadraticLyapunov:
     def _mass_over(self, Y: Interval, dA: Interval | None = None) -> Interval:
         """``A`` over each box (B, n, n): its natural enclosure intersected with its
         mean-value form. The natural one of the composite-rigid-body sum carries every
-        product's dependency (UR5 PD scene at 1 s: ``A_11`` +-0.62 of 2.14 over the outer
-        payload piece's box, +-0.23 in mean-value form; with it all 4 pieces certify a
-        decay, 1.24-1.55 /s, against 3 of 4 at 0.82-1.24)."""
+        product's dependency; the mean-value form is narrower on robots and certifies
+        more (docs/lab/code_notes.md)."""
         n, B = self.n, Y.shape[0]
         g = self._y["mass"]
         if dA is None:
@@ -508,9 +507,8 @@ class QuadraticLyapunov:
         ``splits``: the region is also tried cut into ``k^d`` pieces (``k`` in ``splits``,
         ``d <= 3`` positions, those the mass matrix varies most along), each certified with
         the same ``eps``; the rate is the smallest, ``gamma`` the largest, and a state lies
-        in one of the pieces, so the box is the hull of each piece's own bound (UR5 PD
-        scene at 1 s: the outer payload pieces certify only cut in 8; the inner ones go
-        from 0.83 to 1.24 /s).
+        in one of the pieces, so the box is the hull of each piece's own bound (on
+        robots some pieces certify only when cut; docs/lab/code_notes.md).
         """
         if "dissipation" not in self.graphs:
             raise ValueError("no dissipation graph: the decay certificate is not available")
@@ -1051,8 +1049,8 @@ class InvariantHook(Hook):
     def after_step(self, step, sets, run):
         if self.result is not None or step.t < self.t_switch * (1 - 1e-12) - 1e-300:
             return None
-        # after a failed attempt wait 1, 2, 4, ... steps: an attempt costs about a step
-        # (the UR5 PD scene, before the decay was added: 255 attempts, none verified)
+        # after a failed attempt wait 1, 2, 4, ... steps: an attempt costs about a step,
+        # and attempts may fail for many steps in a row (docs/lab/code_notes.md)
         self._wait -= 1
         if self._wait > 0:
             return None

@@ -109,8 +109,8 @@ def congruence_pivots(M: Sequence[Sequence]) -> list:
     invertible ``K``, so ``M`` is positive definite iff every pivot of ``P`` is > 0
     (over intervals: iff every lower bound is > 0 proves it for every matrix in ``M``).
     ``P`` is close to ``diag(D)``, so its pivots stay tight where the pivots of ``M``
-    itself spread through the elimination (a 5-link arm over q +- 1e-3: interval
-    pivots of ``M`` reach below 0 at t = 0). ``K`` is unit lower triangular, hence
+    itself spread through the elimination (on robots below 0 over small boxes;
+    docs/lab/code_notes.md). ``K`` is unit lower triangular, hence
     invertible whatever ``mid`` picks (a singular ``mid(M)`` gives a zero or unbounded
     pivot, so an unbounded ``K`` and no proof -- never a false one)."""
     n = len(M)
