@@ -58,8 +58,8 @@ def kernel_array(a):
     when it is not one already). numba compiles a separate specialization for a
     read-only argument (``np.broadcast_to`` views, and ``np.ascontiguousarray`` keeps them
     read-only): a full test run compiled four versions of ``mul_loop`` and two of the
-    Taylor kernel, each once more on a cold cache. (Not ``np.require``: it costs 2 us per
-    call, and the interval operations call this on every operand.)"""
+    Taylor kernel, each once more on a cold cache. (Not ``np.require``: it costs more per
+    call, and the interval operations call this on every operand; docs/lab/code_notes.md.)"""
     a = np.ascontiguousarray(a, dtype=np.float64)
     return a if a.flags.writeable else a.copy()
 

@@ -60,8 +60,7 @@ def _positive(name: str, value, *, allow_inf: bool = False, or_none: bool = Fals
 
 
 #: upper bounds of the size arguments: beyond them a run does not fail, it runs for hours
-#: or exhausts memory before its first step (``order=10**6`` ran past 120 s on a 2-state
-#: oscillator). Taylor coefficients of order > 60 underflow the step's h^k for any step
+#: or exhausts memory before its first step (docs/lab/code_notes.md). Taylor coefficients of order > 60 underflow the step's h^k for any step
 #: the solver takes; 10^8 steps are days of work; each box holds n x n float matrices.
 MAX_ORDER = 60
 MAX_STEPS = 10**8

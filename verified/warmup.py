@@ -1,9 +1,9 @@
 """Compile the numba kernels once, ahead of use: ``python -m verified.warmup``.
 
 The kernels are compiled on first use and cached on disk (``cache=True``), which costs
-seconds to a minute per family the first time: on the 2-core CI machine about 45 s for
-the affine Taylor kernel, 40 s for the Taylor-model kernels and 20 s for the affine
-reference kernel and the interval loops, none of which the demo's double pendulum uses.
+seconds to a minute per family the first time (the longest: the affine Taylor kernel,
+the Taylor-model kernels, the affine reference kernel and the interval loops, none of
+which the demo's double pendulum uses; docs/lab/code_notes.md).
 This module runs tiny verified integrations that go through every family (interval,
 affine with fresh symbols, Taylor models of degree 2, 3 and 4 with the composition
 step, interval parameters, the rigorous linear solve), so that later runs start warm.

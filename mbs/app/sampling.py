@@ -318,8 +318,8 @@ def plant_acceleration(model):
     Pinocchio's ``aba`` leaves ``model.damping`` out, while the library's models
     include it (the ``D`` of eq. (7)): an oracle that calls ``aba`` with the controller's
     torque alone differs from the model by ``M^-1 D qd``. On the Panda (0.003 N m s/rad
-    per joint) that is 2.5e-4 rad/s^2 in qdd at qd ~ 1e-3, and held at a pose by PD
-    control the sampled qd7 then left a 2e-3-wide enclosure by 5 % at 0.25 s."""
+    per joint) that is 2.5e-4 rad/s^2 in qdd at qd ~ 1e-3, enough to carry samples held at
+    a pose by PD control outside a tight enclosure (docs/lab/code_notes.md)."""
     import pinocchio as pin  # (pinocchio only for the robot plants, not to sample a given rhs)
     data = model.createData()
     damping = np.asarray(model.damping, float).copy()
