@@ -1,10 +1,10 @@
 """A graph as straight-line Python code, for fast float evaluation at one point.
 
-:meth:`verified.ir.Graph.eval_float` walks the graph node by node with numpy arrays:
-about 1 us per node whatever the batch size, which is right for many points at once and
-slow for one (the UR5's right-hand side, 1558 nodes: 1.8 ms a call). :func:`compile_float`
-writes the graph once as a Python function of plain floats, one line per node, which
-runs at the speed of Python float arithmetic.
+:meth:`verified.ir.Graph.eval_float` walks the graph node by node with numpy arrays: a
+numpy call per node whatever the batch size, which is right for many points at once and
+slow for one (times: ``benchmarks/bench_float_model.py``, docs/lab/auto.md).
+:func:`compile_float` writes the graph once as a Python function of plain floats, one
+line per node, which runs at the speed of Python float arithmetic.
 
 Float semantics, not interval semantics: constants are their nearest double (as
 ``eval_float``); ``+ - * /`` are IEEE double operations (correctly rounded, as numpy's);
