@@ -57,12 +57,14 @@ def test_an_idle_test_is_suspended_and_resumed_and_loses_no_state():
     assert _misses(sol) == 0
 
 
+@pytest.mark.slow  # (default-run budget)
 def test_suspend_after_0_keeps_the_test_on():
     sol = _run(suspend_after=0)
     assert sol.status == "completed" and "energy_test_phases" not in sol.stats
     assert _misses(sol) == 0
 
 
+@pytest.mark.slow  # (default-run budget)
 def test_first_order_sets_keep_the_test_on_by_default():
     sol = _run(method=Lohner(error_basis="auto"))
     assert "energy_test_phases" not in sol.stats

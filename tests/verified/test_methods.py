@@ -294,6 +294,7 @@ class _StopSecondAttempt:
         return None
 
 
+@pytest.mark.slow  # (default-run budget)
 def test_a_stop_while_splitting_keeps_the_first_attempts_further_enclosure():
     """The first attempt (one box) breaks down at about 1.8 s; the split attempt is
     stopped at once: the result is the first attempt's enclosure of the whole initial
