@@ -168,11 +168,14 @@ def solve_batch(
     hooks=(),
     progress=None,
     start: Start | None = None,
+    prepared: dict | None = None,
 ) -> Solution:
     """:func:`verified.solver.solve` as one batch in this process (its arguments but the
     chunking ones: ``workers``, ``client``, ``chunks``, ``rechunk``; see its docstring).
     Every argument is checked, in ``solve``'s order, before the tapes are built and before
-    any step."""
+    any step. ``prepared``: a dict in which the VerifiedODEs this run builds are kept
+    by graph, for runs that continue each other on the same graphs
+    (:mod:`verified.energy_cadence`); None: built for this run only."""
     wall0 = time.perf_counter()
     # every argument is checked before the tapes are built and before any step
     t0, t1, outs, h_max = check_settings(
@@ -190,14 +193,15 @@ def solve_batch(
     hook_list = ([ProgressHook(progress, t1)] if progress is not None else []) \
         + check_hooks([] if consistency is None else [consistency]) + check_hooks(hooks)
     kind = set_kind(set_order, set_step)
-    setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, kind.sets)
+    setup, prob, param_boxes, boxes = _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, kind.sets,
+                                             prepared)
     if start is not None:
         setup, boxes = _resume(setup, start, boxes, kind, consistency)
     for hook in hook_list:
         setup = hook.before_run(setup) or setup
     appended = setup.graph is not prob.graph
     if appended:  # a hook appended states (the energy test's h)
-        prob = VerifiedODE(setup.graph, prob.arithmetic)
+        prob = _verified_ode(setup.graph, prob.arithmetic, prepared)
         if setup.graph.n_inputs > setup.n_steer and isinstance(error_basis, str):
             # appended states keep a box of their own in the error basis: rotated into the
             # states' basis, h's error widened the states, second-order sets too
@@ -330,7 +334,18 @@ def _unvalidated(stepper, sets, X: Interval, h: float):
     return (bad if bad.any() else None), evaluations
 
 
-def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, sets_type=DoubletonSets):
+def _verified_ode(graph, arithmetic: str, prepared: dict | None) -> "VerifiedODE":
+    """``VerifiedODE(graph, arithmetic)``, kept in ``prepared`` by the graph's
+    fingerprint when that dict is given (building one costs its tapes)."""
+    if prepared is None:
+        return VerifiedODE(graph, arithmetic)
+    key = (graph.fingerprint(), arithmetic)
+    if key not in prepared:
+        prepared[key] = VerifiedODE(graph, arithmetic)
+    return prepared[key]
+
+
+def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, sets_type=DoubletonSets, prepared=None):
     """The checked problem: ``(RunSetup, VerifiedODE, param_boxes, boxes)``. Uncertain
     parameters become constant states after the ODE's (``param_boxes`` (p,): their
     hull over the initial boxes, else None); ``boxes`` (B, N) the initial boxes, the
@@ -345,7 +360,7 @@ def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, sets_type=Double
             raise ValueError(f"arithmetic={arithmetic!r} differs from the VerifiedODE's {ode.arithmetic!r}")
         prob = ode
     else:
-        prob = VerifiedODE(graph, "interval" if arithmetic is None else arithmetic)
+        prob = _verified_ode(graph, "interval" if arithmetic is None else arithmetic, prepared)
     param_boxes = None
     if params is not None and (params.width() > 0).any():
         # Uncertain parameters become constant states, so their influence is carried

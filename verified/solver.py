@@ -319,6 +319,8 @@ def _one_method_run(ode, x0, t_span, *, params, t_eval, order, tol, subdivision,
         n_state = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode).n_inputs
         carried = params.shape[-1] if isinstance(params, Interval) and bool(np.any(params.width() > 0)) else 0
 
+        prepared = {}  # (the phases run on the same two graphs: their tapes are built once)
+
         def run(X, st, test, hks):
             return solve_batch(
                 ode, X, t_span, params=params, t_eval=t_eval, order=order, tol=tol,
@@ -327,7 +329,7 @@ def _one_method_run(ode, x0, t_span, *, params, t_eval, order, tol, subdivision,
                 wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, arithmetic=arithmetic,
                 set_order=set_order, set_step=set_step, model_degree=model_degree, model_caps=model_caps,
                 absorb=absorb, params_per_state=params_per_state, consistency=test, hooks=hks,
-                progress=progress, start=st)
+                progress=progress, start=st, prepared=prepared)
         return solve_with_cadence(run, x0, t_span, consistency, hooks, n_state, n_state + carried,
                                   consistency.test_interval)
     return solve_batch(
