@@ -127,6 +127,16 @@ def dop853(rhs, x0, t_end, rtol=1e-12, atol=1e-12, dense=True, t_eval=None, stri
     return s
 
 
+def radau(rhs, x0, t_end, rtol=1e-12, atol=1e-20, dense=True, strict=True):
+    """scipy's Radau (implicit, for stiff systems such as Robertson's) of x' = rhs(t, x),
+    otherwise as :func:`dop853`."""
+    from scipy.integrate import solve_ivp
+    s = solve_ivp(rhs, (0.0, t_end), x0, method="Radau", rtol=rtol, atol=atol, dense_output=dense)
+    if strict and not s.success:
+        raise RuntimeError(f"oracle: Radau failed: {s.message}")
+    return s
+
+
 def _autonomous(f):
     return lambda t, x: np.asarray(f(x), dtype=float)
 
