@@ -25,6 +25,7 @@ import math
 import time
 from dataclasses import replace
 from fractions import Fraction
+from functools import partial
 
 import numpy as np
 
@@ -772,13 +773,19 @@ class _Run:
             start = self.resumes.get(e)
             if start is None or not dead.any():
                 continue
-            record = _restricted(_until(full, t), dead, self.out_pieces, self.tube_pieces)
-            out.append(Failure(np.flatnonzero(dead), float(t), reason, start, record))
+            out.append(Failure(np.flatnonzero(dead), float(t), reason, start,
+                               partial(_record_of, full, dead, t, self.out_pieces, self.tube_pieces)))
         if full.status == "breakdown" and self.stop_point is not None and book.alive.any():
-            record = _restricted(full, book.alive, self.out_pieces, self.tube_pieces) if book.events else full
-            out.append(Failure(np.flatnonzero(book.alive), float(full.t_reached), full.reason, self.stop_point,
-                               record))
+            alive = book.alive.copy()
+            make = (partial(_restricted, full, alive, self.out_pieces, self.tube_pieces) if book.events
+                    else (lambda: full))
+            out.append(Failure(np.flatnonzero(alive), float(full.t_reached), full.reason, self.stop_point, make))
         return out
+
+
+def _record_of(full: Solution, pieces: np.ndarray, t: float, out_pieces: list, tube_pieces: list) -> Solution:
+    """``full`` up to ``t``, restricted to ``pieces`` (a Failure's record)."""
+    return _restricted(_until(full, t), pieces, out_pieces, tube_pieces)
 
 
 def _until(sol: Solution, T: float) -> Solution:

@@ -128,14 +128,21 @@ class Failure:
         time), in the run's set kind: ``solve(..., start=failure.start)`` continues them.
     record : Solution
         The run restricted to those pieces, up to ``t``: its boxes enclose the solutions
-        from those pieces only.
+        from those pieces only (made when first asked for: a run with many failures
+        pays for the records only where a caller continues them).
     """
 
     pieces: np.ndarray
     t: float
     reason: str
     start: Start
-    record: "Solution"
+    make_record: object = field(repr=False, default=None)  # () -> Solution
+
+    @property
+    def record(self) -> "Solution":
+        if not hasattr(self, "_record"):
+            self._record = self.make_record()
+        return self._record
 
 
 @dataclass
