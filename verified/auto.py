@@ -43,10 +43,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hooks import Hook, StopAfterWall
+from .hooks import Hook, caps_from
 from .interval import Interval, concatenate
 from .methods import Auto, Composition, Lohner, Method
 from .solution import Failure, Solution, Start
+from .time_chain import chain_in_time
 
 __all__ = ["solve_auto", "default_rungs", "split_boxes", "COMPOSITION_MAX_STATES"]
 
@@ -306,17 +307,6 @@ class StallGuard(Hook):
         return None
 
 
-def _attempt_hooks(hooks, started: float) -> list:
-    """The hooks of one attempt: a wall-clock cap (:class:`~verified.hooks.StopAfterWall`)
-    counts from the start of the whole ``auto`` run, not of the attempt."""
-    out = []
-    for h in hooks:
-        if isinstance(h, StopAfterWall):
-            h = StopAfterWall(max(0.0, h.seconds - (time.perf_counter() - started)), h.clock)
-        out.append(h)
-    return out
-
-
 def _one_batch(common: dict) -> dict:
     """``common`` for a run continued from sets (``solve(start=)``: one batch here)."""
     return {**common, "workers": 1, "client": None, "chunks": None, "rechunk": None}
@@ -327,15 +317,6 @@ def _carried(params) -> int:
     if params is None or not isinstance(params, Interval) or not bool(np.any(params.width() > 0)):
         return 0
     return int(params.shape[-1])
-
-
-def _stitched(failure: Failure, start: Start, sol: Solution, outs, t0, n: int) -> Solution:
-    """The failed attempt's record of ``failure``'s pieces up to ``failure.t``, followed
-    by ``sol``, the run continued from ``start`` (those pieces' sets at that time), as one
-    Solution over those pieces (:func:`verified.time_chain.chain_in_time`)."""
-    from .time_chain import chain_in_time
-
-    return chain_in_time([failure.record, sol])
 
 
 def _summary(log) -> str:
@@ -383,12 +364,12 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         if cont is None:
             sol = solve(ode, task.boxes, (t0, t1), method=rung, params=task.params, t_eval=t_eval,
                         consistency=None if consistency is None else copy.deepcopy(consistency),
-                        hooks=_attempt_hooks(hooks, started) + guard, progress=progress, **common)
+                        hooks=caps_from(hooks, started) + guard, progress=progress, **common)
         else:
             # continued from the failed attempt's sets at exactly their time (switch_start)
             start = switch_start(cont, rung)
             sol = solve(ode, start.sets.hull()[:, :n], (t0, t1), method=rung, params=task.params, t_eval=t_eval,
-                        start=start, hooks=_attempt_hooks(hooks, started) + guard, progress=progress,
+                        start=start, hooks=caps_from(hooks, started) + guard, progress=progress,
                         **_one_batch(common))
         entry = dict(method=rung.describe(), pieces=int(task.boxes.shape[0]), splits=task.splits,
                      t_span=(t_from, float(sol.t_reached)), status=sol.status, reason=sol.reason,
@@ -400,7 +381,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
                 and task.splits == 0:
             first = sol  # (the first attempt, on every initial piece)
         if cont is not None and sol.status != "breakdown":
-            sol = _stitched(cont, start, sol, outs, t0, n)
+            sol = chain_in_time([cont.record, sol])
         if sol.status != "breakdown":  # completed, or stopped / interrupted: nothing more is tried
             done.append((task.boxes, sol))
             if sol.status != "completed":
@@ -419,7 +400,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             # a continuation that broke down: its sets mix its pieces, which go back to t0
             # and are split there (below); the failed attempt's record stands for them
             failed, failures = list(range(task.boxes.shape[0])), []
-            sol = _stitched(cont, start, sol, outs, t0, n)
+            sol = chain_in_time([cont.record, sol])
         else:
             failed = [p.index for p in (sol.piece_results or ()) if p.failed]
             if not failed or sol.surviving is None:

@@ -29,7 +29,7 @@ import warnings
 import numpy as np
 
 from .consistency_graphs import EnergyClaimWarning
-from .hooks import Hook, StopAfterWall
+from .hooks import Hook, caps_from
 from .interval import matvec
 from .quadratic import QuadraticSets
 from .sets import DoubletonSets
@@ -94,16 +94,6 @@ def drop_appended(start: Start, n_run: int) -> Start:
     return Start(sets=new, t_exact=start.t_exact, h_limit=start.h_limit, split_scale=None)
 
 
-def _phase_hooks(hooks, started: float) -> list:
-    """A phase's hooks: a wall-clock cap counts from the start of the whole run."""
-    out = []
-    for h in hooks:
-        if isinstance(h, StopAfterWall):
-            h = StopAfterWall(max(0.0, h.seconds - (time.perf_counter() - started)), h.clock)
-        out.append(h)
-    return out
-
-
 def solve_with_cadence(run, x0, t_span, test, hooks, n_state: int, n_run: int, test_interval: float):
     """The run with an energy test that is suspended while idle (module docstring).
     ``run(x0, start, consistency, hooks)`` is one in-process batch run
@@ -115,7 +105,7 @@ def solve_with_cadence(run, x0, t_span, test, hooks, n_state: int, n_run: int, t
     t1 = float(t_span[1])
     template = copy.deepcopy(test)  # (each resumed phase gets a fresh test with the same settings)
     test.can_suspend = True
-    sol = run(x0, None, test, _phase_hooks(hooks, started))
+    sol = run(x0, None, test, caps_from(hooks, started))
     parts = [sol]
     off = FIRST_OFF_TESTS * test_interval
     current = test
@@ -125,7 +115,7 @@ def solve_with_cadence(run, x0, t_span, test, hooks, n_state: int, n_run: int, t
         t_stop = float(stop.t_exact)
         pause = PauseAt(min(t1, t_stop + off))
         X = quiet.sets.hull()[:, :n_state]
-        sol = run(X, quiet, None, _phase_hooks(hooks, started) + [pause])
+        sol = run(X, quiet, None, caps_from(hooks, started) + [pause])
         parts.append(sol)
         if pause.point is None or sol.status != "stopped":
             break
@@ -137,7 +127,7 @@ def solve_with_cadence(run, x0, t_span, test, hooks, n_state: int, n_run: int, t
         X = pause.point.sets.hull()[:, :n_state]
         with warnings.catch_warnings():  # (said once, by the first phase)
             warnings.simplefilter("ignore", EnergyClaimWarning)
-            sol = run(X, pause.point, current, _phase_hooks(hooks, started))
+            sol = run(X, pause.point, current, caps_from(hooks, started))
         parts.append(sol)
         gained = (current.stats.get("pruned_boxes", 0) > 0 or current.stats.get("contraction_ratio_min", 1.0) < 1.0)
         off = FIRST_OFF_TESTS * test_interval if gained else 2 * off

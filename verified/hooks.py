@@ -168,6 +168,19 @@ class StopAfterWall(Hook):
         return None
 
 
+def caps_from(hooks, started: float) -> list:
+    """``hooks`` for one of several runs that make up one (the attempts of ``auto``, the
+    phases of an energy test that steps aside): a wall-clock cap
+    (:class:`StopAfterWall`) counts from ``started`` (``time.perf_counter()`` at the start
+    of the whole), not from the start of this run."""
+    out = []
+    for h in hooks:
+        if isinstance(h, StopAfterWall):
+            h = StopAfterWall(max(0.0, h.seconds - (time.perf_counter() - started)), h.clock)
+        out.append(h)
+    return out
+
+
 class ProgressHook(Hook):
     """Calls ``progress(t, t_end)`` after every accepted step (``solve(progress=...)``)."""
 

@@ -566,8 +566,7 @@ def stitch(items: list, root: int, outs, t0, n: int):
     the tube on the union of the pieces' step times, one box per piece live on each
     interval (the hull of its step's boxes); ``t_reached``/``status``/``reason`` those of
     the earliest worst leaf (a piece not cut; one that never ran counts as interrupted
-    at its start); counters summed over the pieces. (Also :mod:`verified.auto`: a
-    failed attempt's record continued by a stronger method.)"""
+    at its start); counters summed over the pieces."""
     if items[root].sol is None or not items[root].children:
         return items[root].sol  # (not re-chunked: the chunk's own Solution)
     order = _dfs(items, root)

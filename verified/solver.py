@@ -276,24 +276,7 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
                       consistency, hooks, progress, workers, client, chunks, rechunk, start) -> Solution:
     """One method's run: chunked (:mod:`verified.parallel`) or one batch here."""
     asked_auto = isinstance(workers, str) and workers == "auto"
-    sol = _one_method_run(ode, x0, t_span, params=params, t_eval=t_eval, order=order, tol=tol,
-                          subdivision=subdivision, h_max=h_max, h_min=h_min, max_steps=max_steps,
-                          max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
-                          wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis,
-                          arithmetic=arithmetic, set_order=set_order, set_step=set_step, model_degree=model_degree,
-                          model_caps=model_caps, absorb=absorb, params_per_state=params_per_state,
-                          consistency=consistency, hooks=hooks, progress=progress, workers=workers, client=client,
-                          chunks=chunks, rechunk=rechunk, start=start)
-    if asked_auto and "backend" not in sol.stats:  # ("auto" that chose this process: said as before)
-        sol.stats.update(chunks=1, workers=1, backend="inprocess")
-    return sol
-
-
-def _one_method_run(ode, x0, t_span, *, params, t_eval, order, tol, subdivision, h_max, h_min, max_steps,
-                    max_width, adaptive, split_ratio, max_boxes, wrap_target, merge_slack, error_basis,
-                    arithmetic, set_order, set_step, model_degree, model_caps, absorb, params_per_state,
-                    consistency, hooks, progress, workers, client, chunks, rechunk, start) -> Solution:
-    if (workers is None or (isinstance(workers, str) and workers == "auto")) and client is None and chunks is None:
+    if (workers is None or asked_auto) and client is None and chunks is None:
         # None / "auto": every core when worthwhile (verified.parallel.auto_workers), else one
         # batch here (which, unlike one chunk of a chunked run, can suspend an idle energy test)
         if start is not None:
@@ -306,10 +289,15 @@ def _one_method_run(ode, x0, t_span, *, params, t_eval, order, tol, subdivision,
         if start is not None:
             raise ValueError("start= continues one batch: it cannot be combined with workers, client or chunks")
         kw = {k: v for k, v in locals().items()
-              if k not in ("ode", "x0", "t_span", "workers", "client", "chunks", "start", "one_batch")}
+              if k not in ("ode", "x0", "t_span", "workers", "client", "chunks", "start", "one_batch", "asked_auto")}
         return solve_parallel(ode, x0, t_span, workers=workers, client=client, chunks=chunks, **kw)
     if rechunk is not None and not isinstance(rechunk, (bool, np.bool_)):
         raise ValueError(f"rechunk must be None, True or False, got {rechunk!r}")
+    batch = dict(params=params, t_eval=t_eval, order=order, tol=tol, h_max=h_max, h_min=h_min, max_steps=max_steps,
+                 max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
+                 wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, arithmetic=arithmetic,
+                 set_order=set_order, set_step=set_step, model_degree=model_degree, model_caps=model_caps,
+                 absorb=absorb, params_per_state=params_per_state, progress=progress)
     if start is None and getattr(consistency, "can_suspend", None) is not None and (
             params is None or not isinstance(params, Interval) or params.ndim == 1):
         # an energy test that may be suspended while idle (verified.energy_cadence)
@@ -318,24 +306,16 @@ def _one_method_run(ode, x0, t_span, *, params, t_eval, order, tol, subdivision,
 
         n_state = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode).n_inputs
         carried = params.shape[-1] if isinstance(params, Interval) and bool(np.any(params.width() > 0)) else 0
-
         prepared = {}  # (the phases run on the same two graphs: their tapes are built once)
 
         def run(X, st, test, hks):
-            return solve_batch(
-                ode, X, t_span, params=params, t_eval=t_eval, order=order, tol=tol,
-                subdivision=subdivision if st is None else None, h_max=h_max, h_min=h_min, max_steps=max_steps,
-                max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
-                wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, arithmetic=arithmetic,
-                set_order=set_order, set_step=set_step, model_degree=model_degree, model_caps=model_caps,
-                absorb=absorb, params_per_state=params_per_state, consistency=test, hooks=hks,
-                progress=progress, start=st, prepared=prepared)
-        return solve_with_cadence(run, x0, t_span, consistency, hooks, n_state, n_state + carried,
-                                  consistency.test_interval)
-    return solve_batch(
-        ode, x0, t_span, params=params, t_eval=t_eval, order=order, tol=tol, subdivision=subdivision, h_max=h_max,
-        h_min=h_min, max_steps=max_steps, max_width=max_width, adaptive=adaptive, split_ratio=split_ratio,
-        max_boxes=max_boxes, wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis,
-        arithmetic=arithmetic, set_order=set_order, set_step=set_step, model_degree=model_degree,
-        model_caps=model_caps, absorb=absorb, params_per_state=params_per_state, consistency=consistency,
-        hooks=hooks, progress=progress, start=start)
+            return solve_batch(ode, X, t_span, subdivision=subdivision if st is None else None, consistency=test,
+                               hooks=hks, start=st, prepared=prepared, **batch)
+        sol = solve_with_cadence(run, x0, t_span, consistency, hooks, n_state, n_state + carried,
+                                 consistency.test_interval)
+    else:
+        sol = solve_batch(ode, x0, t_span, subdivision=subdivision, consistency=consistency, hooks=hooks,
+                          start=start, **batch)
+    if asked_auto and "backend" not in sol.stats:  # ("auto" that chose this process: said as before)
+        sol.stats.update(chunks=1, workers=1, backend="inprocess")
+    return sol
