@@ -72,6 +72,7 @@ def solve(
     merge_slack: float | None = None,
     consistency=None,
     hooks=(),
+    invariants=(),
     progress=None,
     workers=None,
     client=None,
@@ -137,6 +138,15 @@ def solve(
         by sets enclosing the same true states, roll the step back, or stop the run) and
         on the Solution, in this order after ``progress`` and ``consistency``. For
         example :class:`verified.hooks.StopAfterWall` caps the wall-clock time.
+    invariants : sequence of :class:`verified.conservation.Conserved` /
+        :class:`~verified.conservation.NonIncreasing`
+        Quantities of the ODE that are constant (``Conserved([1, 1, 1])`` for
+        ``x + y + z``, or a graph / callable ``I(x, p)``) or never rise along its
+        solutions. A conserved one is proven (``grad I . f`` identically 0, exactly)
+        before any work, else a ValueError; a non-increasing one is checked on every
+        step (``dI/dt <= 0`` over the step's enclosure). After every step the sets are
+        contracted to the level the initial sets give (:mod:`verified.conservation`,
+        the hook :class:`~verified.conservation.InvariantHook`, run before ``hooks``).
     progress : callable(t, t_end) or None
         Called after every accepted step (for progress bars).
     wrap_target : wrapping control: the next step is shortened when a step injected
@@ -189,6 +199,8 @@ def solve(
     if unknown:
         raise TypeError(f"solve() got an unexpected keyword argument {unknown[0]!r}")
     method, flags = _method_settings(method, ode, start, {k: method_settings.get(k) for k in METHOD_FIELDS})
+    if invariants is not None and not (isinstance(invariants, (tuple, list)) and len(invariants) == 0):
+        hooks = _with_invariants(ode, invariants, hooks)
     if isinstance(method, Auto):
         return solve_auto(
             solve, ode, x0, t_span, method=method, params=params, t_eval=t_eval, subdivision=subdivision,
@@ -210,6 +222,18 @@ def solve(
                             start=start)
     sol.method = method.describe() if method is not None else _legacy_name(flags)
     return sol
+
+
+def _with_invariants(ode, invariants, hooks) -> list:
+    """``hooks`` with the :class:`verified.conservation.InvariantHook` of ``invariants``
+    first (the declarations checked and proven against the ODE here, before any work)."""
+    from .conservation import invariant_hook
+    from .hooks import check_hooks
+    from .solver_args import check_graph
+
+    graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
+    hook = invariant_hook(invariants, graph)
+    return ([hook] if hook is not None else []) + check_hooks(hooks)
 
 
 #: the solver settings of the signature before methods were objects, at their old
