@@ -43,6 +43,7 @@ from verified.consistency import STRATEGIES, EnergyTest
 from verified.contractor import EnergyShell
 from verified.energy_rate import MODEL_RATES, check_energy_rate
 from verified.energy_shell import EnergyShellHook, max_energy
+from verified.graph import Graph
 from verified.hooks import StopAfterWall
 from verified.interval import Interval, _as_interval
 from verified.invariant import InvariantHook
@@ -385,9 +386,14 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         Hold the enclosure inside the energy shell ``H(q, qd) <= hmax``
         (:class:`verified.energy_shell.EnergyShellHook`; ``hmax`` the interval bound of
         ``H`` over the initial box): a set the shell cuts by more than 10 % in some
-        component is replaced by its contracted box. Sound for a chain without control inputs and
-        without uncertain parameters (its energy never rises: damping only takes it
-        away); anything else is a ValueError. It keeps wide enclosures (the pendulum over
+        component is replaced by its contracted box. Sound for a chain without control
+        inputs (its energy never rises: damping only takes it away), also with uncertain
+        parameters (``hmax`` then bounds ``H`` over the parameter box as well, and each
+        set is held with its own parameter columns). On a bare :class:`System` its
+        ``energy`` is the shell: declared ``energy_rate="zero"`` (proven) it is conserved,
+        else non-increasing, checked on every step (the declared rate graph, proven equal to
+        ``grad H . f``, or ``grad H . f`` itself; :mod:`verified.conservation`). A
+        controller, or a bare System without energy, is a ValueError. It keeps wide enclosures (the pendulum over
         the top) from breaking down (docs/lab/code_notes.md). Default False: on enclosures
         that stay narrow it only costs time.
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
@@ -455,7 +461,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     if not isinstance(energy_shell, (bool, np.bool_)):
         raise ValueError(f"energy_shell must be True or False, got {energy_shell!r}")
     if energy_shell:
-        solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [_energy_shell_hook(masses, loop, box)]
+        solver_kwargs["hooks"] = list(solver_kwargs.get("hooks", ())) + [
+            _energy_shell_hook(masses, loop, box, model if isinstance(model, System) else system, ode_params)]
     t_eval = output_times(t0, t_end, output_dt)
     if invariant_after is not None:
         if solver_kwargs.get("client") is None and solver_kwargs.get("chunks") is None and (
@@ -552,18 +559,45 @@ def _invariant_hook(loop, t_switch, t0: float, t_end: float, t_eval, rhs=None):
     return InvariantHook(pd_hold_lyapunov(loop, rhs=rhs), float(t_switch), t_eval, t_end)
 
 
-def _energy_shell_hook(masses, loop, box: Interval):
-    """The EnergyShellHook of a passive chain: M(q) and P(q) of its numeric model,
-    ``hmax`` = the interval bound of ``H = K + P`` over the initial box (sound because
-    ``dH/dt = -qd^T D qd <= 0`` without inputs, eq. (7))."""
+def _energy_shell_hook(masses, loop, box: Interval, system: System | None = None, params=None):
+    """The energy shell's hook (``simulate(energy_shell=True)``).
+
+    A passive chain (no controller; damping >= 0, which :mod:`mbs.uncertain` enforces
+    for uncertain damping): :class:`EnergyShellHook` with M(q) and P(q) of its numeric
+    model, ``hmax`` the interval bound of ``H = K + P`` over the initial box and, with
+    uncertain parameters, over the parameter box too (sound because
+    ``dH/dt = -qd^T D qd <= 0`` without inputs, eq. (7), for every parameter value).
+
+    A bare System with an energy: its ``H`` as a :class:`verified.conservation.NonIncreasing`
+    invariant (the rate its ``energy_rate`` declares, proven, else ``grad H . f``, checked
+    ``<= 0`` on every step) or, with ``energy_rate="zero"``, a proven
+    :class:`~verified.conservation.Conserved` one (:class:`verified.conservation.InvariantHook`)."""
     if loop is not None:
         raise ValueError("energy_shell=True needs a system without control inputs (a controller can add energy)")
     if masses is None:
-        raise ValueError("energy_shell=True needs a chain model (URDF, DH table or a registry model), "
-                         "not a bare System (its M(q) and P(q) are unknown)")
-    if masses.cparams is not None:
-        raise ValueError("energy_shell=True does not take uncertain parameters yet")
-    return EnergyShellHook(*energy_shell_of(masses.num, box))
+        if system is None or system.energy is None:
+            raise ValueError("energy_shell=True on a bare System needs its energy (System(energy=H)); "
+                             "without one it has no shell")
+        from verified.conservation import Conserved, NonIncreasing, invariant_hook
+        rate = system.energy_rate
+        if isinstance(rate, str) and rate == "zero":
+            decl = Conserved(system.energy, name="H")
+        else:
+            decl = NonIncreasing(system.energy, rate=rate if isinstance(rate, Graph) else None, name="H")
+        return invariant_hook([decl], system.rhs)
+    if masses.cparams is not None and masses.cparams.n:
+        cp = masses.cparams
+        if system is not None and tuple(system.rhs.param_names) != tuple(cp.names):
+            raise ValueError(f"energy_shell=True: the ODE's parameters {tuple(system.rhs.param_names)} are not the "
+                             f"chain's {tuple(cp.names)} in order; the shell cannot pair them")
+        P = Interval(np.asarray(cp.lo, float), np.asarray(cp.hi, float))
+        if params is not None and isinstance(params, Interval) and params.ndim == 2 and box.ndim == 2 \
+                and params.shape[0] == box.shape[0]:
+            P = params  # (per initial box, after param_subdivision)
+        hmax = max_energy(cp.energy_graph(), box, P)
+        return EnergyShellHook(EnergyShell(cp.mass_matrix_graph(), cp.potential_graph()), hmax)
+    num = masses.num if masses.cparams is None else masses.cparams.float_model()
+    return EnergyShellHook(*energy_shell_of(num, box))
 
 
 def energy_shell_of(num, box: Interval):

@@ -441,6 +441,25 @@ class ChainParameters:
         return trace(lambda x, p: [self.bind(p).hamiltonian(list(x)[:n], list(x)[n:])], len(names), self.n,
                      input_names=names, param_names=self.names, output_names=["H"])
 
+    def mass_matrix_graph(self):
+        """q, p -> the n * n entries of M(q; p) (row-major; kg m^2), the parameters as
+        PARAMs (as :meth:`NumericModel.mass_matrix_graph`; the energy shell's ``M``)."""
+        n = self.chain.n
+        qn = self._state_names()[:n]
+
+        def fn(q, p):
+            M = self.bind(p).mass_matrix(list(q))
+            return [M[i][j] for i in range(n) for j in range(n)]
+        return trace(fn, n, self.n, input_names=list(qn), param_names=self.names,
+                     output_names=[f"M{i + 1}{j + 1}" for i in range(n) for j in range(n)])
+
+    def potential_graph(self):
+        """q, p -> [P(q; p)] (J), the potential of :meth:`energy_graph`'s ``H``."""
+        n = self.chain.n
+        qn = self._state_names()[:n]
+        return trace(lambda q, p: [self.bind(p).potential_energy(list(q))], n, self.n, input_names=list(qn),
+                     param_names=self.names, output_names=["P"])
+
     def pivot_graph(self):
         """(q, p) -> (D_1, ..., D_n), pivots whose positivity proves M(q; p) positive
         definite (as :meth:`NumericModel.pivot_graph`), with the parameters as *inputs*

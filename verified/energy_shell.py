@@ -78,6 +78,12 @@ class EnergyShellHook(Hook):
             ``cut`` times the set's hull in some component (default 0.9).
         pieces: sub-boxes of ``q`` for the ellipsoid bound (EnergyShell.contract).
         params: parameters of the shell's graphs (fixed floats or intervals), if any.
+            None for a shell with parameters: they are the ODE's own, in its order,
+            taken from the run: the fixed values, or, for uncertain ones carried as
+            states, each set's own parameter columns (the ``p`` states after the ODE's
+            ``n``); the shell then holds the states with ``H(x, p) <= hmax`` for some
+            ``p`` of the set, and ``hmax`` must bound ``H`` over the initial box and
+            every parameter value (:func:`max_energy` with the parameter box).
     """
 
     def __init__(self, shell: EnergyShell, hmax: float, *, cut: float = 0.9, pieces: int = 64, params=None):
@@ -89,6 +95,8 @@ class EnergyShellHook(Hook):
         if not 0.0 < float(cut) <= 1.0:
             raise ValueError(f"cut must be in (0, 1], got {cut!r}")
         self.shell, self.hmax, self.cut, self.pieces, self.params = shell, hmax, float(cut), int(pieces), params
+        self._from_run = params is None and shell.M_graph.n_params > 0
+        self._pcols = None  # the carried parameter columns (from the run), or None
         self.resets = 0  # sets replaced by their contracted box
         self.dropped = 0  # sets outside the shell
 
@@ -100,8 +108,20 @@ class EnergyShellHook(Hook):
         if type(setup.sets) not in _SET_TYPES:
             raise ValueError("the energy shell works on first- and second-order sets (set_order=1 or 2), "
                              f"not on {type(setup.sets).__name__}")
-        boxes = setup.sets.hull()[:, :nq2]
+        if self._from_run:
+            p = self.shell.M_graph.n_params
+            if setup.user_graph.n_params != p:
+                raise ValueError(f"the energy shell takes {p} parameters, the ODE has {setup.user_graph.n_params}: "
+                                 "pass them as params=")
+            if setup.params is not None:
+                P = setup.params if isinstance(setup.params, Interval) else Interval(setup.params)
+                self.params = P if P.ndim == 1 else Interval(P.lo.min(axis=0), P.hi.max(axis=0))
+                self._pcols = None
+            else:
+                self._pcols = slice(setup.n_state, setup.n_state + p)
+        boxes = setup.sets.hull()
         res = self._contract(boxes)
+        boxes = boxes[:, :nq2]
         if res.empty.any():
             raise ValueError(f"an initial box lies outside the energy shell H <= {self.hmax!r}: "
                              "hmax is not an upper bound of the initial energy")
@@ -116,8 +136,15 @@ class EnergyShellHook(Hook):
                              "potential V?)")
         return None
 
-    def _contract(self, boxes: Interval):
-        return self.shell.contract(boxes, self.hmax, params=self.params, pieces=self.pieces)
+    def _params_of(self, hull: Interval):
+        """The shell's parameters for sets with these hulls (B, N): the carried columns,
+        or the fixed ones."""
+        return hull[:, self._pcols] if self._pcols is not None else self.params
+
+    def _contract(self, hull: Interval):
+        """The shell's contraction of the ``(q, qd)`` columns of hulls (B, N)."""
+        nq2 = 2 * self.shell.nq
+        return self.shell.contract(hull[:, :nq2], self.hmax, params=self._params_of(hull), pieces=self.pieces)
 
     def after_step(self, step, sets, run):
         if type(sets) not in _SET_TYPES:
@@ -127,12 +154,12 @@ class EnergyShellHook(Hook):
         # only sets whose hull reaches past the shell can be cut: H over the hull (one
         # interval evaluation per set) sorts out the rest before the dearer contraction
         # (few sets are ever reset; docs/lab/code_notes.md)
-        H = eval_interval(self.shell.graph, hull[:, :nq2], self.params)[..., 0]
+        H = eval_interval(self.shell.graph, hull[:, :nq2], self._params_of(hull))[..., 0]
         near = ~(H.hi <= self.hmax)
         if not near.any():
             return None
         idx_near = np.flatnonzero(near)
-        sub = self._contract(Interval(hull.lo[idx_near, :nq2], hull.hi[idx_near, :nq2]))
+        sub = self._contract(hull[idx_near])
         empty = np.zeros(sets.n_sets, dtype=bool)
         empty[idx_near] = sub.empty
         c_lo, c_hi = hull.lo[:, :nq2].copy(), hull.hi[:, :nq2].copy()

@@ -18,9 +18,10 @@ Where the chunks run:
   on the same cores after a Dask round trip (and, on a first call, the cluster's
   start);
 * on a local Dask cluster (one process per worker, 1 thread each), created on first
-  use and kept for later calls (:func:`local_client`); its workers load the numba
-  caches once when they start (:func:`_warm_kernels`). On POSIX the workers are fresh
-  interpreters (``python -m dask spec``, under a nanny that restarts a worker process
+  use and kept for later calls (:func:`local_client`); each worker loads the kernels a
+  run needs from numba's on-disk cache before that run's first chunk
+  (:func:`_warm_problem`) and compiles none at start (:func:`_prepare_worker`). On
+  POSIX the workers are fresh interpreters (``python -m dask spec``, under a nanny that restarts a worker process
   that dies) with the scheduler in this process, not ``LocalCluster``'s spawned
   processes, which re-run the calling script's top level: a script needs no
   ``if __name__ == "__main__":`` guard (:func:`_start_local_cluster`). So
@@ -147,7 +148,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .graph import trace
 from .hooks import Hook, StopAfterWall
 from .interval import Interval, concatenate, hull, stack
 from .batch import VerifiedODE, solve_batch
@@ -329,21 +329,23 @@ def _prepared(problem: _Problem):
     return ode
 
 
-_WARM = False
+_WORKER_READY = False
 
 
-def _warm_kernels() -> float:
-    """Load (or compile) the numba kernels in this process: a two-step solve of a tiny
-    ODE in both arithmetics. Returns the seconds it took (0: this process was warm)."""
-    global _WARM
-    if _WARM:
-        return 0.0
-    _WARM = True
-    _tune_malloc()
+def _prepare_worker() -> float:
+    """Once per worker process, when it joins a local cluster: the solver's modules
+    imported (unpickling this function did that) and glibc tuned. No kernel is compiled
+    or loaded here: each run's first task on a worker (:func:`_warm_problem`) loads the
+    kernels that run needs from numba's on-disk cache (or, where the machine has never
+    compiled them, compiles them, as the first in-process run would). This used to run
+    a tiny solve in both the interval and the affine arithmetic, which compiled the
+    affine kernels in every worker of a first cluster although a first-order interval
+    run never calls them (docs/lab/parallel.md). Returns the seconds it took."""
+    global _WORKER_READY
     t = time.perf_counter()
-    g = trace(lambda x, p: [x[1], -np.sin(x[0])], 2)
-    for arithmetic in ("interval", "affine"):
-        solve_batch(g, Interval([0.1, 0.0], [0.11, 0.01]), (0.0, 0.02), arithmetic=arithmetic, h_max=0.01)
+    if not _WORKER_READY:
+        _WORKER_READY = True
+        _tune_malloc()
     return time.perf_counter() - t
 
 
@@ -781,7 +783,7 @@ def _start_local_cluster(workers: int):
 
 def local_client(workers: int):
     """A ``distributed.Client`` of a local cluster with ``workers`` processes of one
-    thread each, created on first use (with warm numba caches in every worker) and
+    thread each, created on first use (:func:`_prepare_worker` run in every worker) and
     kept for later calls until :func:`close_local_clients` / exit.
 
     On POSIX the workers are fresh interpreters (:func:`_start_local_cluster`): the
@@ -812,8 +814,8 @@ def local_client(workers: int):
                 "the calling script's top level, so put it under `if __name__ == \"__main__\":`, or pass "
                 "workers=1 to run in this process") from None
         client = Client(cluster, set_as_default=False)
-    client.run(_warm_kernels)
-    client.register_worker_callbacks(_warm_kernels)  # also workers restarted later (a killed worker)
+    client.run(_prepare_worker)
+    client.register_worker_callbacks(_prepare_worker)  # also workers restarted later (a killed worker)
     _LOCAL[workers] = (cluster, client)
     return client
 

@@ -94,7 +94,56 @@ def test_energy_shell_refuses_what_it_cannot_bound():
     with pytest.raises(ValueError, match="energy_shell must be True or False"):
         simulate("pendulum_paper", box, 0.1, mode="i", energy_shell="yes", progress=False)
     bare = System(name="bare", rhs=trace(pd.rhs, 2))
-    with pytest.raises(ValueError, match="chain model"):
+    with pytest.raises(ValueError, match="needs its energy"):
         simulate(bare, box, 0.1, mode="i", energy_shell=True, progress=False)
-    with pytest.raises(ValueError, match="uncertain parameters"):
-        simulate("pendulum_paper", box, 0.1, mode="i", params={"mass_scale": [0.9, 1.1]}, energy_shell=True, progress=False)
+    # (a declared rate is proven before the run: a wrong one is refused)
+    wrong = System(name="bare", rhs=trace(pd.rhs, 2), energy=trace(lambda x, p: [pd.hamiltonian(x)], 2),
+                   energy_rate=trace(lambda x, p: [x[1] ** 2], 2))
+    with pytest.raises(ValueError, match="not proven equal"):
+        simulate(wrong, box, 0.1, mode="i", energy_shell=True, progress=False)
+
+
+@pytest.mark.slow  # (two 2 s runs and 20 DOP853 samples)
+def test_energy_shell_with_uncertain_parameters_holds_the_pendulum_and_stays_sound():
+    """Issue 43 item 3: the shell of a passive chain with uncertain mass and damping
+    (hmax over the parameter box, each set held with its own parameter columns)."""
+    from mbs.app.sampling import dop853
+    lo, hi = pd.initial_box()
+    T = 2.0
+    prm = {"mass_scale": [0.9, 1.1], "damping": [0.0, 0.05]}
+    kw = dict(mode="i", output_dt=0.5, error_basis="auto", max_width=1e6, progress=False, params=prm)
+    held = simulate("pendulum_paper", Interval(lo, hi), T, energy_shell=True, **kw)
+    plain = simulate("pendulum_paper", Interval(lo, hi), T, **kw)
+    assert held.status == "completed" and held.stats["shell_resets"] >= 1
+    assert held.hull[-1].width()[1] < 0.5 * plain.hull[-1].width()[1]
+    rng = np.random.default_rng(7)
+    bad = 0
+    for x in sample_initial_points(lo, hi, 20):
+        s, d = rng.uniform(0.9, 1.1), rng.uniform(0.0, 0.05)
+        # m = s m0 (m0 = l = 1): qdd = -(g / l) sin q - d qd / (m l^2)
+        r = dop853(lambda t, y, s=s, d=d: np.array([y[1], -pd.G / pd.L * np.sin(y[0]) - d * y[1] / (s * pd.M * pd.L ** 2)]),
+                   np.asarray(x, float), T, rtol=1e-12, atol=1e-12)
+        for k, t in enumerate(held.t):
+            B = held.boxes[k]
+            y = r.sol(float(t))
+            bad += not np.any(np.all((B.lo[:, :2] - 1e-9 <= y) & (y <= B.hi[:, :2] + 1e-9), axis=1))
+    assert bad == 0
+
+
+@pytest.mark.slow  # (two 2-3 s runs)
+def test_energy_shell_on_a_bare_system_with_a_declared_energy():
+    """A bare System with H (declared conserved, proven) gets the shell as an invariant;
+    its enclosure matches the chain's over the top of the pendulum (sound: the chain's
+    slow test samples it)."""
+    from mbs.system import System
+    from verified.graph import trace
+    lo, hi = pd.initial_box()
+    H = trace(lambda x, p: [0.5 * pd.M * pd.L ** 2 * x[1] ** 2 + pd.M * pd.G * pd.L * (1 - np.cos(x[0]))], 2)
+    bare = System(name="bare", rhs=trace(lambda x, p: pd.rhs(x), 2), energy=H, energy_rate="zero")
+    kw = dict(mode="i", error_basis="auto", max_width=1e6, progress=False)
+    held = simulate(bare, Interval(lo, hi), 2.0, energy_shell=True, **kw)
+    assert held.status == "completed" and held.stats["invariant_resets"] >= 1
+    lo_h, hi_h = held.stats["invariant_levels"]["'H'"]
+    assert lo_h <= 19.62 and 20.6 <= hi_h
+    chain = simulate("pendulum_paper", Interval(lo, hi), 2.0, energy_shell=True, **kw)
+    assert np.all(held.hull[-1].width() <= 1.5 * chain.hull[-1].width())
