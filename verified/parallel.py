@@ -37,7 +37,9 @@ On Dask the ODE graph is sent once per worker (one small task returns it; each w
 fetches it from a peer when its first chunk needs it, builds the Taylor tapes once and
 keeps them for every chunk; a worker new to it also takes one warm-up step first),
 chunks are ordinary tasks, so Dask's scheduler retries a chunk whose worker died (up to
-``distributed.scheduler.allowed-failures`` times) and the result is complete. Each
+``distributed.scheduler.allowed-failures`` times) and the result is complete; a
+cluster left without any worker for ``NO_WORKERS_TIMEOUT`` seconds ends the run with
+:class:`WorkersLostError` (Dask would wait for ever). Each
 worker process lets glibc keep freed memory (:func:`_tune_malloc`: Dask's
 ``MALLOC_TRIM_THRESHOLD_=65536`` costs CPU per chunk; docs/lab/code_notes.md).
 
@@ -98,7 +100,11 @@ up to the step-size differences):
     (on or off), ``pieces`` (solves run: chunks and pieces cut from them), ``rechunks``
     (chunks or pieces that paused and were cut),
     ``chunk_wall_s`` (each chunk's own solve time), ``setup_s`` (cluster start and
-    graph shipping), ``sent_bytes`` / ``received_bytes`` (pickled sizes per run).
+    graph shipping), ``sent_bytes`` / ``received_bytes`` (pickled sizes per run),
+    ``merge_s`` (stitching and merging the chunks here); on Dask ``warm_s`` (each new
+    worker's first step of this problem: its kernels loaded) and ``timeline`` (per
+    piece run: worker pid, task start and end on the worker, result here; seconds
+    after the call: where the time went, benchmarks/bench_parallel.py).
 ``chunks``
     Per initial chunk: boxes, status, steps, its tube, ...; with re-chunking ``pieces``:
     each piece's parent, start time, sets at its start, status, steps, wall time, worker.
@@ -156,7 +162,8 @@ from .solver_args import _subdivision, check_arithmetic, check_graph, check_para
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "auto_workers", "subprocess_workers_supported", "SchedulerError",
-           "WorkerStartError", "CONNECT_TIMEOUT", "CHUNK_TARGET", "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs"]
+           "WorkerStartError", "WorkersLostError", "NO_WORKERS_TIMEOUT", "CONNECT_TIMEOUT", "CHUNK_TARGET",
+           "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs"]
 
 #: seconds to wait for a scheduler before :class:`SchedulerError`
 CONNECT_TIMEOUT = 10.0
@@ -206,6 +213,16 @@ class SchedulerError(ConnectionError):
 
 class WorkerStartError(RuntimeError):
     """Local Dask workers that could not be started (the message says why and what to do)."""
+
+
+class WorkersLostError(RuntimeError):
+    """Every worker of the Dask cluster left during a run and none came back within
+    :data:`NO_WORKERS_TIMEOUT` seconds (the message names the chunks left)."""
+
+
+#: seconds a run waits for a cluster without any worker before :class:`WorkersLostError`
+#: (Dask itself would keep the chunks waiting for ever: its ``no-workers-timeout`` is off)
+NO_WORKERS_TIMEOUT = 60.0
 
 
 def dask_available() -> bool:
@@ -881,6 +898,14 @@ def _identity(x):
     return x
 
 
+def _worker_count(client) -> int:
+    """Workers connected to ``client``'s scheduler now (-1 when it cannot be asked)."""
+    try:
+        return len(client.nthreads())
+    except Exception:  # noqa: BLE001 - the scheduler may be gone too: not this check's error
+        return -1
+
+
 def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> float:
     """On each worker before the chunks: build the problem's Taylor tapes and take one
     step from one box with the run's settings (first calls of the kernels on this
@@ -914,11 +939,12 @@ def _solve_piece(ode, piece: _Piece, kwargs: dict, extra_hooks=()):
 
 def _run_chunk(problem: _Problem, piece: _Piece, kwargs: dict, topic: str):
     """One piece on a worker (a Dask task): ``(Solution, Start or None)``."""
-    t = time.perf_counter()
+    t, t_unix = time.perf_counter(), time.time()
     ode = _prepared(problem)
     sol, paused = _solve_piece(ode, piece, kwargs, [_Report(topic, piece.family)])
     sol.stats["chunk_task_s"] = time.perf_counter() - t
     sol.stats["worker_pid"] = os.getpid()
+    sol.stats["chunk_span_unix"] = (t_unix, time.time())  # (not summed by the merge: a tuple)
     return sol, paused
 
 
@@ -1075,17 +1101,19 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
                     stats_extra["cluster_start_s"] = time.perf_counter() - setup_t
             if cluster_start_s is not None:
                 stats_extra["cluster_start_s"] = cluster_start_s
-            interrupted, sizes = _run_on_dask(c, graph, arithmetic, pieces, base, consistency, hooks, board)
+            interrupted, sizes = _run_on_dask(c, graph, arithmetic, pieces, base, consistency, hooks, board, t_wall0)
             stats_extra.update(sizes)
         finally:
             if own_client is not None:
                 own_client.close()
         stats_extra["setup_s"] = stats_extra.pop("setup_s", time.perf_counter() - setup_t)
+    t_merge = time.perf_counter()
     results = pieces.families(outs, t0)
     stats_extra["pieces"] = sum(1 for p in pieces.items if p.sol is not None)
     stats_extra["rechunks"] = pieces.cuts
     sol = merge_solutions(results, ranges, boxes[:, :graph.n_inputs], outs, t0,
                           tuple(graph.input_names[:graph.n_inputs]), interrupted=interrupted)
+    stats_extra["merge_s"] = time.perf_counter() - t_merge
     board.emit()
     sol.stats.update(stats_extra)
     sol.stats["wall_s"] = time.perf_counter() - wall0
@@ -1132,10 +1160,15 @@ class _SigintRaises:
 _SHIPPED: dict = {}  # (client id, token) -> (future of the shipped problem, workers warmed)
 
 
-def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, hooks, board):
+def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, hooks, board, t_wall0=None):
     """Run the pieces on ``client``'s cluster: the initial chunks at once, a piece cut
     from a paused one as soon as the paused one's result arrives. Returns
-    ``(interrupted, sizes)``; the Solutions are in ``pieces``."""
+    ``(interrupted, sizes)``; the Solutions are in ``pieces``. ``sizes["timeline"]``:
+    per piece run, its worker's pid and when (s after ``t_wall0``, ``time.time()``) its
+    task started and ended on the worker and its result was here (the worker's clock:
+    comparable on one machine only)."""
+    t_wall0 = time.time() if t_wall0 is None else t_wall0
+    timeline = []
     t_setup = time.perf_counter()
     blob = pickle.dumps(graph)
     problem = _Problem(graph=graph, arithmetic=arithmetic,
@@ -1192,9 +1225,13 @@ def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, 
         out = f.result()  # (a chunk that raised raises here, as before)
         received += len(pickle.dumps(out))
         sol, paused = out
+        a, b = sol.stats.get("chunk_span_unix", (math.nan, math.nan))
+        timeline.append(dict(piece=i, worker_pid=sol.stats.get("worker_pid"), start_s=a - t_wall0, end_s=b - t_wall0,
+                             received_s=time.time() - t_wall0))
         board.update(pieces.items[i].family, sol.t_reached)
         return pieces.done(i, sol, paused)
 
+    last_check, lost_since = time.monotonic(), None
     try:
         with _SigintRaises():
             while running:
@@ -1204,6 +1241,16 @@ def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, 
                     if _INTERRUPT.is_set():
                         raise KeyboardInterrupt
                     board.emit()
+                    now = time.monotonic()
+                    if now - last_check >= 1.0:  # a cluster left without workers: say so, never hang
+                        last_check = now
+                        lost_since = (lost_since or now) if _worker_count(client) == 0 else None
+                        if lost_since is not None and now - lost_since >= NO_WORKERS_TIMEOUT:
+                            client.cancel(list(running.values()))
+                            raise WorkersLostError(
+                                f"every Dask worker left and none joined within {NO_WORKERS_TIMEOUT:g} s; "
+                                f"{len(running)} of {len(pieces.items)} chunks did not finish (start workers "
+                                "for the scheduler, or run with workers=1)")
                     continue
                 for j in take(i):
                     submit(j)
@@ -1220,7 +1267,8 @@ def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, 
             except Exception:  # noqa: BLE001
                 pass
     warm_s = [f.result() if f.status == "finished" else None for f in warm]
-    return interrupted, {"sent_bytes": sent, "received_bytes": received, "setup_s": setup_s, "warm_s": warm_s}
+    return interrupted, {"sent_bytes": sent, "received_bytes": received, "setup_s": setup_s, "warm_s": warm_s,
+                         "timeline": timeline}
 
 
 # ----------------------------------------------------------------------------- merge

@@ -465,6 +465,27 @@ def test_default_plan_and_explicit_chunks_on_a_cluster(ode, box, oracle, single,
     assert two.status == "completed" and two.boxes[-1].shape == (n, 4)
 
 
+@pytest.mark.parametrize("method", ["lohner", "second_order", "composition"])
+def test_chunked_methods_on_dask_equal_one_process(box, client, method):
+    """Issue 42 item 4: first-order, second-order and composition sets run chunked on
+    the cluster's worker processes give the in-process result of the same plan, float
+    for float (the same operations on the same numbers), and a one-chunk plan on the
+    cluster the in-process batch itself."""
+    g = trace(dp.rhs, 4)  # a Graph: method= picks the arithmetic
+    kw = dict(method=method, subdivision=[4, 1, 1, 1], t_eval=[0.05, 0.1])
+    pairs = [(solve(g, box, (0.0, 0.1), workers=1, chunks=2, **kw), solve(g, box, (0.0, 0.1), client=client,
+                                                                        chunks=2, **kw)),
+             (solve(g, box, (0.0, 0.1), workers=1, **kw), solve(g, box, (0.0, 0.1), client=client, chunks=1, **kw))]
+    for here, there in pairs:
+        assert here.stats.get("backend", "inprocess") == "inprocess" and there.stats["backend"] == "dask"
+        assert here.status == there.status == "completed" and here.method == there.method
+        np.testing.assert_array_equal(here.t, there.t)
+        for a, b in zip(here.boxes, there.boxes):
+            np.testing.assert_array_equal(a.lo, b.lo)
+            np.testing.assert_array_equal(a.hi, b.hi)
+    assert pairs[0][1].stats["chunks"] == 2 and os.getpid() not in [c["worker_pid"] for c in pairs[0][1].chunks]
+
+
 def test_simulate_forwards_workers(client):
     """simulate(..., client=) reaches the chunked path, energy test included (mode ii)."""
     from mbs.simulate import simulate
