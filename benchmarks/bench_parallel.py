@@ -4,6 +4,7 @@ overhead, scaling, and a paper estimate for a 64-worker cluster.
     python benchmarks/bench_parallel.py                 # everything (~6 min on 2 cores)
     python benchmarks/bench_parallel.py --only speedup --repeat 2
     python benchmarks/bench_parallel.py --quick         # small sizes (smoke test)
+    python benchmarks/bench_parallel.py --only first,model16 --repeat 2   # issue 42 (~6 min)
 
 Every timing is printed with the load averages of /proc/loadavg at that moment (other
 jobs on the machine distort the ratios: read them next to the load). Sections:
@@ -33,9 +34,29 @@ rechunk   adaptive splitting concentrated in one chunk: 64 pieces of the paper's
 start     cluster start, fresh each time: local_client(2) (worker interpreters started as
           ``python -m dask spec``, what workers=None / "auto" / 2 start) against
           ``LocalCluster(2)`` (spawned workers, the previous local cluster), each until
-          every worker connected and then with the numba caches loaded in every worker
+          every worker connected and then after _prepare_worker ran in every worker
 cluster   the speedup run on both warm local clusters of 2 workers, interleaved:
           local_client against LocalCluster (not in the default list)
+first     issue 42: one fresh Python process per row (numba's on-disk cache warm, the
+          main process's kernels loaded by a small in-process solve first, as a user's
+          script that ran something before), double pendulum, N pieces, T = 2:
+          ``workers=1`` (one in-process batch) against ``workers=W`` (a local cluster of
+          W, started by that call: "first cluster"), then the same call again in the
+          same process ("later cluster"), rows interleaved, --repeat times. Where the
+          time of a cluster row went: cluster start, the first task's start (scheduler,
+          transfer, imports, kernels loaded), the busiest worker's compute, workers idle
+          at the end (imbalance), results arriving after the last chunk ended (transfer),
+          merge. Then a model of 16 workers (see ``model16``)
+model16   the 16-core numbers modelled from measured costs (issue 42 has no 16-core
+          machine here): the same run in-process as 16 chunks one after the other
+          (``workers=1, chunks=16``: each chunk's own wall time is what one of 16
+          workers would compute, alone on its core, and the merge of 16 chunks is
+          timed), plus the cluster start, first-task latency and result latency measured
+          in ``first``. It is a model: no memory-bandwidth, turbo or SMT effects of 16
+          busy cores
+granular  chunk granularity on a warm local cluster of 2 (issue 42 item 2): the speedup run
+          with chunks=2 (the default plan for 1024 boxes), 4 and 8, interleaved --repeat
+          times: wall, workers idle at the end, the workers' busy time in all
 scaling   local clusters of 1, 2, 4 workers (processes, 1 thread each) on the speedup run,
           and from the measured per-chunk costs and message sizes an estimate for 64
           workers and 65,536 pieces
@@ -44,6 +65,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -215,7 +237,7 @@ def section_overhead(ode, box, Ts, repeat, log):
 def section_start(repeat, log, workers=2):
     """Fresh local clusters: local_client (worker interpreters) against LocalCluster
     (spawned workers; this script has the main guard), until every worker connected,
-    then with the numba caches loaded in each (what local_client returns after)."""
+    then after _prepare_worker ran in each (what local_client returns after)."""
     from distributed import Client, LocalCluster
 
     from verified import parallel
@@ -227,7 +249,7 @@ def section_start(repeat, log, workers=2):
         t = time.perf_counter()
         cluster, client = parallel._start_local_cluster(workers)
         t_up = time.perf_counter() - t
-        client.run(parallel._warm_kernels)
+        client.run(parallel._prepare_worker)
         t_warm = time.perf_counter() - t
         client.close()
         cluster.close()
@@ -238,7 +260,7 @@ def section_start(repeat, log, workers=2):
         lcl = Client(lc, set_as_default=False)
         lcl.wait_for_workers(workers)
         l_up = time.perf_counter() - t
-        lcl.run(parallel._warm_kernels)
+        lcl.run(parallel._prepare_worker)
         l_warm = time.perf_counter() - t
         lcl.close()
         lc.close()
@@ -262,7 +284,7 @@ def section_cluster(ode, box, pieces, T, repeat, log, workers=2):
                       silence_logs=50)
     theirs = Client(lc, set_as_default=False)
     theirs.wait_for_workers(workers)
-    theirs.run(parallel._warm_kernels)
+    theirs.run(parallel._prepare_worker)
     sub = [pieces, 1, 1, 1]
     for c in (ours, theirs):
         solve(ode, box, (0, 0.05), subdivision=sub, client=c)  # graph shipped, first steps
@@ -310,6 +332,142 @@ def section_scaling(ode, box, pieces, T, log, workers=(1, 2, 4)):
     return rows
 
 
+def _child_first(spec: str) -> int:
+    """One row of ``first`` in this (fresh) process: prints one JSON line."""
+    workers, pieces, T = spec.split(",")
+    workers, pieces, T = int(workers), int(pieces), float(T)
+    t = time.perf_counter()
+    ode, box = setup()
+    from verified.solver import solve
+    t_import = time.perf_counter() - t
+    t = time.perf_counter()
+    solve(ode, box, (0, 0.05), subdivision=[4, 1, 1, 1], workers=1)  # this process's kernels (disk cache)
+    t_main_warm = time.perf_counter() - t
+    out = dict(workers=workers, pieces=pieces, T=T, import_s=t_import, main_warm_s=t_main_warm, calls=[])
+    for call in ("first", "later"):
+        ld = load()
+        w, sol = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], workers=workers))
+        st = sol.stats
+        out["calls"].append(dict(call=call, wall_s=w, load=ld, status=sol.status, backend=st.get("backend"),
+                                 chunks=st.get("chunks", 1), widths=np.asarray(sol.hull[-1].width(), float).tolist(),
+                                 cluster_start_s=st.get("cluster_start_s"), setup_s=st.get("setup_s"),
+                                 warm_s=st.get("warm_s"), merge_s=st.get("merge_s"), timeline=st.get("timeline"),
+                                 chunk_wall_s=st.get("chunk_wall_s"), received_bytes=st.get("received_bytes")))
+    print("CHILD " + json.dumps(out, default=float), flush=True)
+    return 0
+
+
+def breakdown(call: dict, workers: int) -> dict:
+    """Where a cluster call's wall time went (from its timeline; seconds)."""
+    tl = call.get("timeline") or []
+    if not tl:
+        return {}
+    start = call.get("cluster_start_s") or 0.0
+    first_task = min(r["start_s"] for r in tl)
+    busy, last = {}, {}
+    for r in tl:
+        busy[r["worker_pid"]] = busy.get(r["worker_pid"], 0.0) + r["end_s"] - r["start_s"]
+        last[r["worker_pid"]] = max(last.get(r["worker_pid"], 0.0), r["end_s"])
+    compute_end = max(r["end_s"] for r in tl)
+    ends = list(last.values()) + [first_task] * (workers - len(last))  # (a worker without a chunk idles)
+    return dict(cluster_start_s=start, to_first_task_s=first_task - start, busiest_s=max(busy.values()),
+                busy_total_s=sum(busy.values()), idle_at_end_s=float(np.mean([compute_end - e for e in ends])),
+                results_after_s=max(r["received_s"] for r in tl) - compute_end, merge_s=call.get("merge_s") or 0.0)
+
+
+def section_first(pieces, T, repeat, log, workers=2):
+    import subprocess
+    log(f"\n## first run (issue 42): {pieces} pieces, T = {T}, fresh process per row: workers=1 against "
+        f"workers={workers} (first cluster of the process, then a later call on it)")
+    rows = []
+    for r in range(repeat):
+        for w in (1, workers):
+            cmd = [sys.executable, os.path.abspath(__file__), "--child-first", f"{w},{pieces},{T}"]
+            t = time.perf_counter()
+            p = subprocess.run(cmd, capture_output=True, text=True)
+            proc_s = time.perf_counter() - t
+            line = [x for x in p.stdout.splitlines() if x.startswith("CHILD ")]
+            if p.returncode or not line:
+                log(f"child failed ({p.returncode}): {p.stderr[-2000:]}")
+                continue
+            out = json.loads(line[-1][6:])
+            out.update(run=r + 1, process_s=proc_s)
+            rows.append(out)
+    one = {x["run"]: x for x in rows if x["workers"] == 1}
+    log("| run | workers | call | wall s | speed-up over 1 | load | cluster start | to 1st task | busiest worker "
+        "| idle at end | results after | merge |")
+    log("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for x in rows:
+        for c in x["calls"]:
+            ref = one.get(x["run"])
+            base = ref["calls"][0]["wall_s"] if ref else math.nan
+            b = breakdown(c, x["workers"]) if x["workers"] > 1 else {}
+            c["breakdown"] = b
+            f = (lambda k: f"{b[k]:.2f}" if k in b else "-")
+            log(f"| {x['run']} | {x['workers']} | {c['call']} | {c['wall_s']:.2f} | {base / c['wall_s']:.2f} | "
+                f"{c['load']} | {f('cluster_start_s')} | {f('to_first_task_s')} | {f('busiest_s')} | "
+                f"{f('idle_at_end_s')} | {f('results_after_s')} | {f('merge_s')} |")
+    for x in rows:
+        if x["workers"] > 1 and x["run"] in one:
+            a = np.asarray(one[x["run"]]["calls"][0]["widths"])
+            for c in x["calls"]:
+                c["width_rel_diff"] = float(np.max(np.abs(np.asarray(c["widths"]) / a - 1)))
+    log("widths at T, cluster rows against workers=1 (max relative difference): "
+        + ", ".join(f"{c['width_rel_diff']:.1e}" for x in rows for c in x["calls"] if "width_rel_diff" in c))
+    log("(each row's process: import " + ", ".join(f"{x['import_s']:.1f}" for x in rows) + " s; main process's "
+        "kernels loaded in " + ", ".join(f"{x['main_warm_s']:.1f}" for x in rows) + " s)")
+    return rows
+
+
+def section_granular(ode, box, pieces, T, repeat, log, workers=2, plans=(2, 4, 8)):
+    from verified.parallel import local_client
+    from verified.solver import solve
+    log(f"\n## chunk granularity: {pieces} pieces, T = {T}, warm local cluster of {workers}, chunks = {plans}")
+    client = local_client(workers)
+    solve(ode, box, (0, 0.05), subdivision=[pieces, 1, 1, 1], client=client)  # graph shipped, first steps
+    rows = []
+    for r in range(repeat):
+        for c in plans:
+            ld = load()
+            w, sol = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], client=client, chunks=c))
+            b = breakdown(dict(timeline=sol.stats["timeline"], merge_s=sol.stats["merge_s"]), workers)
+            rows.append(dict(run=r + 1, chunks=c, wall_s=w, load=ld, **b))
+            log(f"run {r + 1}, chunks={c}: {w:6.2f} s ({ld}) | idle at end {b['idle_at_end_s']:.2f} s | busy in all "
+                f"{b['busy_total_s']:.1f} s | busiest {b['busiest_s']:.1f} s")
+    return rows
+
+
+def section_model16(ode, box, pieces, T, first_rows, log, workers=16):
+    """16 workers modelled from this machine's measured costs (see the module docstring)."""
+    from verified.solver import solve
+    log(f"\n## model of {workers} workers (MODELLED from measured costs, not run): {pieces} pieces, T = {T}")
+    ld = load()
+    w, sol = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], workers=1, chunks=workers))
+    cw = np.asarray(sol.stats["chunk_wall_s"], float)
+    merge = float(sol.stats["merge_s"])
+    firsts = [c for x in first_rows if x["workers"] > 1 for c in x["calls"] if c.get("breakdown")]
+    one = [x["calls"][0]["wall_s"] for x in first_rows if x["workers"] == 1]
+    t1 = float(np.median(one)) if one else float(w)
+    med = (lambda key, call: float(np.median([c["breakdown"][key] for c in firsts if c["call"] == call]))
+           if any(c["call"] == call for c in firsts) else 0.0)
+    start, lat_first, lat_later = med("cluster_start_s", "first"), med("to_first_task_s", "first"), \
+        med("to_first_task_s", "later")
+    res = max(med("results_after_s", "first"), med("results_after_s", "later"))
+    model_first = start + lat_first + cw.max() + res + merge
+    model_later = lat_later + cw.max() + res + merge
+    log(f"measured here ({ld}): 16 chunks in-process {w:.1f} s in all (one batch of {pieces}: {t1:.1f} s); chunk "
+        f"walls {cw.min():.2f}..{cw.max():.2f} s (mean {cw.mean():.2f}); merge of 16 chunks {merge:.2f} s; from "
+        f"'first': cluster start {start:.2f} s, to the first task {lat_first:.2f} s (first cluster) / "
+        f"{lat_later:.2f} s (later), results after the last chunk {res:.2f} s")
+    log(f"model, first cluster: start + to first task + slowest chunk + results + merge = {model_first:.1f} s "
+        f"-> {t1 / model_first:.1f}x one core; later cluster: {model_later:.1f} s -> {t1 / model_later:.1f}x "
+        f"(assumes 16 idle cores as fast as one of these, each worker's start and kernel load in parallel)")
+    return dict(inprocess_16_chunks_s=w, one_batch_s=t1, chunk_wall_s=cw.tolist(), merge_s=merge,
+                cluster_start_s=start, to_first_task_first_s=lat_first, to_first_task_later_s=lat_later,
+                results_after_s=res, model_first_s=model_first, model_later_s=model_later,
+                speedup_first=t1 / model_first, speedup_later=t1 / model_later, load=ld)
+
+
 def estimate(scaling, pieces, log, target_pieces=65536, target_workers=64, bandwidth=100e6, task_overhead=0.005):
     """A paper estimate for ``target_workers`` workers on ``target_pieces`` pieces from the
     measured per-chunk costs: a chunk of the planned size costs what the measured chunk
@@ -349,9 +507,15 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     ap.add_argument("--json", default=None, help="write the measurements here")
+    ap.add_argument("--pieces", type=int, default=None, help="pieces of the speedup/first/model16 runs")
+    ap.add_argument("--child-first", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.child_first:
+        return _child_first(args.child_first)
     only = set(args.only.split(","))
     pieces, T = (64, 0.5) if args.quick else (1024, 2.0)
+    if args.pieces:
+        pieces = args.pieces
     n_mixed, t_mixed = (16, 0.3) if args.quick else (128, 0.5)
     n_rechunk, t_rechunk = (64, 0.5) if args.quick else (64, 0.7)
     log = print
@@ -372,6 +536,12 @@ def main(argv=None):
         res["start"] = section_start(args.repeat, log)
     if "cluster" in only:
         res["cluster"] = section_cluster(ode, box, pieces, T, args.repeat, log)
+    if "first" in only:
+        res["first"] = section_first(pieces, T, args.repeat, log)
+    if "granular" in only:
+        res["granular"] = section_granular(ode, box, pieces, T, args.repeat, log)
+    if "model16" in only:
+        res["model16"] = section_model16(ode, box, pieces, T, res.get("first", []), log)
     if "scaling" in only:
         res["scaling"] = section_scaling(ode, box, pieces, T, log)
         res["estimate"] = estimate(res["scaling"], pieces, log)
