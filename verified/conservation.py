@@ -222,8 +222,8 @@ class _Bound:
         if decl.kind == "conserved":
             proof = prove_claim(claim_graph(rhs, self.graph, None))
             if not proof.proven:
-                raise ValueError(f"invariant {self.label} is not proven conserved: grad I . f could not be shown "
-                                 f"identically 0 ({proof.reason.replace('grad H . f - dH/dt', 'grad I . f')}); "
+                raise ValueError(f"invariant {self.label} is not proven conserved "
+                                 f"({proof.reason.replace('grad H . f - dH/dt', 'grad I . f')}); "
                                  "declare it NonIncreasing to have it checked on every step, or fix it")
         else:
             rate = getattr(decl, "rate", None)
