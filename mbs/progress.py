@@ -30,8 +30,8 @@ __all__ = ["Progress", "interactive", "kernel_cache_warm", "cold_families", "com
 #: from runs (docs/lab/code_notes.md)
 KERNEL_FAMILIES = {
     "interval": (("verified._kernels", "verified.taylor", "verified.linalg"), 30),
-    "Taylor-model": (("verified.taylor_model", "verified.tm_flow"), 60),
-    "affine": (("verified.affine_taylor",), 50),
+    "Taylor-model": (("verified.taylor_model", "verified.tm_flow"), 45),
+    "affine": (("verified.affine_taylor",), 30),
 }
 
 

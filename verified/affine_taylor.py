@@ -55,6 +55,11 @@ _UPF = 1.0 + 2.0**-40  # covers the relative rounding of up to 2^12 operations o
 _TINY = 1e-300  # covers the absolute (underflow) rounding of as many
 _U = 2.0**-52  # bound on the relative rounding error of one operation (round to nearest: 2^-53)
 INF = math.inf
+
+# Integer constants handed to other compiled functions are written ``np.int64(k)``, not ``k``:
+# numba compiles a callee once per distinct integer *literal* argument, so the eight kinds of
+# the unary expansion were eight compilations of it and of everything it calls, which
+# multiplied a first run's compile time (docs/lab/code_notes.md, compile time).
 _NO_SLOTS = np.zeros(0, dtype=np.int64)
 
 
@@ -375,10 +380,10 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
                             _acc_mul(Z, F[u, j, b], F[v, k - j, b], m, 1.0)
                 elif o == T_SQR:
                     _clear(Z, m)
-                    _sqrconv(Z, F, u, k, 0, b, m)
+                    _sqrconv(Z, F, u, k, np.int64(0), b, m)
                 elif o == T_DIV:
                     if k == 0:
-                        _unary_into(REC[s, b], F[v, 0, b], m, 7)
+                        _unary_into(REC[s, b], F[v, 0, b], m, np.int64(7), -INF)
                     # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0 (the sum is 0 for a constant v)
                     _clear(T, m)
                     _acc_add(T, F[u, k, b], m, 1.0)
@@ -389,21 +394,21 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
                     _acc_mul(Z, T, REC[s, b], m, 1.0)
                 elif o == T_SQRT:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, 0)
+                        _unary_into(Z, F[u, 0, b], m, np.int64(0), -INF)
                         _scale_into(T, Z, m, 2.0)
-                        _unary_into(REC[s, b], T, m, 7)
+                        _unary_into(REC[s, b], T, m, np.int64(7), -INF)
                     else:
                         # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
                         _clear(T, m)
                         _acc_add(T, F[u, k, b], m, 1.0)
                         _clear(S, m)
-                        _sqrconv(S, F, s, k, 1, b, m)
+                        _sqrconv(S, F, s, k, np.int64(1), b, m)
                         _acc_add(T, S, m, -1.0)
                         _clear(Z, m)
                         _acc_mul(Z, T, REC[s, b], m, 1.0)
                 elif o == T_EXP:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, 1)
+                        _unary_into(Z, F[u, 0, b], m, np.int64(1), -INF)
                     else:
                         _clear(T, m)
                         for j in range(1, k + 1):
@@ -411,8 +416,8 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
                         _div_int_into(Z, T, m, fk)
                 elif o == T_LOG:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, 2)
-                        _unary_into(REC[s, b], F[u, 0, b], m, 7)
+                        _unary_into(Z, F[u, 0, b], m, np.int64(2), -INF)
+                        _unary_into(REC[s, b], F[u, 0, b], m, np.int64(7), -INF)
                     else:
                         # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
                         _quotient_step(Z, F, s, u, u, k, b, m, REC[s, b], T, S)
@@ -420,8 +425,8 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
                     ss = s if o == T_SIN else aux[s]
                     cs = aux[s] if o == T_SIN else s
                     if k == 0:
-                        _unary_into(F[ss, 0, b], F[u, 0, b], m, 3)
-                        _unary_into(F[cs, 0, b], F[u, 0, b], m, 4)
+                        _unary_into(F[ss, 0, b], F[u, 0, b], m, np.int64(3), -INF)
+                        _unary_into(F[cs, 0, b], F[u, 0, b], m, np.int64(4), -INF)
                     else:
                         _clear(T, m)
                         for j in range(1, k + 1):
@@ -434,7 +439,7 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
                 elif o == T_TAN:
                     vs = aux[s]  # v = 1 + tan^2 = tan'
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, 5)
+                        _unary_into(Z, F[u, 0, b], m, np.int64(5), -INF)
                         V = F[vs, 0, b]
                         _clear(V, m)
                         V[0] = 1.0
@@ -446,20 +451,20 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
                         _div_int_into(Z, T, m, fk)
                         V = F[vs, k, b]
                         _clear(V, m)
-                        _sqrconv(V, F, s, k, 0, b, m)
+                        _sqrconv(V, F, s, k, np.int64(0), b, m)
                 elif o == T_ATAN:
                     vs = aux[s]  # v = 1 + u^2, atan(u)' = u' / v
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, 6)
+                        _unary_into(Z, F[u, 0, b], m, np.int64(6), -INF)
                         V = F[vs, 0, b]
                         _clear(V, m)
                         V[0] = 1.0
                         _acc_sqr(V, F[u, 0, b], m, 1.0)
-                        _unary_into(REC[s, b], V, m, 7, 1.0)  # v0 = 1 + u0^2 >= 1
+                        _unary_into(REC[s, b], V, m, np.int64(7), 1.0)  # v0 = 1 + u0^2 >= 1
                     else:
                         V = F[vs, k, b]
                         _clear(V, m)
-                        _sqrconv(V, F, u, k, 0, b, m)
+                        _sqrconv(V, F, u, k, np.int64(0), b, m)
                         # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
                         _quotient_step(Z, F, s, u, vs, k, b, m, REC[s, b], T, S)
                 if k == 0 and sel.size > 0 and sel[s] >= 0:
@@ -911,10 +916,10 @@ def _b_quotient_step(A, Af, s, ss, u, us, v, vs, L, k, rec, t, sc, Ls, m, cb, R)
         ls = _b_acc_mul(A, sc, s + j * m2, v + (k - j) * m2, ls, max(L[ss, j], L[vs, k - j]), m, float(j), cb, R)
     _b_div_int_into(A, t, sc, Ls, m, float(k), cb, R)
     _b_clear(Af, sc, Ls, m, CB)
-    lt = _b_acc_add(A, sc, u + k * m2, 0, L[us, k], m, 1.0, cb, R)
+    lt = _b_acc_add(A, sc, u + k * m2, np.int64(0), L[us, k], m, 1.0, cb, R)
     lt = _b_acc_add(A, sc, t, lt, ls, m, -1.0, cb, R)
     _b_clear(Af, s + k * m2, Ls, m, CB)
-    _b_acc_mul(A, s + k * m2, sc, rec, 0, max(lt, L[ss, 0]), m, 1.0, cb, R)
+    _b_acc_mul(A, s + k * m2, sc, rec, np.int64(0), max(lt, L[ss, 0]), m, 1.0, cb, R)
 
 
 @njit(cache=True)
@@ -1079,16 +1084,16 @@ def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, orde
                     _b_copy(Af, z, OB + idx[s] * KM + k * m2, Ls, m, CB, 1.0)
                 elif o == T_ADD or o == T_SUB:
                     _b_clear(Af, z, Ls, m, CB)
-                    lz = _b_acc_add(A, z, uk, 0, L[a0[s], k], m, 1.0, cb, R)
+                    lz = _b_acc_add(A, z, uk, np.int64(0), L[a0[s], k], m, 1.0, cb, R)
                     _b_acc_add(A, z, v + k * m2, lz, L[a1[s], k], m, 1.0 if o == T_ADD else -1.0, cb, R)
                 elif o == T_NEG:
                     _b_copy(Af, z, uk, Ls, m, CB, -1.0)
                 elif o == T_MUL:
                     _b_clear(Af, z, Ls, m, CB)
                     if cst[a0[s]]:  # (c w)_[k] = c_[0] w_[k]: the other terms are exact zeros
-                        _b_acc_mul(A, z, u, v + k * m2, 0, max(L[a0[s], 0], L[a1[s], k]), m, 1.0, cb, R)
+                        _b_acc_mul(A, z, u, v + k * m2, np.int64(0), max(L[a0[s], 0], L[a1[s], k]), m, 1.0, cb, R)
                     elif cst[a1[s]]:
-                        _b_acc_mul(A, z, uk, v, 0, max(L[a0[s], k], L[a1[s], 0]), m, 1.0, cb, R)
+                        _b_acc_mul(A, z, uk, v, np.int64(0), max(L[a0[s], k], L[a1[s], 0]), m, 1.0, cb, R)
                     else:
                         lz = 0
                         for j in range(k + 1):
@@ -1096,36 +1101,36 @@ def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, orde
                                             m, 1.0, cb, R)
                 elif o == T_SQR:
                     _b_clear(Af, z, Ls, m, CB)
-                    _b_sqrconv(A, z, u, a0[s], L, k, 0, 0, m, cb, R)
+                    _b_sqrconv(A, z, u, a0[s], L, k, np.int64(0), np.int64(0), m, cb, R)
                 elif o == T_DIV:
                     if k == 0:
-                        _b_unary_into(A, rec, v, Ls, m, 7, -INF, cb)
+                        _b_unary_into(A, rec, v, Ls, m, np.int64(7), -INF, cb)
                     # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0 (the sum is 0 for a constant v)
                     _b_clear(Af, TB, Ls, m, CB)
-                    lt = _b_acc_add(A, TB, uk, 0, L[a0[s], k], m, 1.0, cb, R)
+                    lt = _b_acc_add(A, TB, uk, np.int64(0), L[a0[s], k], m, 1.0, cb, R)
                     if not cst[a1[s]]:
                         for j in range(1, k + 1):
                             lt = _b_acc_mul(A, TB, v + j * m2, s0 + (k - j) * m2, lt, max(L[a1[s], j], L[s, k - j]),
                                             m, -1.0, cb, R)
                     _b_clear(Af, z, Ls, m, CB)
-                    _b_acc_mul(A, z, TB, rec, 0, max(lt, L[s, 0]), m, 1.0, cb, R)
+                    _b_acc_mul(A, z, TB, rec, np.int64(0), max(lt, L[s, 0]), m, 1.0, cb, R)
                 elif o == T_SQRT:
                     if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, 0, -INF, cb)
+                        _b_unary_into(A, z, u, Ls, m, np.int64(0), -INF, cb)
                         _b_scale_into(A, TB, z, Ls, m, 2.0, cb)
-                        _b_unary_into(A, rec, TB, Ls, m, 7, -INF, cb)
+                        _b_unary_into(A, rec, TB, Ls, m, np.int64(7), -INF, cb)
                     else:
                         # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
                         _b_clear(Af, TB, Ls, m, CB)
-                        lt = _b_acc_add(A, TB, uk, 0, L[a0[s], k], m, 1.0, cb, R)
+                        lt = _b_acc_add(A, TB, uk, np.int64(0), L[a0[s], k], m, 1.0, cb, R)
                         _b_clear(Af, SB, Ls, m, CB)
-                        ls = _b_sqrconv(A, SB, s0, s, L, k, 1, 0, m, cb, R)
+                        ls = _b_sqrconv(A, SB, s0, s, L, k, np.int64(1), np.int64(0), m, cb, R)
                         lt = _b_acc_add(A, TB, SB, lt, ls, m, -1.0, cb, R)
                         _b_clear(Af, z, Ls, m, CB)
-                        _b_acc_mul(A, z, TB, rec, 0, max(lt, L[s, 0]), m, 1.0, cb, R)
+                        _b_acc_mul(A, z, TB, rec, np.int64(0), max(lt, L[s, 0]), m, 1.0, cb, R)
                 elif o == T_EXP:
                     if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, 1, -INF, cb)
+                        _b_unary_into(A, z, u, Ls, m, np.int64(1), -INF, cb)
                     else:
                         _b_clear(Af, TB, Ls, m, CB)
                         lt = 0
@@ -1135,8 +1140,8 @@ def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, orde
                         _b_div_int_into(A, z, TB, Ls, m, fk, cb, R)
                 elif o == T_LOG:
                     if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, 2, -INF, cb)
-                        _b_unary_into(A, rec, u, Ls, m, 7, -INF, cb)
+                        _b_unary_into(A, z, u, Ls, m, np.int64(2), -INF, cb)
+                        _b_unary_into(A, rec, u, Ls, m, np.int64(7), -INF, cb)
                     else:
                         # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
                         _b_quotient_step(A, Af, s0, s, u, a0[s], u, a0[s], L, k, rec, TB, SB, Ls, m, cb, R)
@@ -1144,8 +1149,8 @@ def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, orde
                     ss = s0 if o == T_SIN else aux[s] * KM
                     cs = aux[s] * KM if o == T_SIN else s0
                     if k == 0:
-                        _b_unary_into(A, ss, u, Ls, m, 3, -INF, cb)
-                        _b_unary_into(A, cs, u, Ls, m, 4, -INF, cb)
+                        _b_unary_into(A, ss, u, Ls, m, np.int64(3), -INF, cb)
+                        _b_unary_into(A, cs, u, Ls, m, np.int64(4), -INF, cb)
                     else:
                         # both partners have the bounds L[s] (see _live_counts)
                         _b_clear(Af, TB, Ls, m, CB)
@@ -1163,11 +1168,11 @@ def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, orde
                 elif o == T_TAN:
                     vs = aux[s] * KM  # v = 1 + tan^2 = tan'
                     if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, 5, -INF, cb)
+                        _b_unary_into(A, z, u, Ls, m, np.int64(5), -INF, cb)
                         _b_clear(Af, vs, Ls, m, CB)
                         for c in range(cb):
                             A[vs, c] = 1.0
-                        _b_acc_sqr(A, vs, z, 0, Ls, m, 1.0, cb, R)
+                        _b_acc_sqr(A, vs, z, np.int64(0), Ls, m, 1.0, cb, R)
                     else:
                         _b_clear(Af, TB, Ls, m, CB)
                         lt = 0
@@ -1176,19 +1181,19 @@ def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, orde
                                             m, float(j), cb, R)
                         _b_div_int_into(A, z, TB, Ls, m, fk, cb, R)
                         _b_clear(Af, vs + k * m2, Ls, m, CB)
-                        _b_sqrconv(A, vs + k * m2, s0, s, L, k, 0, 0, m, cb, R)
+                        _b_sqrconv(A, vs + k * m2, s0, s, L, k, np.int64(0), np.int64(0), m, cb, R)
                 elif o == T_ATAN:
                     vs = aux[s] * KM  # v = 1 + u^2, atan(u)' = u' / v
                     if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, 6, -INF, cb)
+                        _b_unary_into(A, z, u, Ls, m, np.int64(6), -INF, cb)
                         _b_clear(Af, vs, Ls, m, CB)
                         for c in range(cb):
                             A[vs, c] = 1.0
-                        _b_acc_sqr(A, vs, u, 0, L[a0[s], 0], m, 1.0, cb, R)
-                        _b_unary_into(A, rec, vs, Ls, m, 7, 1.0, cb)  # v0 = 1 + u0^2 >= 1
+                        _b_acc_sqr(A, vs, u, np.int64(0), L[a0[s], 0], m, 1.0, cb, R)
+                        _b_unary_into(A, rec, vs, Ls, m, np.int64(7), 1.0, cb)  # v0 = 1 + u0^2 >= 1
                     else:
                         _b_clear(Af, vs + k * m2, Ls, m, CB)
-                        _b_sqrconv(A, vs + k * m2, u, a0[s], L, k, 0, 0, m, cb, R)
+                        _b_sqrconv(A, vs + k * m2, u, a0[s], L, k, np.int64(0), np.int64(0), m, cb, R)
                         # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
                         _b_quotient_step(A, Af, s0, s, u, a0[s], vs, aux[s], L, k, rec, TB, SB, Ls, m, cb, R)
                 if k == 0 and sel.size > 0 and sel[s] >= 0:

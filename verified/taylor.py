@@ -34,6 +34,11 @@ from .interval import Interval, _as_interval
 
 __all__ = ["TaylorODE"]
 
+# Integer constants handed to other compiled functions are written ``np.int64(k)``, not ``k``:
+# numba compiles a callee once per distinct integer *literal* argument, so the eight kinds of
+# the unary expansion were eight compilations of it and of everything it calls, which
+# multiplied a first run's compile time (docs/lab/code_notes.md, compile time).
+
 # Tape opcodes (independent of Op's numbering).
 T_CONST, T_INPUT, T_PARAM, T_ADD, T_SUB, T_MUL, T_DIV, T_NEG, T_SQR = range(9)
 T_SQRT, T_EXP, T_LOG, T_SIN, T_COS, T_TAN, T_ATAN, T_AUX, T_MID = range(9, 18)
@@ -247,15 +252,15 @@ def _taylor_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, xlo, xhi, plo, 
                     elif cst[v]:
                         tlo[s, k, b], thi[s, k, b] = _k.mul(tlo[u, k, b], thi[u, k, b], tlo[v, 0, b], thi[v, 0, b])
                     else:
-                        tlo[s, k, b], thi[s, k, b] = _conv(tlo, thi, u, v, k, 0, b)
+                        tlo[s, k, b], thi[s, k, b] = _conv(tlo, thi, u, v, k, np.int64(0), b)
                 elif o == T_SQR:
-                    tlo[s, k, b], thi[s, k, b] = _sqrconv(tlo, thi, u, k, 0, b)
+                    tlo[s, k, b], thi[s, k, b] = _sqrconv(tlo, thi, u, k, np.int64(0), b)
                 elif o == T_DIV:
                     if cst[v]:  # w_k = u_k / v_0
                         tlo[s, k, b], thi[s, k, b] = _k.div(tlo[u, k, b], thi[u, k, b], tlo[v, 0, b], thi[v, 0, b])
                     else:
                         # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
-                        sl, sh = _conv(tlo, thi, v, s, k, 1, b)
+                        sl, sh = _conv(tlo, thi, v, s, k, np.int64(1), b)
                         sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
                         tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[v, 0, b], thi[v, 0, b])
                 elif o == T_SQRT:
@@ -263,7 +268,7 @@ def _taylor_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, xlo, xhi, plo, 
                         tlo[s, 0, b], thi[s, 0, b] = _k.sqrt(tlo[u, 0, b], thi[u, 0, b])
                     else:
                         # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
-                        sl, sh = _sqrconv(tlo, thi, s, k, 1, b)
+                        sl, sh = _sqrconv(tlo, thi, s, k, np.int64(1), b)
                         sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
                         dl, dh = _k.mul(2.0, 2.0, tlo[s, 0, b], thi[s, 0, b])
                         tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, dl, dh)
@@ -304,7 +309,7 @@ def _taylor_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, xlo, xhi, plo, 
                     else:
                         sl, sh = _wconv(tlo, thi, u, vs, k, k, b)
                         tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, fk, fk)
-                        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, s, k, 0, b)
+                        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, s, k, np.int64(0), b)
                 elif o == T_ATAN:
                     vs = aux[s]  # v = 1 + u^2, atan(u)' = u' / v
                     if k == 0:
@@ -312,7 +317,7 @@ def _taylor_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, xlo, xhi, plo, 
                         ql, qh = _k.sqr(tlo[u, 0, b], thi[u, 0, b])
                         tlo[vs, 0, b], thi[vs, 0, b] = _k.add(1.0, 1.0, ql, qh)
                     else:
-                        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, u, k, 0, b)
+                        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, u, k, np.int64(0), b)
                         sl, sh = _wconv(tlo, thi, s, vs, k, k - 1, b)
                         sl, sh = _k.div(sl, sh, fk, fk)
                         sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)

@@ -80,6 +80,11 @@ __all__ = ["TaylorModelODE", "model_length", "forms_to_models", "models_to_inter
 
 INF = math.inf
 
+# Integer constants handed to other compiled functions are written ``np.int64(k)``, not ``k``:
+# numba compiles a callee once per distinct integer *literal* argument, so the eight kinds of
+# the unary expansion were eight compilations of it and of everything it calls, which
+# multiplied a first run's compile time (docs/lab/code_notes.md, compile time).
+
 #: default cap on the symbols that get quadratic monomials (the rest stay linear):
 #: the model's length grows as mq^2 / 2 and a product's cost with it
 QUADRATIC_SYMBOLS = 12
@@ -266,7 +271,7 @@ def _abs_sum(x, lo, hi):
 def _spread(x):
     """Sum of |coefficients| of the non-constant monomials, rounded up: a bound of
     |x - c - e| over the symbols' box."""
-    return _abs_sum(x, 1, x.size - 1)
+    return _abs_sum(x, np.int64(1), x.size - 1)
 
 
 @njit(cache=True)
@@ -332,7 +337,7 @@ def _acc_add(T, x, sign):
     for i in range(E):
         T[i] = T[i] + sign * x[i]
     # one rounding per coefficient, at most u |result| (the sum bound is vectorized)
-    T[E] = _up(T[E] + x[E] + _abs_sum(T, 0, E) * _U)
+    T[E] = _up(T[E] + x[E] + _abs_sum(T, np.int64(0), E) * _U)
 
 
 @njit(cache=True)
@@ -341,7 +346,7 @@ def _scale_into(Z, x, d):
     E = Z.size - 1
     for i in range(E):
         Z[i] = d * x[i]
-    Z[E] = _up(_pm(abs(d), x[E]) + _abs_sum(Z, 0, E) * _U)
+    Z[E] = _up(_pm(abs(d), x[E]) + _abs_sum(Z, np.int64(0), E) * _U)
 
 
 @njit(cache=True)
@@ -350,7 +355,7 @@ def _div_int_into(Z, x, kf):
     E = Z.size - 1
     for i in range(E):
         Z[i] = x[i] / kf
-    Z[E] = _up(x[E] / kf + _abs_sum(Z, 0, E) * _U)
+    Z[E] = _up(x[E] / kf + _abs_sum(Z, np.int64(0), E) * _U)
 
 
 @njit(cache=True)
@@ -399,7 +404,7 @@ def _deriv2(kind, lo, hi):
         nl, nh = _k.mul(-2.0, -2.0, lo, hi)
         return _k.div(nl, nh, bl, bh)
     # 7: reciprocal: 2 / x^3
-    cl, ch = _k.ipow(lo, hi, 3)
+    cl, ch = _k.ipow(lo, hi, np.int64(3))
     return _k.div(2.0, 2.0, cl, ch)
 
 
@@ -415,7 +420,7 @@ def _deriv3(kind, lo, hi):
     if kind == 1:  # exp
         return _k.exp(lo, hi)
     if kind == 2:  # log: 2 / x^3
-        cl, ch = _k.ipow(lo, hi, 3)
+        cl, ch = _k.ipow(lo, hi, np.int64(3))
         return _k.div(2.0, 2.0, cl, ch)
     if kind == 3:  # sin: -cos
         cl, ch = _k.cos(lo, hi)
@@ -432,12 +437,12 @@ def _deriv3(kind, lo, hi):
     if kind == 6:  # atan: (6 x^2 - 2) / (1 + x^2)^3
         ql, qh = _k.sqr(lo, hi)
         al, ah = _k.add(1.0, 1.0, ql, qh)
-        cl, ch = _k.ipow(al, ah, 3)
+        cl, ch = _k.ipow(al, ah, np.int64(3))
         sl, sh = _k.mul(6.0, 6.0, ql, qh)
         nl, nh = _k.sub(sl, sh, 2.0, 2.0)
         return _k.div(nl, nh, cl, ch)
     # 7: reciprocal: -6 / x^4
-    fl, fh = _k.ipow(lo, hi, 4)
+    fl, fh = _k.ipow(lo, hi, np.int64(4))
     rl, rh = _k.div(6.0, 6.0, fl, fh)
     return -rh, -rl
 
@@ -447,7 +452,7 @@ def _deriv4(kind, lo, hi):
     """Interval enclosure of the fourth derivative over [lo, hi] (kinds as :func:`_deriv2`)."""
     if kind == 0:  # sqrt: -15 / (16 x^3 sqrt(x))
         sl, sh = _k.sqrt(lo, hi)
-        cl, ch = _k.ipow(lo, hi, 3)
+        cl, ch = _k.ipow(lo, hi, np.int64(3))
         pl, ph = _k.mul(cl, ch, sl, sh)
         dl, dh = _k.mul(16.0, 16.0, pl, ph)
         rl, rh = _k.div(15.0, 15.0, dl, dh)
@@ -455,7 +460,7 @@ def _deriv4(kind, lo, hi):
     if kind == 1:  # exp
         return _k.exp(lo, hi)
     if kind == 2:  # log: -6 / x^4
-        fl, fh = _k.ipow(lo, hi, 4)
+        fl, fh = _k.ipow(lo, hi, np.int64(4))
         rl, rh = _k.div(6.0, 6.0, fl, fh)
         return -rh, -rl
     if kind == 3:  # sin: sin
@@ -474,13 +479,13 @@ def _deriv4(kind, lo, hi):
     if kind == 6:  # atan: 24 x (1 - x^2) / (1 + x^2)^4
         ql, qh = _k.sqr(lo, hi)
         al, ah = _k.add(1.0, 1.0, ql, qh)
-        cl, ch = _k.ipow(al, ah, 4)
+        cl, ch = _k.ipow(al, ah, np.int64(4))
         ol, oh = _k.sub(1.0, 1.0, ql, qh)
         ul, uh = _k.mul(24.0, 24.0, lo, hi)
         nl, nh = _k.mul(ul, uh, ol, oh)
         return _k.div(nl, nh, cl, ch)
     # 7: reciprocal: 24 / x^5
-    fl, fh = _k.ipow(lo, hi, 5)
+    fl, fh = _k.ipow(lo, hi, np.int64(5))
     return _k.div(24.0, 24.0, fl, fh)
 
 
@@ -672,10 +677,10 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                             _acc_mul(Z, F[u, j, b], F[v, k - j, b], PA, PB, PC, 1.0)
                 elif o == T_SQR:
                     _clear(Z)
-                    _sqrconv(Z, F, u, k, 0, b, PA, PB, PC)
+                    _sqrconv(Z, F, u, k, np.int64(0), b, PA, PB, PC)
                 elif o == T_DIV:
                     if k == 0:
-                        _unary_into(REC[s, b], F[v, 0, b], PA, PB, PC, deg, 7, D, D2, D3)
+                        _unary_into(REC[s, b], F[v, 0, b], PA, PB, PC, deg, np.int64(7), D, D2, D3, -INF)
                     _clear(T)
                     _acc_add(T, F[u, k, b], 1.0)
                     if not cst[v]:
@@ -685,20 +690,20 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                     _acc_mul(Z, T, REC[s, b], PA, PB, PC, 1.0)
                 elif o == T_SQRT:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 0, D, D2, D3)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(0), D, D2, D3, -INF)
                         _scale_into(T, Z, 2.0)
-                        _unary_into(REC[s, b], T, PA, PB, PC, deg, 7, D, D2, D3)
+                        _unary_into(REC[s, b], T, PA, PB, PC, deg, np.int64(7), D, D2, D3, -INF)
                     else:
                         _clear(T)
                         _acc_add(T, F[u, k, b], 1.0)
                         _clear(S)
-                        _sqrconv(S, F, s, k, 1, b, PA, PB, PC)
+                        _sqrconv(S, F, s, k, np.int64(1), b, PA, PB, PC)
                         _acc_add(T, S, -1.0)
                         _clear(Z)
                         _acc_mul(Z, T, REC[s, b], PA, PB, PC, 1.0)
                 elif o == T_EXP:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 1, D, D2, D3)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(1), D, D2, D3, -INF)
                     else:
                         _clear(T)
                         for j in range(1, k + 1):
@@ -706,16 +711,16 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                         _div_int_into(Z, T, fk)
                 elif o == T_LOG:
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 2, D, D2, D3)
-                        _unary_into(REC[s, b], F[u, 0, b], PA, PB, PC, deg, 7, D, D2, D3)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(2), D, D2, D3, -INF)
+                        _unary_into(REC[s, b], F[u, 0, b], PA, PB, PC, deg, np.int64(7), D, D2, D3, -INF)
                     else:
                         _quotient_step(Z, F, s, u, u, k, b, PA, PB, PC, REC[s, b], T, S)
                 elif o == T_SIN or o == T_COS:
                     ss = s if o == T_SIN else aux[s]
                     cs = aux[s] if o == T_SIN else s
                     if k == 0:
-                        _unary_into(F[ss, 0, b], F[u, 0, b], PA, PB, PC, deg, 3, D, D2, D3)
-                        _unary_into(F[cs, 0, b], F[u, 0, b], PA, PB, PC, deg, 4, D, D2, D3)
+                        _unary_into(F[ss, 0, b], F[u, 0, b], PA, PB, PC, deg, np.int64(3), D, D2, D3, -INF)
+                        _unary_into(F[cs, 0, b], F[u, 0, b], PA, PB, PC, deg, np.int64(4), D, D2, D3, -INF)
                     else:
                         _clear(T)
                         for j in range(1, k + 1):
@@ -728,7 +733,7 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                 elif o == T_TAN:
                     vs = aux[s]  # v = 1 + tan^2 = tan'
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 5, D, D2, D3)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(5), D, D2, D3, -INF)
                         V = F[vs, 0, b]
                         _clear(V)
                         V[0] = 1.0
@@ -740,20 +745,20 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                         _div_int_into(Z, T, fk)
                         V = F[vs, k, b]
                         _clear(V)
-                        _sqrconv(V, F, s, k, 0, b, PA, PB, PC)
+                        _sqrconv(V, F, s, k, np.int64(0), b, PA, PB, PC)
                 elif o == T_ATAN:
                     vs = aux[s]  # v = 1 + u^2, atan(u)' = u' / v
                     if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, 6, D, D2, D3)
+                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(6), D, D2, D3, -INF)
                         V = F[vs, 0, b]
                         _clear(V)
                         V[0] = 1.0
                         _acc_mul(V, F[u, 0, b], F[u, 0, b], PA, PB, PC, 1.0)
-                        _unary_into(REC[s, b], V, PA, PB, PC, deg, 7, D, D2, D3, 1.0)  # v0 >= 1
+                        _unary_into(REC[s, b], V, PA, PB, PC, deg, np.int64(7), D, D2, D3, 1.0)  # v0 >= 1
                     else:
                         V = F[vs, k, b]
                         _clear(V)
-                        _sqrconv(V, F, u, k, 0, b, PA, PB, PC)
+                        _sqrconv(V, F, u, k, np.int64(0), b, PA, PB, PC)
                         _quotient_step(Z, F, s, u, vs, k, b, PA, PB, PC, REC[s, b], T, S)
             if k < pool_orders and pool0 >= 0 and o != T_INPUT and o != T_PARAM and o != T_CONST and o != T_MID:
                 # a remainder born here becomes the coefficient of a symbol of its own
