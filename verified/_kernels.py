@@ -347,12 +347,12 @@ def _periodic(a, b, is_cos):
 
 @njit(cache=_CACHE)
 def sin(a, b):
-    return _periodic(a, b, False)
+    return _periodic(a, b, np.bool_(False))  # (not literals: one compilation)
 
 
 @njit(cache=_CACHE)
 def cos(a, b):
-    return _periodic(a, b, True)
+    return _periodic(a, b, np.bool_(True))  # (not literals: one compilation)
 
 
 @njit(cache=_CACHE)

@@ -1,0 +1,71 @@
+"""Compiled kernels hand no integer or boolean literal to another compiled function.
+
+numba compiles a jitted callee once per distinct literal argument (``f(x, 7)`` from compiled
+code types the 7 as ``Literal[int](7)``): the unary expansions' eight kinds, passed as
+literals, were compiled eight or nine times over with everything they call, which more than
+doubled a first run's compile time (docs/lab/code_notes.md, "compile time: integer
+literals"). Constants are passed as ``np.int64(k)``. Checked on the source, so that the
+check costs nothing and needs no cold cache.
+"""
+
+import ast
+import inspect
+
+from verified import _kernels, affine_taylor, linalg, taylor, taylor_model, tm_flow
+
+MODULES = [_kernels, taylor, taylor_model, affine_taylor, tm_flow, linalg]
+
+
+def _jitted(tree):
+    out = {}
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and any("njit" in ast.unparse(d) for d in node.decorator_list):
+            out[node.name] = node
+    return out
+
+
+def _literal(arg):
+    if isinstance(arg, ast.UnaryOp) and isinstance(arg.op, ast.USub):
+        arg = arg.operand
+    return isinstance(arg, ast.Constant) and isinstance(arg.value, (bool, int))
+
+
+def literal_calls(modules=MODULES):
+    """(module, caller, callee, argument) for every literal int or bool handed from one
+    jitted function to another (``_k.f`` resolves to :mod:`verified._kernels`)."""
+    trees = {m.__name__: ast.parse(inspect.getsource(m)) for m in modules}
+    jitted = {name: set(_jitted(t)) for name, t in trees.items()}
+    found = []
+    for mod, tree in trees.items():
+        for fname, fn in _jitted(tree).items():
+            for call in ast.walk(fn):
+                if not isinstance(call, ast.Call):
+                    continue
+                f = call.func
+                if isinstance(f, ast.Name) and f.id in jitted[mod]:
+                    callee = f.id
+                elif (isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id == "_k"
+                      and f.attr in jitted["verified._kernels"]):
+                    callee = "_k." + f.attr
+                else:
+                    continue
+                found += [(mod, fname, callee, ast.unparse(a)) for a in call.args if _literal(a)]
+    return found
+
+
+def test_no_literal_reaches_a_compiled_callee():
+    assert literal_calls() == []
+
+
+def test_the_check_sees_a_literal(monkeypatch):
+    """The check bites: a kernel source that passes ``7`` to a jitted helper is reported."""
+    src = ("from numba import njit\n@njit(cache=True)\ndef g(x, kind):\n    return x\n"
+           "@njit(cache=True)\ndef f(x):\n    return g(x, 7) + g(x, True)\n")
+
+    class Fake:
+        pass
+
+    Fake.__name__ = "fake"
+    real = inspect.getsource
+    monkeypatch.setattr(inspect, "getsource", lambda m: src if m is Fake else real(m))
+    assert literal_calls([Fake]) == [("fake", "f", "g", "7"), ("fake", "f", "g", "True")]
