@@ -37,8 +37,9 @@ The contraction, after every accepted step, for each set and each invariant:
    over the same parameters, the floats' rounding and the spread of ``k`` over ``K``
    enclosed in the new error part (``r_i``). Every true state keeps its parameters, so it
    stays in the set, and ``w . x`` over the set is ``K`` up to rounding. Kept only where
-   the set's hull in ``x_i`` gets at most ``growth`` (25 %) wider (the error removed
-   along ``w`` no longer grows from step to step);
+   the set's hull in ``x_i`` does not get wider or, where the spread of ``w . x`` over the
+   set is more than twice ``K``'s (mostly wrapping), at most ``growth`` (25 %) wider (the
+   error removed along ``w`` no longer grows from step to step);
 1. (a nonlinear or non-increasing ``I``) the set's own parameters (``x = c + A r``,
    ``r in R``, first- and second-order sets)
    are narrowed with the row ``I(c + A r) in K`` in mean-value form
@@ -532,7 +533,17 @@ class InvariantHook(Hook):
         if r_zero:  # (base kept its Q: the unchanged sets must keep it too)
             base = type(base)(**{**base.__dict__, "Q": eye}) if quad else DoubletonSets(c, C, r0, eye, base.r)
         nw = new.hull().width()[rows, piv]
-        take = np.isfinite(nw) & np.isfinite(e.lo) & np.isfinite(e.hi) & (nw <= (1.0 + self.growth) * old.width()[rows, piv])
+        # widening x_i is allowed only where most of w . x's spread over the set is excess
+        # over K (wrapping to remove), not the spread of K itself: allowed every step
+        # on a wide K it would compound
+        cs, As, Rs = self._linear_view(sets)
+        with np.errstate(all="ignore"):
+            wA = (point(np.broadcast_to(w, (B, n))[:, :, None]) * (As[:, :n, :] if isinstance(As, Interval)
+                                                                   else point(As[:, :n, :]))).sum(axis=1)
+            spread = (wA * Rs).sum(axis=1).width()
+        excess = spread > 2.0 * float(K.width())
+        allowed = np.where(excess, 1.0 + self.growth, 1.0) * old.width()[rows, piv]
+        take = np.isfinite(nw) & np.isfinite(e.lo) & np.isfinite(e.hi) & (nw <= allowed)
         if not take.any():
             return sets
         idx = np.flatnonzero(take)
