@@ -1,4 +1,4 @@
-"""Compile the numba kernels once, ahead of use: ``python -m verified.warmup``.
+"""Compile the numba kernels once, ahead of use: ``python -m verified.warmup [FAMILY ...]``.
 
 The kernels are compiled on first use and cached on disk (``cache=True``), which costs
 seconds to a minute per family the first time (the longest: the affine Taylor kernel,
@@ -34,9 +34,21 @@ def _rhs(x, p):
                                                                   + q.arctan() + v ** 2 * v.mid())]
 
 
-def compile_kernels(log=None) -> float:
+#: what compile_kernels can warm: the kernel families (as :data:`mbs.progress.KERNEL_FAMILIES`
+#: names them), and ``"affine_range"``, the affine graph range alone (a robot's frame
+#: enclosures: :func:`verified.affine_taylor.affine_range`), the first step of ``"affine"``
+FAMILIES = ("interval", "affine", "Taylor-model", "affine_range")
+
+
+def compile_kernels(log=None, families=None) -> float:
     """Run the tiny integrations (about 2 minutes cold on 2 shared cores, a second warm);
-    returns the wall time in s."""
+    returns the wall time in s. ``families``: a subset of :data:`FAMILIES` (None: the
+    three families); the interval kernels are compiled with any family (every run uses
+    them), not with ``"affine_range"`` alone."""
+    families = FAMILIES[:3] if families is None else tuple(families)
+    unknown = [f for f in families if f not in FAMILIES]
+    if unknown:
+        raise ValueError(f"unknown kernel families {unknown}; known: {', '.join(FAMILIES)}")
     # (import here: the solver and the kernels (~1.5 s) only in the process that compiles;
     # mbs.app.demo imports this module to start that process)
     from . import interval as iv, linalg
@@ -46,48 +58,64 @@ def compile_kernels(log=None) -> float:
     from .tracer import trace
 
     t0 = time.perf_counter()
+
+    def said(what):
+        if log is not None:
+            log(f"warm: {what} ({time.perf_counter() - t0:.0f} s)")
+
     graph = trace(_rhs, 2, n_params=1)
     x0 = Interval(np.array([0.4, -0.1]), np.array([0.41, -0.09]))
     p = Interval(np.array([9.8]), np.array([9.82]))
-    runs = [dict(),
-            dict(arithmetic="affine", error_basis="auto"),
-            dict(arithmetic="taylor_model", set_order=2, error_basis="auto"),
-            dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=2),
-            dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=3, error_basis="auto"),
-            dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=4)]
+    boxes = x0.subdivide([2, 2]).reshape(-1, 2)
+    if "affine" in families or "affine_range" in families:
+        affine_range(graph, boxes, p.broadcast_to((boxes.shape[0], 1)))
+        said("affine range")
+    if not set(families) & set(FAMILIES[:3]):
+        return time.perf_counter() - t0
+    runs = [dict()]
+    if "affine" in families:
+        runs.append(dict(arithmetic="affine", error_basis="auto"))
+    if "Taylor-model" in families:
+        runs += [dict(arithmetic="taylor_model", set_order=2, error_basis="auto"),
+                 dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=2),
+                 dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=3,
+                      error_basis="auto"),
+                 dict(arithmetic="taylor_model", set_order=2, set_step="composition", model_degree=4)]
     for opts in runs:
         solve(graph, x0, (0.0, 0.05), params=p, order=6, tol=1e-9, **opts)
-        if log is not None:
-            log(f"warm: {opts or 'interval'} ({time.perf_counter() - t0:.0f} s)")
+        said(opts or "interval")
     # the same without graph parameters, over a batch of boxes (other array shapes), the
     # graph's interval and affine evaluation over boxes, interval operations and solves
     free = trace(lambda x, _: _rhs(x, [9.81]), 2)
-    boxes = x0.subdivide([2, 2]).reshape(-1, 2)
     solve(free, boxes, (0.0, 0.05), order=6, tol=1e-9)
-    solve(free, boxes, (0.0, 0.05), order=6, tol=1e-9, arithmetic="affine")
     graph.eval_interval(boxes, p.broadcast_to((boxes.shape[0], 1)))
-    # (one set: the affine kernel ranks its slots for fresh symbols)
-    AffineTaylorODE(graph, fresh_slots=2).series(box_forms(x0.lo[None], x0.hi[None], np.arange(2), 2), 4, p)
-    affine_range(graph, boxes, p.broadcast_to((boxes.shape[0], 1)))
+    if "affine" in families:
+        solve(free, boxes, (0.0, 0.05), order=6, tol=1e-9, arithmetic="affine")
+        # (one set: the affine kernel ranks its slots for fresh symbols)
+        AffineTaylorODE(graph, fresh_slots=2).series(box_forms(x0.lo[None], x0.hi[None], np.arange(2), 2), 4, p)
     for op in (iv.sin, iv.cos, iv.tan, iv.exp, iv.log, iv.sqrt, iv.atan, iv.sqr):
         op(boxes)
     (boxes * boxes - boxes / (boxes + 2.0)) ** 3
     linalg.solve(point(np.array([[[2.0, 0.1], [0.1, 1.0]]])), boxes[:1])
-    if log is not None:
-        log(f"warm: batches, graph evaluation, interval operations ({time.perf_counter() - t0:.0f} s)")
+    said("batches, graph evaluation, interval operations")
     return time.perf_counter() - t0
 
 
-def start_in_background():
-    """``python -m verified.warmup`` in a child process (the same ``verified`` package as
-    this one, so the kernels land in the same cache), or None on a machine with one core
-    (it would slow the caller down) or when ``MBS_NO_WARMUP`` is set."""
+def start_in_background(families=None):
+    """``python -m verified.warmup [FAMILY ...]`` in a child process (the same ``verified``
+    package as this one, so the kernels land in the same cache), or None on a machine with
+    one core (it would slow the caller down) or when ``MBS_NO_WARMUP`` is set.
+    ``families``: as :func:`compile_kernels` (None: all)."""
+    families = () if families is None else tuple(families)
+    unknown = [f for f in families if f not in FAMILIES]
+    if unknown:
+        raise ValueError(f"unknown kernel families {unknown}; known: {', '.join(FAMILIES)}")
     if (os.cpu_count() or 1) < 2 or os.environ.get("MBS_NO_WARMUP"):
         return None
     root = str(Path(__file__).resolve().parents[1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
     try:
-        return subprocess.Popen([sys.executable, "-m", "verified.warmup"], stdout=subprocess.DEVNULL,
+        return subprocess.Popen([sys.executable, "-m", "verified.warmup", *families], stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL, env=env)
     except OSError:
         return None
@@ -113,5 +141,5 @@ def finish_background(proc, timeout: float = 300.0) -> str:
 
 
 if __name__ == "__main__":
-    wall = compile_kernels(log=lambda s: print(s, file=sys.stderr, flush=True))
+    wall = compile_kernels(log=lambda s: print(s, file=sys.stderr, flush=True), families=sys.argv[1:] or None)
     print(f"numba kernels warm ({wall:.1f} s)")

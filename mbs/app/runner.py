@@ -18,6 +18,7 @@ import numpy as np
 from verified.interval import Interval
 from verified.parallel import (SchedulerError, connect, dask_available, default_workers, interrupt_runs,
                                local_client)
+from verified.warmup import finish_background, start_in_background
 
 from ..control import ControlError
 from ..errors import ModelError
@@ -25,6 +26,7 @@ from ..frames import default_frame, default_frame_note
 from ..modes import get_mode
 from ..progress import Progress, cold_families, compile_note
 from ..simulate import simulate, system_for
+from ..system import System
 from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
 from .frame_figures import fig_frame_region
 from .results import format_tightness, tightness, write_result
@@ -164,6 +166,19 @@ def kernel_families(kw: dict) -> tuple:
     return tuple(fam)
 
 
+def _start_frame_warmup(model, kw: dict, workers):
+    """A background process compiling the affine range (:func:`verified.warmup.start_in_background`)
+    while the solver runs, when the run will enclose a robot's frames (a model that is not a
+    bare System), the solve itself does not use those kernels, they are cold, and the run
+    leaves a core free (one worker). None otherwise. On a first run the frame enclosures
+    then find their kernels compiled instead of compiling them after the solve."""
+    if isinstance(model, System) or "affine" in kernel_families(kw) or workers not in (None, 1):
+        return None
+    if cold_families(("affine",)) != ["affine"]:
+        return None
+    return start_in_background(("affine_range",))
+
+
 def _phase(bar, name):
     if bar is not None:
         bar.phase(name)
@@ -208,6 +223,7 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
     if system.rhs.n_params:
         log("uncertain parameters: " + ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in
                                                  ((k, system.params[k]) for k in system.rhs.param_names)))
+    frame_warmup = _start_frame_warmup(model, kw, workers)
     if bar is not None and bar.enabled:  # (the cache is read only for a terminal that shows the note)
         families = kernel_families(kw)
         cold = cold_families(families)  # (None: numba's cache could not be read)
@@ -284,6 +300,11 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
             if said:
                 log(said)
         _phase(bar, "frame enclosures")
+        if frame_warmup is not None:  # (rather than compile the same kernels a second time here)
+            if bar is not None and bar.enabled:
+                bar.note("waiting for the affine range compiling in the background ...")
+            finish_background(frame_warmup)
+            frame_warmup = None
         if bar is not None and bar.enabled:
             bar.note(compile_note(("affine",), " for the frame enclosures"))
         t_fr = time.perf_counter()
@@ -292,6 +313,9 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
             log(f"frame {f!r} at t = {enc.t[-1]:g} s: position enclosed to "
                 + ", ".join(_fmt_width(v) for v in np.asarray(enc.position.width()[-1], float)) + " m")
         extra["frames_s"] = time.perf_counter() - t_fr
+    if frame_warmup is not None:  # (no frame to enclose after all)
+        frame_warmup.kill()
+        frame_warmup.wait()
     path = write_result(out / "result.json", sol, scene=scene.source, mode=mode, state_names=state_names,
                         t_end=t_end, extra_stats=extra, frames=frames, tightness=tight)
     report["frames"] = frames

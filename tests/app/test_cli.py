@@ -295,3 +295,23 @@ def test_invariant_after_with_a_controller_it_cannot_prove_is_one_line_exit_2(tm
     assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--no-figures"]) == 2
     err = capsys.readouterr().err.strip()
     assert "one PD controller" in err and len(err.splitlines()) == 1, err
+
+
+def test_frame_kernels_compile_in_the_background_only_when_they_help(monkeypatch):
+    """The runner starts the affine range's warm-up beside the solver when a robot's frames
+    will need those kernels, they are cold and a core is free; not for a bare System, a run
+    on several workers, an affine solve (it compiles them itself) or a warm cache."""
+    from mbs.app import runner
+    from mbs.system import System
+
+    started = []
+    monkeypatch.setattr(runner, "start_in_background", lambda fam: started.append(fam) or "proc")
+    monkeypatch.setattr(runner, "cold_families", lambda fam: list(fam))
+    assert runner._start_frame_warmup("ur5", {}, None) == "proc" and started == [("affine_range",)]
+    assert runner._start_frame_warmup("ur5", {}, 1) == "proc"
+    assert runner._start_frame_warmup(object.__new__(System), {}, None) is None
+    assert runner._start_frame_warmup("ur5", {}, 2) is None
+    assert runner._start_frame_warmup("ur5", {"arithmetic": "affine"}, None) is None
+    monkeypatch.setattr(runner, "cold_families", lambda fam: [])
+    assert runner._start_frame_warmup("ur5", {}, None) is None
+    assert len(started) == 2

@@ -2,13 +2,29 @@
 import subprocess
 import sys
 
+import pytest
+
 from verified import warmup
 
 
 def test_compile_kernels_runs_every_arithmetic():
     lines = []
     assert warmup.compile_kernels(log=lines.append) >= 0
-    assert len(lines) == 7 and "affine" in lines[1] and "'model_degree': 4" in lines[-2]
+    assert len(lines) == 8 and lines[0].startswith("warm: affine range") and "affine" in lines[2]
+    assert "'model_degree': 4" in lines[-2]
+
+
+def test_compile_kernels_warms_the_families_asked_for():
+    lines = []
+    warmup.compile_kernels(log=lines.append, families=("affine_range",))
+    assert len(lines) == 1 and lines[0].startswith("warm: affine range")
+    lines.clear()
+    warmup.compile_kernels(log=lines.append, families=("interval",))
+    assert [ln.split(" (")[0] for ln in lines] == ["warm: interval", "warm: batches, graph evaluation, interval operations"]
+    with pytest.raises(ValueError, match="unknown kernel families .'afine'."):
+        warmup.compile_kernels(families=("afine",))
+    with pytest.raises(ValueError, match="unknown kernel families"):
+        warmup.start_in_background(("afine",))
 
 
 def test_background_warmup_can_be_turned_off(monkeypatch):
