@@ -42,6 +42,11 @@ for the sampler's own error).
     python benchmarks/arch/run.py --only vdp,ll001      # some cases
     python benchmarks/arch/run.py --quick               # short horizons, default rows only
     python benchmarks/arch/run.py --cap 60              # wall-clock cap per run (s)
+    python benchmarks/arch/run.py --only rob23,pdp --invariant both   # each row without and with x + y + z declared
+
+``--invariant on|both`` declares the conserved x + y + z of Robertson and
+Production-Destruction (``solve(..., invariants=[Conserved([1, 1, 1])])``,
+:mod:`verified.conservation`: proven, then imposed on the sets after every step).
 
 The table (Markdown) goes to stdout, progress to stderr.
 """
@@ -83,6 +88,7 @@ class Case:
     hand: list = field(default_factory=list)   # [(label, settings)]; settings may carry x0/params
     stiff: bool = False
     samples: int = 100
+    conserved: tuple | None = None   # weights of a linear conserved quantity (x + y + z), for --invariant
 
     def graph(self):
         return trace(self.f, self.n, 0 if self.params is None else self.params.shape[-1])
@@ -214,7 +220,7 @@ def robertson(b: float, c: float) -> Case:
         return [-0.4 * x[0] + b * x[1] * x[2], 0.4 * x[0] - b * x[1] * x[2] - c * x[1] * x[1], c * x[1] * x[1]]
     return Case(f"rob{int(np.log10(b))}{int(np.log10(c))}", f"Robertson b = {b:.0e}, c = {c:.0e}", f, 3,
                 Interval([1.0, 0.0, 0.0], [1.0, 0.0, 0.0]), None, 40.0, quick_T, "width x+y+z(T)", sum_width, None,
-                "—", [], stiff=True, samples=1)
+                "—", [], stiff=True, samples=1, conserved=(1.0, 1.0, 1.0))
 
 
 def _pd(x, p):
@@ -234,7 +240,7 @@ def production_destruction(variant: str) -> Case:
         hand = [("second_order", dict(method="second_order")),
                 ("second_order, a in 4 pieces", dict(method="second_order", x0=xs, params=ps))]
     return Case(f"pd{variant.lower()}", f"Production-Destruction {label}", _pd, 3, x0, a, 100.0, 10.0,
-                "volume at T", volume, pd_spec, "—", hand)
+                "volume at T", volume, pd_spec, "—", hand, conserved=(1.0, 1.0, 1.0))
 
 
 CASES = {
@@ -348,12 +354,28 @@ def format_row(r: dict) -> str:
             f"{m} | {r['published']} | {r['spec']} | {r['inside']} | {what.replace('|', '/')} |")
 
 
-def run_case(key: str, quick: bool = False, cap: float = 120.0, out=print, log=None):
+def with_invariant(case: Case, rows: list, invariant: str) -> list:
+    """The rows to run: as they are (``"off"``), with the case's conserved quantity
+    declared (``solve(..., invariants=[Conserved(w)])``, ``"on"``), or each both ways
+    (``"both"``); cases without one run as they are."""
+    if invariant == "off" or case.conserved is None:
+        return rows
+    from verified.conservation import Conserved
+    w = case.conserved
+    name = " + ".join(("" if c == 1 else f"{c:g} ") + v for c, v in zip(w, "xyz"))
+    inv = [(f"{label} + invariant {name}", dict(settings, invariants=[Conserved(list(w))]))
+           for label, settings in rows]
+    if invariant == "on":
+        return inv
+    return [r for pair in zip(rows, inv) for r in pair]
+
+
+def run_case(key: str, quick: bool = False, cap: float = 120.0, out=print, log=None, invariant: str = "off"):
     case = CASES[key]()
     T = case.quick_T if quick else case.T
     samples = min(case.samples, 30) if quick else case.samples
     rows = []
-    for label, settings in [("defaults (auto)", {})] + ([] if quick else case.hand):
+    for label, settings in with_invariant(case, [("defaults (auto)", {})] + ([] if quick else case.hand), invariant):
         if log:
             log(f"{case.name}: {label} ...")
         r = run_row(case, label, settings, T, cap, samples)
@@ -367,6 +389,9 @@ def main(argv=None):
     ap.add_argument("--only", default=",".join(CASES), help="comma-separated case keys: " + ", ".join(CASES))
     ap.add_argument("--quick", action="store_true", help="short horizons, default rows only")
     ap.add_argument("--cap", type=float, default=120.0, help="wall-clock cap per run (s)")
+    ap.add_argument("--invariant", choices=("off", "on", "both"), default="off",
+                    help="declare the case's conserved x + y + z (Robertson, Production-Destruction): "
+                         "off (default), on, or both (each row without, then with it)")
     a = ap.parse_args(argv)
     keys = [k.strip() for k in a.only.split(",") if k.strip()]
     unknown = [k for k in keys if k not in CASES]
@@ -377,7 +402,7 @@ def main(argv=None):
     all_ok = True
     for k in keys:
         rows = run_case(k, quick=a.quick, cap=a.cap, out=lambda s: print(s, flush=True),
-                        log=lambda s: print(s, file=sys.stderr, flush=True))
+                        log=lambda s: print(s, file=sys.stderr, flush=True), invariant=a.invariant)
         all_ok &= all(r["inside_ok"] for r in rows)
     print(f"\n{'quick, ' if a.quick else ''}cap {a.cap:g} s per run; {time.perf_counter() - w0:.0f} s wall in all; "
           f"every sample inside: {'yes' if all_ok else 'NO'}", flush=True)
