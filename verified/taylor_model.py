@@ -84,6 +84,8 @@ INF = math.inf
 # numba compiles a callee once per distinct integer *literal* argument, so the eight kinds of
 # the unary expansion were eight compilations of it and of everything it calls, which
 # multiplied a first run's compile time (docs/lab/code_notes.md, compile time).
+# Except ``_abs_sum``'s start: its reassociated loop vectorizes better from a literal start
+# (the kernel ran 1.5x slower without; docs/lab/robot_speed.md).
 
 #: default cap on the symbols that get quadratic monomials (the rest stay linear):
 #: the model's length grows as mq^2 / 2 and a product's cost with it
@@ -271,7 +273,7 @@ def _abs_sum(x, lo, hi):
 def _spread(x):
     """Sum of |coefficients| of the non-constant monomials, rounded up: a bound of
     |x - c - e| over the symbols' box."""
-    return _abs_sum(x, np.int64(1), x.size - 1)
+    return _abs_sum(x, 1, x.size - 1)
 
 
 @njit(cache=True)
@@ -337,7 +339,7 @@ def _acc_add(T, x, sign):
     for i in range(E):
         T[i] = T[i] + sign * x[i]
     # one rounding per coefficient, at most u |result| (the sum bound is vectorized)
-    T[E] = _up(T[E] + x[E] + _abs_sum(T, np.int64(0), E) * _U)
+    T[E] = _up(T[E] + x[E] + _abs_sum(T, 0, E) * _U)
 
 
 @njit(cache=True)
@@ -346,7 +348,7 @@ def _scale_into(Z, x, d):
     E = Z.size - 1
     for i in range(E):
         Z[i] = d * x[i]
-    Z[E] = _up(_pm(abs(d), x[E]) + _abs_sum(Z, np.int64(0), E) * _U)
+    Z[E] = _up(_pm(abs(d), x[E]) + _abs_sum(Z, 0, E) * _U)
 
 
 @njit(cache=True)
@@ -355,7 +357,7 @@ def _div_int_into(Z, x, kf):
     E = Z.size - 1
     for i in range(E):
         Z[i] = x[i] / kf
-    Z[E] = _up(x[E] / kf + _abs_sum(Z, np.int64(0), E) * _U)
+    Z[E] = _up(x[E] / kf + _abs_sum(Z, 0, E) * _U)
 
 
 @njit(cache=True)

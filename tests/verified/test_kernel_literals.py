@@ -53,8 +53,14 @@ def literal_calls(modules=MODULES):
     return found
 
 
+#: callees that keep their literal argument, and why: ``_abs_sum``'s reassociated sum
+#: vectorizes better from a literal start (two small compilations; with ``np.int64`` the
+#: whole Taylor-model kernel ran 1.5x slower: docs/lab/robot_speed.md)
+LITERAL_OK = {"_abs_sum"}
+
+
 def test_no_literal_reaches_a_compiled_callee():
-    assert literal_calls() == []
+    assert [c for c in literal_calls() if c[2] not in LITERAL_OK] == []
 
 
 def test_the_check_sees_a_literal(monkeypatch):
