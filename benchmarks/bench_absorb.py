@@ -31,19 +31,15 @@ compare within a row.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import bench_robots as br  # noqa: E402
-import bench_solver  # noqa: E402
-from verified.graph import trace  # noqa: E402
-from verified.interval import Interval  # noqa: E402
-from verified.solver import VerifiedODE, solve  # noqa: E402
+import bench_robots as br
+import bench_solver
+from verified.graph import trace
+from verified.interval import Interval
+from verified.solver import VerifiedODE, solve
 
 
 def dp_case(T, pieces):
@@ -84,7 +80,7 @@ def robot_case(name, eps, T, order, tol):
         sol = solve(ode, Interval(lo, hi), (0.0, T), t_eval=te, order=order, tol=tol, absorb=absorb)
         wall = time.perf_counter() - t0
         k = len(sol.t) - 1
-        inside = all(br._inside(oracle.states(t), b).all() for t, b in zip(sol.t, sol.boxes))
+        inside = all(br.inside_boxes(oracle.states(t), b).all() for t, b in zip(sol.t, sol.boxes))
         if not inside:
             raise AssertionError(f"{name}: a sampled trajectory left the enclosure (absorb={absorb})")
         ratio = float((sol.hull[k].width() / np.maximum(oracle.hull_width(sol.t[k]), 1e-300)).max()) if k else float("nan")
@@ -94,7 +90,6 @@ def robot_case(name, eps, T, order, tol):
 
 
 def controlled_case():
-    sys.path.append(str(Path(__file__).resolve().parents[1] / "tests"))
     from mbs.control import ComputedTorque
     from mbs.simulate import simulate
     q0 = np.array([0.5, -0.3])

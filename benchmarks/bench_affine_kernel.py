@@ -29,18 +29,15 @@ import argparse
 import importlib.util
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from verified.affine_taylor import AffineTaylorODE  # noqa: E402
-from verified.graph import trace  # noqa: E402
-from verified.interval import Interval  # noqa: E402
-from verified.sets import DoubletonSets  # noqa: E402
-from verified.taylor import TaylorODE  # noqa: E402
-from verified.variational import variational_graph  # noqa: E402
+from verified.affine_taylor import AffineTaylorODE
+from verified.graph import trace
+from verified.interval import Interval
+from verified.sets import DoubletonSets
+from verified.taylor import TaylorODE
+from verified.variational import variational_graph
 
 Q0_ARM3 = (0.5, -0.3, 0.2)
 Q0_UR5 = (0.0, -1.0, 1.0, -0.5, 0.5, 0.0)

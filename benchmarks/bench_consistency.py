@@ -25,20 +25,16 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from typing import NamedTuple
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))  # tests/oracles: the sampling oracle
-
-from mbs.simulate import simulate  # noqa: E402
-from models import double_pendulum as dp  # noqa: E402
-from models import pendulum as pd  # noqa: E402
-from oracles.sampling import end_states, hull_widths, states_at  # noqa: E402
-from verified.interval import Interval  # noqa: E402
+from mbs.simulate import simulate
+from models import double_pendulum as dp
+from models import pendulum as pd
+from mbs.app.sampling import end_states, hull_widths, states_at
+from verified.interval import Interval
 
 
 def sampled_hull(f, lo, hi, ts, n=401):

@@ -21,20 +21,16 @@ worst component); times are per box (wall clock, after a warm-up).
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-
-from models import double_pendulum as dp  # noqa: E402
-from verified import linalg  # noqa: E402
-from verified.contractor import HC4, EnergyShell, contract_linear_row, mean_value_row  # noqa: E402
-from verified.evaluate import eval_interval  # noqa: E402
-from verified.graph import trace  # noqa: E402
-from verified.interval import Interval  # noqa: E402
+from models import double_pendulum as dp
+from verified import linalg
+from verified.contractor import HC4, EnergyShell, contract_linear_row, mean_value_row
+from verified.evaluate import eval_interval
+from verified.graph import trace
+from verified.interval import Interval
 
 
 def shell():

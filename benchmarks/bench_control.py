@@ -38,17 +38,14 @@ energy test's cost (mode ii against mode i on the same case).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))  # tests/oracles: the sampling oracle
 
-from oracles.sampling import SLACK, dop853, hull_widths, inside_union, pinocchio_with, plant_acceleration  # noqa: E402
+from mbs.app.sampling import SLACK, dop853, hull_widths, inside_union, pinocchio_with, plant_acceleration  # noqa: E402
 
 
 def sample_oracle(sol, count=24, seed=0, frame=None, payload_link=None):

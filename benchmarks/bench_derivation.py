@@ -63,11 +63,11 @@ def measure(name: str) -> dict:
 
 
 def _measure_subprocess(name: str, cache_dir: str) -> dict:
-    env = dict(os.environ, MBS_CACHE_DIR=cache_dir, PYTHONPATH=str(ROOT) + os.pathsep +
-               os.environ.get("PYTHONPATH", ""))
-    code = ("import json, sys; sys.path.insert(0, %r); "
-            "from benchmarks.bench_derivation import measure; "
-            "print(json.dumps(measure(%r)))" % (str(ROOT), name))
+    env = dict(os.environ, MBS_CACHE_DIR=cache_dir)
+    # this file's measure() in a fresh interpreter (runpy: not run as __main__)
+    code = ("import json, runpy; "
+            "measure = runpy.run_path(%r)['measure']; "
+            "print(json.dumps(measure(%r)))" % (str(Path(__file__).resolve()), name))
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          cwd=str(ROOT))
     if out.returncode != 0:
@@ -117,5 +117,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(ROOT))
     main()

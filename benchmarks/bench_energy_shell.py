@@ -21,18 +21,16 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import bench_robots as br  # noqa: E402  (Oracle, sample_points, containment, md_table)
-from models import pendulum as pd  # noqa: E402
-from verified.contractor import EnergyShell  # noqa: E402
-from verified.energy_shell import EnergyShellHook, max_energy  # noqa: E402
-from verified.graph import trace  # noqa: E402
-from verified.interval import Interval  # noqa: E402
-from verified.solver import solve  # noqa: E402
+import bench_robots as br  # (Oracle, sample_points, containment, md_table)
+from models import pendulum as pd
+from verified.contractor import EnergyShell
+from verified.energy_shell import EnergyShellHook, max_energy
+from verified.graph import trace
+from verified.interval import Interval
+from verified.solver import solve
 
 
 def pendulum_shell():

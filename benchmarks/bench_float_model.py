@@ -29,6 +29,7 @@ def _per_call(fn, reps: int) -> float:
 def run(name, chain, symbolic: bool, out=print):
     import pinocchio as pin
 
+    from mbs import numeric
     from mbs.app.sampling import pinocchio_with
     from mbs.numeric import NumericModel
 
@@ -36,13 +37,18 @@ def run(name, chain, symbolic: bool, out=print):
     rng = np.random.default_rng(0)
     q, qd, tau = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
     rec = NumericModel(chain)
-    rec._float_calls = -10**9  # (never compiles: the recursion)
     comp = NumericModel(chain)
     fast = comp.float_acceleration()
     x = np.concatenate([q, qd, tau])
-    rows = [("numeric, recursion", _per_call(lambda: rec.acceleration(q, qd, tau), 20)),
-            ("numeric, compiled float code", _per_call(lambda: fast(x), 500))]
-    a, b = rec.acceleration(q, qd, tau), fast(x)[:n]
+    float_code_after = numeric.FLOAT_CODE_AFTER
+    numeric.FLOAT_CODE_AFTER = float("inf")  # (acceleration never compiles: the recursion)
+    try:
+        rows = [("numeric, recursion", _per_call(lambda: rec.acceleration(q, qd, tau), 20))]
+        a = rec.acceleration(q, qd, tau)
+    finally:
+        numeric.FLOAT_CODE_AFTER = float_code_after
+    rows.append(("numeric, compiled float code", _per_call(lambda: fast(x), 500)))
+    b = fast(x)[:n]
     out(f"{name}: compiled vs recursion, max relative difference {np.max(np.abs(a - b) / np.abs(a)):.1e}")
     if symbolic:
         from mbs.symbolic import SymbolicModel

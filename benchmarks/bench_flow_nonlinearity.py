@@ -32,18 +32,11 @@ import argparse
 import itertools
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-# tests/oracles (the sampling oracle) after the repository root: tests/mbs, a directory
-# without __init__, must not shadow the mbs package
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.append(str(Path(__file__).resolve().parents[1] / "tests"))
-
-import bench_robots as br  # noqa: E402
-from oracles.sampling import states_at  # noqa: E402
+import bench_robots as br
+from mbs.app.sampling import states_at
 
 
 def _case(name):

@@ -12,16 +12,13 @@ interval Jacobian on a batch of boxes; wall time per call, per operation per cal
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from verified.graph import Graph, GraphBuilder, trace  # noqa: E402
-from verified.interval import Interval  # noqa: E402
+from verified.graph import Graph, GraphBuilder, trace
+from verified.interval import Interval
 
 M1 = M2 = L1 = L2 = 1.0
 G = 9.81

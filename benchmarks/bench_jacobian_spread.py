@@ -29,21 +29,19 @@ side by side in one run.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from verified.affine_taylor import AffineTaylorODE  # noqa: E402
-from verified.hooks import Hook  # noqa: E402
-from verified.interval import Interval, concatenate, point  # noqa: E402
-from verified.lohner import horner  # noqa: E402
-from verified.taylor import TaylorODE  # noqa: E402
-from verified.taylor_model import TaylorModelODE  # noqa: E402
-from verified.variational import variational_graph  # noqa: E402
+from verified.affine_taylor import AffineTaylorODE
+from verified.hooks import Hook
+from verified.interval import Interval, concatenate, point
+from verified.lohner import horner
+from verified.taylor import TaylorODE
+from verified.taylor_model import TaylorModelODE
+from verified.variational import variational_graph
 
 
 class CaptureAt(Hook):

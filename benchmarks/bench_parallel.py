@@ -34,7 +34,7 @@ rechunk   adaptive splitting concentrated in one chunk: 64 pieces of the paper's
 start     cluster start, fresh each time: local_client(2) (worker interpreters started as
           ``python -m dask spec``, what workers=None / "auto" / 2 start) against
           ``LocalCluster(2)`` (spawned workers, the previous local cluster), each until
-          every worker connected and then after _prepare_worker ran in every worker
+          every worker connected and then after prepare_worker ran in every worker
 cluster   the speedup run on both warm local clusters of 2 workers, interleaved:
           local_client against LocalCluster (not in the default list)
 first     issue 42: one fresh Python process per row (numba's on-disk cache warm, the
@@ -72,7 +72,6 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 # true hull widths at T = 2: bench_solver.true_hull_widths(2.0) (2001 DOP853 solutions from
 # x1(0) across the box, rtol = atol = 1e-12), rounded to 5 digits
@@ -237,7 +236,7 @@ def section_overhead(ode, box, Ts, repeat, log):
 def section_start(repeat, log, workers=2):
     """Fresh local clusters: local_client (worker interpreters) against LocalCluster
     (spawned workers; this script has the main guard), until every worker connected,
-    then after _prepare_worker ran in each (what local_client returns after)."""
+    then after prepare_worker ran in each (what local_client returns after)."""
     from distributed import Client, LocalCluster
 
     from verified import parallel
@@ -247,9 +246,9 @@ def section_start(repeat, log, workers=2):
         parallel.close_local_clients()
         l1 = load()
         t = time.perf_counter()
-        cluster, client = parallel._start_local_cluster(workers)
+        cluster, client = parallel.start_local_cluster(workers)
         t_up = time.perf_counter() - t
-        client.run(parallel._prepare_worker)
+        client.run(parallel.prepare_worker)
         t_warm = time.perf_counter() - t
         client.close()
         cluster.close()
@@ -260,7 +259,7 @@ def section_start(repeat, log, workers=2):
         lcl = Client(lc, set_as_default=False)
         lcl.wait_for_workers(workers)
         l_up = time.perf_counter() - t
-        lcl.run(parallel._prepare_worker)
+        lcl.run(parallel.prepare_worker)
         l_warm = time.perf_counter() - t
         lcl.close()
         lc.close()
@@ -284,7 +283,7 @@ def section_cluster(ode, box, pieces, T, repeat, log, workers=2):
                       silence_logs=50)
     theirs = Client(lc, set_as_default=False)
     theirs.wait_for_workers(workers)
-    theirs.run(parallel._prepare_worker)
+    theirs.run(parallel.prepare_worker)
     sub = [pieces, 1, 1, 1]
     for c in (ours, theirs):
         solve(ode, box, (0, 0.05), subdivision=sub, client=c)  # graph shipped, first steps

@@ -51,7 +51,7 @@ Cases (issue 17's targets table):
 Oracle: trajectories from all corners of the box (over its wide components), random
 points and the centre (the pendulum: also 250 points per edge), integrated together as
 one system by scipy's DOP853 (rtol = atol = 1e-12, dense output): the tests' sampling
-oracle, ``tests/oracles/sampling.py`` (``Ensemble``, ``sample_initial_points``,
+oracle, :mod:`mbs.app.sampling` (``Ensemble``, ``sample_initial_points``,
 ``count_outside``), shared with the other benchmarks. The right-hand side
 is Pinocchio's ``aba`` (with ``tau = -D qd`` for URDF damping) on a ``pin.Model``
 (URDF robots: Pinocchio's own parser; DH chains: joint by joint,
@@ -97,24 +97,18 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-# tests/oracles (the sampling oracle) after the repository root: tests/mbs, a directory
-# without __init__, must not shadow the mbs package
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.append(str(Path(__file__).resolve().parents[1] / "tests"))
-
-import bench_solver  # noqa: E402  (true_hull_widths of the double pendulum)
-from mbs.simulate import simulate  # noqa: E402
-from models import double_pendulum as dp  # noqa: E402
-from models import pendulum as pd  # noqa: E402
+import bench_solver  # (true_hull_widths of the double pendulum)
+from mbs.simulate import simulate
+from models import double_pendulum as dp
+from models import pendulum as pd
 # the oracle (also for bench_absorb, bench_energy_shell, bench_taylor_model: br.Oracle, br.sample_points)
-from oracles.sampling import Ensemble as Oracle  # noqa: E402
-from oracles.sampling import count_outside, inside_union  # noqa: E402
-from oracles.sampling import sample_initial_points as sample_points  # noqa: E402
-from verified.graph import trace  # noqa: E402
-from verified.hooks import Hook  # noqa: E402
-from verified.interval import Interval  # noqa: E402
-from verified.solver import Solution, VerifiedODE, solve  # noqa: E402
+from mbs.app.sampling import Ensemble as Oracle
+from mbs.app.sampling import count_outside, inside_union
+from mbs.app.sampling import sample_initial_points as sample_points
+from verified.graph import trace
+from verified.hooks import Hook
+from verified.interval import Interval
+from verified.solver import Solution, VerifiedODE, solve
 
 ARITHMETICS = ("interval", "affine")
 SLACK = 1e-9  # relative (to max(1, |x|)); DOP853 at 1e-12 is far more accurate
@@ -145,10 +139,10 @@ def chain_q0(n):
 def _hulls(list_of_boxes, n):
     """(k, n) Interval of the hulls of a list of (B, n) boxes."""
     if not list_of_boxes:
-        return Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n)))
+        return Interval(np.zeros((0, n)), np.zeros((0, n)))
     lo = np.stack([b.lo.reshape(-1, n).min(axis=0) for b in list_of_boxes])
     hi = np.stack([b.hi.reshape(-1, n).max(axis=0) for b in list_of_boxes])
-    return Interval._from_bounds(lo, hi)
+    return Interval(lo, hi, allow_unbounded=True)
 
 
 # ----------------------------------------------------------------------------- oracle
@@ -198,7 +192,7 @@ def closed_form_rhs(mod):
     return lambda X: np.array(mod.rhs(X), dtype=float)
 
 
-def _inside(x, boxes):
+def inside_boxes(x, boxes):
     """(S,) bool: is each point (S, n) in the union of boxes (B, n)? (relative slack)"""
     return inside_union(x, boxes.lo, boxes.hi, SLACK, relative=True)
 
@@ -403,9 +397,9 @@ def run_chain_solver(chain, lo, hi, T, arithmetic, opts, cap):
 def mass_matrix_proven(chain, lo, hi):
     """Does simulate()'s M(q) > 0 proof (interval LDL^T pivots, bisection) pass on the
     initial q box?"""
-    from mbs.simulate import _proven
+    from mbs.simulate import pivots_proven
     n = chain.n
-    return bool(_proven(chain.numeric().pivot_graph(), lo[None, :n], hi[None, :n])[0])
+    return bool(pivots_proven(chain.numeric().pivot_graph(), lo[None, :n], hi[None, :n])[0])
 
 
 # -------------------------------------------------------------------------- tables

@@ -21,20 +21,14 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-# tests/oracles (the sampling oracle) after the repository root: tests/mbs, a directory
-# without __init__, must not shadow the mbs package
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.append(str(Path(__file__).resolve().parents[1] / "tests"))
-
-from models import double_pendulum as dp  # noqa: E402
-from oracles.sampling import Ensemble, hull_widths  # noqa: E402
-from verified.graph import trace  # noqa: E402
-from verified.interval import Interval  # noqa: E402
-from verified.solver import VerifiedODE, solve  # noqa: E402
+from models import double_pendulum as dp
+from mbs.app.sampling import Ensemble, hull_widths
+from verified.graph import trace
+from verified.interval import Interval
+from verified.solver import VerifiedODE, solve
 
 DEFAULTS = dict(order=12, tol=1e-10)  # chosen from the work-precision table (T = 1)
 

@@ -27,20 +27,18 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import bench_robots as br  # noqa: E402
-from verified.affine_taylor import AffineTaylorODE  # noqa: E402
-from verified.hooks import StopAfterWall  # noqa: E402
-from verified.interval import Interval  # noqa: E402
-from verified.solver import VerifiedODE, solve  # noqa: E402
-from verified.taylor import TaylorODE  # noqa: E402
-from verified.taylor_model import TaylorModelODE  # noqa: E402
-from verified.variational import variational_graph  # noqa: E402
+import bench_robots as br
+from verified.affine_taylor import AffineTaylorODE
+from verified.hooks import StopAfterWall
+from verified.interval import Interval
+from verified.solver import VerifiedODE, solve
+from verified.taylor import TaylorODE
+from verified.taylor_model import TaylorModelODE
+from verified.variational import variational_graph
 
 
 def _chain(name):
@@ -95,7 +93,7 @@ def robot_run(name, eps, T, arithmetic, set_order, cap, order=8, tol=1e-10):
     wall = time.perf_counter() - t0
     oracle = br.Oracle(br.pinocchio_rhs(chain), br.sample_points(lo, hi, 40), T, br.chain_names(chain))
     k = len(sol.t) - 1
-    inside = all(br._inside(oracle.states(t), b).all() for t, b in zip(sol.t, sol.boxes))
+    inside = all(br.inside_boxes(oracle.states(t), b).all() for t, b in zip(sol.t, sol.boxes))
     ratio = float((sol.hull[k].width() / np.maximum(oracle.hull_width(sol.t[k]), 1e-300)).max()) if k else float("nan")
     tag = "" if sol.success else (" cap" if sol.status == "stopped" else " bd")
     reached = f"{T:g}" if sol.success else f"{sol.t_reached:.3g}{tag}"

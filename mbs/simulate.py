@@ -63,7 +63,7 @@ from .system import System
 from .uncertain import ChainParameters, parse_value
 
 __all__ = ["MODES", "Mode", "PAPER_MODELS", "simulate", "Simulation", "compare_modes", "system_for",
-           "width_deviations", "WidthDeviations", "output_times"]
+           "width_deviations", "WidthDeviations", "output_times", "pivots_proven"]
 
 
 @dataclass(repr=False)
@@ -764,8 +764,12 @@ _BISECTIONS = 6
 _MAX_BISECTED = 64
 
 
-def _proven(graph, lo: np.ndarray, hi: np.ndarray, depth: int = _BISECTIONS) -> np.ndarray:
-    """Which rows (boxes of q, shape (B, n)) have every pivot proven > 0.  A box that
+def pivots_proven(graph, lo: np.ndarray, hi: np.ndarray, depth: int = _BISECTIONS) -> np.ndarray:
+    """Which rows (boxes of q, shape (B, n)) have every pivot proven > 0: simulate()'s
+    M(q) > 0 proof on boxes. ``graph``: the LDL^T pivots of M as a graph of q (and the
+    parameters after q), e.g. ``chain.numeric().pivot_graph()``; ``lo``, ``hi``: (B, inputs)
+    bounds; returns a (B,) bool array. Interval evaluation first, affine arithmetic
+    where that does not prove a row. A box that
     fails is bisected along its widest component, up to ``depth`` times, so that
     interval overestimation alone does not fail it (only the first
     ``_MAX_BISECTED`` failing rows: the earliest failure is the one that counts)."""
@@ -792,7 +796,7 @@ def _proven(graph, lo: np.ndarray, hi: np.ndarray, depth: int = _BISECTIONS) -> 
     lower_hi, upper_lo = hi[rows].copy(), lo[rows].copy()
     lower_hi[np.arange(rows.size), j] = cut
     upper_lo[np.arange(rows.size), j] = cut
-    halves = _proven(graph, np.concatenate([lo[rows], upper_lo]), np.concatenate([lower_hi, hi[rows]]), depth - 1)
+    halves = pivots_proven(graph, np.concatenate([lo[rows], upper_lo]), np.concatenate([lower_hi, hi[rows]]), depth - 1)
     ok[rows] = halves[:rows.size] & halves[rows.size:]
     return ok
 
@@ -814,7 +818,7 @@ def _first_unproven(graph, pieces, n, pbox=None):
             rows += los[stop].shape[0]
             stop += 1
         lo, hi = np.concatenate(los[start:stop]), np.concatenate(his[start:stop])
-        ok = _proven(graph, lo, hi)
+        ok = pivots_proven(graph, lo, hi)
         if not ok.all():
             i = int(np.flatnonzero(~ok)[0])
             owner = start + int(np.searchsorted(np.cumsum([x.shape[0] for x in los[start:stop]]), i, side="right"))

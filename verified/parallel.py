@@ -20,11 +20,11 @@ Where the chunks run:
 * on a local Dask cluster (one process per worker, 1 thread each), created on first
   use and kept for later calls (:func:`local_client`); each worker loads the kernels a
   run needs from numba's on-disk cache before that run's first chunk
-  (:func:`_warm_problem`) and compiles none at start (:func:`_prepare_worker`). On
+  (:func:`_warm_problem`) and compiles none at start (:func:`prepare_worker`). On
   POSIX the workers are fresh interpreters (``python -m dask spec``, under a nanny that restarts a worker process
   that dies) with the scheduler in this process, not ``LocalCluster``'s spawned
   processes, which re-run the calling script's top level: a script needs no
-  ``if __name__ == "__main__":`` guard (:func:`_start_local_cluster`). So
+  ``if __name__ == "__main__":`` guard (:func:`start_local_cluster`). So
   ``workers=None``, the default of ``solve``, means "every core when worthwhile"
   (:func:`auto_workers`: at least ``AUTO_MIN_PIECES`` boxes, Dask installed, more
   than one core; else one in-process batch, also silently without Dask); ``workers=1``
@@ -163,7 +163,7 @@ from .solver_args import _subdivision, check_arithmetic, check_graph, check_para
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "auto_workers", "subprocess_workers_supported", "SchedulerError",
            "WorkerStartError", "WorkersLostError", "NO_WORKERS_TIMEOUT", "CONNECT_TIMEOUT", "CHUNK_TARGET",
-           "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs"]
+           "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs", "start_local_cluster", "prepare_worker"]
 
 #: seconds to wait for a scheduler before :class:`SchedulerError`
 CONNECT_TIMEOUT = 10.0
@@ -349,7 +349,7 @@ def _prepared(problem: _Problem):
 _WORKER_READY = False
 
 
-def _prepare_worker() -> float:
+def prepare_worker() -> float:
     """Once per worker process, when it joins a local cluster: the solver's modules
     imported (unpickling this function did that) and glibc tuned. No kernel is compiled
     or loaded here: each run's first task on a worker (:func:`_warm_problem`) loads the
@@ -747,8 +747,10 @@ def _subprocess_worker_class():
     return _Worker
 
 
-def _start_local_cluster(workers: int):
-    """(cluster, client): ``workers`` 1-thread worker processes on this machine.
+def start_local_cluster(workers: int):
+    """(cluster, client): ``workers`` 1-thread worker processes on this machine (what
+    :func:`local_client` starts, before it runs :func:`prepare_worker` in each; the caller
+    closes both).
 
     Not ``LocalCluster``: its nannies start the workers with multiprocessing's "spawn",
     which first re-runs the calling script's top level (``__main__``) in every worker,
@@ -800,10 +802,10 @@ def _start_local_cluster(workers: int):
 
 def local_client(workers: int):
     """A ``distributed.Client`` of a local cluster with ``workers`` processes of one
-    thread each, created on first use (:func:`_prepare_worker` run in every worker) and
+    thread each, created on first use (:func:`prepare_worker` run in every worker) and
     kept for later calls until :func:`close_local_clients` / exit.
 
-    On POSIX the workers are fresh interpreters (:func:`_start_local_cluster`): the
+    On POSIX the workers are fresh interpreters (:func:`start_local_cluster`): the
     calling script needs no ``if __name__ == "__main__":`` guard. Elsewhere it is a
     ``LocalCluster``, whose spawned workers re-run an unguarded script's top level:
     :class:`WorkerStartError` says so."""
@@ -812,7 +814,7 @@ def local_client(workers: int):
         return got[1]
     if subprocess_workers_supported():
         try:
-            cluster, client = _start_local_cluster(workers)
+            cluster, client = start_local_cluster(workers)
         except Exception as exc:  # noqa: BLE001 - one line, the cause named
             why = " ".join(str(exc).split()) or type(exc).__name__
             raise WorkerStartError(f"could not start {workers} local Dask worker processes ({why}); pass "
@@ -831,8 +833,8 @@ def local_client(workers: int):
                 "the calling script's top level, so put it under `if __name__ == \"__main__\":`, or pass "
                 "workers=1 to run in this process") from None
         client = Client(cluster, set_as_default=False)
-    client.run(_prepare_worker)
-    client.register_worker_callbacks(_prepare_worker)  # also workers restarted later (a killed worker)
+    client.run(prepare_worker)
+    client.register_worker_callbacks(prepare_worker)  # also workers restarted later (a killed worker)
     _LOCAL[workers] = (cluster, client)
     return client
 

@@ -589,7 +589,7 @@ def test_mass_matrix_proof_uses_affine_pivots_for_a_five_link_arm():
     """The interval LDL^T pivots of a 5-link arm over q0 +- 1e-3 reach below 0 ([-0.29,
     0.39] and [-inf, inf]); simulate() cut an affine run, verified to 0.04 s, back to
     t = 0. The affine pivots are proven positive and contain the sampled pivots."""
-    from mbs.simulate import _proven
+    from mbs.simulate import pivots_proven
     from verified.affine_taylor import affine_range
 
     from models.planar import planar_chain
@@ -603,7 +603,7 @@ def test_mass_matrix_proof_uses_affine_pivots_for_a_five_link_arm():
     assert not (g.eval_interval(Interval(lo, hi)).lo > 0).all()
     D = _check_affine_range(g, lo, hi, np.random.default_rng(5))
     assert (D.lo > 0).all()
-    assert _proven(g, lo, hi, depth=0).all()
+    assert pivots_proven(g, lo, hi, depth=0).all()
     # the default proof (congruence pivots, tests/verified/test_preconditioned.py) needs no affine
     gc = chain.numeric().pivot_graph()
     assert (gc.eval_interval(Interval(lo, hi)).lo > 0).all()

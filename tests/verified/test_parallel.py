@@ -251,7 +251,7 @@ def test_local_workers_that_cannot_start_are_one_clear_error(monkeypatch):
     def failing(*args, **kwargs):
         raise RuntimeError("Nanny failed to start.")
     monkeypatch.setattr(parallel, "_LOCAL", {})
-    monkeypatch.setattr(parallel, "_start_local_cluster", lambda workers: failing())
+    monkeypatch.setattr(parallel, "start_local_cluster", lambda workers: failing())
     with pytest.raises(parallel.WorkerStartError, match="Nanny failed to start") as e:
         parallel.local_client(2)
     assert "\n" not in str(e.value) and "workers=1" in str(e.value)
