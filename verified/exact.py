@@ -12,7 +12,8 @@ number into floats calls these functions instead of repeating the rule:
 - :mod:`verified.contractor` (pi for the periodic projections),
 - :mod:`verified.stepper` and :mod:`verified.solver` (the exact step times and the gap
   to the next output time),
-- :mod:`mbs.app.scene` (numbers and ``pi`` expressions in scene files),
+- :mod:`mbs.app.scene` (numbers and ``pi`` expressions in scene files, read by
+  :func:`parse_pi_expression`),
 - :mod:`models.pendulum`, :mod:`models.double_pendulum` (the paper's initial boxes).
 
 Rounding is never to nearest: ``lo <= exact <= hi`` always, with ``lo == hi`` only when
@@ -20,10 +21,12 @@ the exact number is a double.
 """
 from __future__ import annotations
 
+import ast
 import math
 from fractions import Fraction
 
-__all__ = ["enclose_fraction", "enclose_pi_multiple", "pi_multiple_enclosure", "enclose_approximation"]
+__all__ = ["enclose_fraction", "enclose_pi_multiple", "pi_multiple_enclosure", "enclose_approximation",
+           "parse_pi_expression", "ExpressionError"]
 
 #: working precision (bits) of the ``a + b pi`` evaluation, raised only when 200 bits
 #: cannot tell on which side of its nearest double the number lies
@@ -126,3 +129,53 @@ def enclose_approximation(r: Fraction, rel_err: Fraction) -> tuple[float, float,
     if exact_f > r + tol:  # exact value < f
         return math.nextafter(f, -math.inf), f, f
     return math.nextafter(f, -math.inf), math.nextafter(f, math.inf), f
+
+
+# ------------------------------------------------------------------ exact expressions
+class ExpressionError(ValueError):
+    """An expression that :func:`parse_pi_expression` refuses; the message quotes it."""
+
+
+def parse_pi_expression(text: str) -> tuple[Fraction, Fraction]:
+    """Exact value ``a + b pi`` of an expression string, as ``(a, b)`` (Fractions).
+
+    Allowed: decimal numbers (each its literal's exact value: ``"0.1"`` is 1/10, never a
+    float), ``pi``, ``+ - * /``, unary minus and parentheses, linear in ``pi``
+    (``"0.99*3*pi/4"``, ``"-11*pi/20"``, ``"43/100"``). Anything else raises
+    :class:`ExpressionError`. :func:`enclose_pi_multiple` encloses the result."""
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError:
+        raise ExpressionError(f"cannot parse expression {text!r}") from None
+
+    def ev(node):
+        if isinstance(node, ast.Expression):
+            return ev(node.body)
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
+                and not isinstance(node.value, bool):
+            seg = ast.get_source_segment(text.strip(), node)
+            return (Fraction(seg.replace("_", "")), Fraction(0))
+        if isinstance(node, ast.Name) and node.id == "pi":
+            return (Fraction(0), Fraction(1))
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            a, b = ev(node.operand)
+            return (-a, -b) if isinstance(node.op, ast.USub) else (a, b)
+        if isinstance(node, ast.BinOp):
+            (a1, b1), (a2, b2) = ev(node.left), ev(node.right)
+            if isinstance(node.op, ast.Add):
+                return a1 + a2, b1 + b2
+            if isinstance(node.op, ast.Sub):
+                return a1 - a2, b1 - b2
+            if isinstance(node.op, ast.Mult):
+                if b1 and b2:
+                    raise ExpressionError(f"{text!r} is not linear in pi")
+                return a1 * a2, a1 * b2 + b1 * a2
+            if isinstance(node.op, ast.Div):
+                if b2:
+                    raise ExpressionError(f"{text!r} divides by a multiple of pi")
+                if a2 == 0:
+                    raise ExpressionError(f"{text!r} divides by zero")
+                return a1 / a2, b1 / a2
+        raise ExpressionError(f"{text!r}: only numbers, pi, + - * / and parentheses are allowed")
+
+    return ev(tree)

@@ -99,7 +99,6 @@ numbers, an unknown model, an unreadable URDF, bad solver settings.
 """
 from __future__ import annotations
 
-import ast
 import math
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -115,7 +114,7 @@ import numpy as np
 import models
 from models.registry import NAMES, SYSTEMS
 from verified.energy_rate import MODEL_RATES
-from verified.exact import enclose_fraction, enclose_pi_multiple
+from verified.exact import ExpressionError, enclose_fraction, enclose_pi_multiple, parse_pi_expression
 from verified.interval import Interval
 
 from ..dh import chain_from_dh
@@ -157,46 +156,6 @@ def scene_dir() -> Path:
 
 
 # --------------------------------------------------------------------------- numbers
-def _eval_expr(text: str, where: str) -> tuple[Fraction, Fraction]:
-    """Exact value ``a + b * pi`` of an expression string, as (a, b)."""
-    try:
-        tree = ast.parse(text.strip(), mode="eval")
-    except SyntaxError:
-        raise SceneError(f"{where}: cannot parse expression {text!r}") from None
-
-    def ev(node):
-        if isinstance(node, ast.Expression):
-            return ev(node.body)
-        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
-                and not isinstance(node.value, bool):
-            seg = ast.get_source_segment(text.strip(), node)
-            return (Fraction(seg.replace("_", "")), Fraction(0))
-        if isinstance(node, ast.Name) and node.id == "pi":
-            return (Fraction(0), Fraction(1))
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-            a, b = ev(node.operand)
-            return (-a, -b) if isinstance(node.op, ast.USub) else (a, b)
-        if isinstance(node, ast.BinOp):
-            (a1, b1), (a2, b2) = ev(node.left), ev(node.right)
-            if isinstance(node.op, ast.Add):
-                return a1 + a2, b1 + b2
-            if isinstance(node.op, ast.Sub):
-                return a1 - a2, b1 - b2
-            if isinstance(node.op, ast.Mult):
-                if b1 and b2:
-                    raise SceneError(f"{where}: {text!r} is not linear in pi")
-                return a1 * a2, a1 * b2 + b1 * a2
-            if isinstance(node.op, ast.Div):
-                if b2:
-                    raise SceneError(f"{where}: {text!r} divides by a multiple of pi")
-                if a2 == 0:
-                    raise SceneError(f"{where}: {text!r} divides by zero")
-                return a1 / a2, b1 / a2
-        raise SceneError(f"{where}: {text!r}: only numbers, pi, + - * / and parentheses are allowed")
-
-    return ev(tree)
-
-
 def enclose_number(value, where: str = "value") -> tuple[float, float]:
     """(lo, hi) doubles enclosing a scene number (see the module docstring)."""
     if isinstance(value, bool):
@@ -208,7 +167,11 @@ def enclose_number(value, where: str = "value") -> tuple[float, float]:
             raise SceneError(f"{where}: {value!r} is not a finite number")
         return enclose_fraction(Fraction(repr(value)))
     if isinstance(value, str):
-        return enclose_pi_multiple(*_eval_expr(value, where))
+        try:
+            a, b = parse_pi_expression(value)
+        except ExpressionError as e:
+            raise SceneError(f"{where}: {e}") from None
+        return enclose_pi_multiple(a, b)
     raise SceneError(f"{where}: expected a number, an expression string or [lo, hi], "
                      f"got {type(value).__name__}")
 
