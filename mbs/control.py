@@ -51,7 +51,10 @@ __all__ = ["ControlError", "Reference", "Constant", "Quintic", "Controller", "PD
 
 
 class ControlError(ModelError, ValueError):
-    """A bad control specification (unknown joint, wrong gain shape, NaN gains, ...)."""
+    """A bad control specification (unknown joint, wrong gain shape, NaN gains, ...);
+    the messages start with "control" (:attr:`mbs.errors.ModelError.detail`: without it)."""
+
+    prefix = "control "
 
 
 # ---------------------------------------------------------------------- helpers

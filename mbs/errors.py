@@ -9,7 +9,21 @@ offending link or joint.  Code that only wants to catch "bad model" errors can
 
 
 class ModelError(ValueError):
-    """A robot description (URDF, DH table, inertial data) is invalid or unsupported."""
+    """A robot description (URDF, DH table, inertial data) is invalid or unsupported.
+
+    ``detail``: the message without the name of the argument it is about, where the
+    messages of a subclass start with one (``prefix``: ``"params "`` for
+    :class:`mbs.uncertain.ParameterError`, ``"control "`` for
+    :class:`mbs.control.ControlError`), for callers that name that input their own way
+    (a scene file's ``[parameters]`` and ``[control]`` tables)."""
+
+    #: the argument name the messages of this class start with ("" : none)
+    prefix = ""
+
+    @property
+    def detail(self) -> str:
+        msg = str(self)
+        return msg[len(self.prefix):] if self.prefix and msg.startswith(self.prefix) else msg
 
 
 class UnsupportedJointError(ModelError):

@@ -63,7 +63,8 @@ from .system import System
 from .uncertain import ChainParameters, parse_value
 
 __all__ = ["MODES", "Mode", "PAPER_MODELS", "simulate", "Simulation", "compare_modes", "system_for",
-           "width_deviations", "WidthDeviations", "output_times", "pivots_proven"]
+           "width_deviations", "WidthDeviations", "output_times", "pivots_proven",
+           "chain_state_names"]
 
 
 @dataclass(repr=False)
@@ -153,6 +154,16 @@ def system_for(model, mode: str | Mode = "ii", *, energy_rate: str = "unsimplifi
     if control is not None:
         return _controlled_system(model, mode, params, control, q_init)[0]
     return _system_and_chain(model, mode, energy_rate, params)[0]
+
+
+def chain_state_names(model, params=None) -> tuple[str, ...]:
+    """The states ``q1..qn, qd1..qdn`` of a chain model (a model name, a URDF or DH
+    :class:`mbs.Chain`) without building its System, ``params`` checked against the chain
+    (:class:`mbs.uncertain.ParameterError`): the states :func:`system_for` integrates for
+    it, and under ``control`` those before the time state ``"t"``. A bare System raises
+    ModelError, as under control."""
+    n = _model_chain(model, params)[0].n
+    return tuple(f"q{i + 1}" for i in range(n)) + tuple(f"qd{i + 1}" for i in range(n))
 
 
 def _model_chain(model, params):

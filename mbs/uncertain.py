@@ -68,7 +68,10 @@ _PAYLOAD_KEYS = ("link", "mass", "com", "inertia")
 
 
 class ParameterError(ModelError, ValueError):
-    """A bad parameter specification (unknown link, inverted interval, NaN, wrong shape)."""
+    """A bad parameter specification (unknown link, inverted interval, NaN, wrong shape);
+    the messages start with "params" (:attr:`mbs.errors.ModelError.detail`: without it)."""
+
+    prefix = "params "
 
 
 def parse_value(v, where: str, *, lower: float | None = None, strict: bool = False) -> tuple[float, float]:

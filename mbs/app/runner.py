@@ -25,7 +25,7 @@ from ..errors import ModelError
 from ..frames import default_frame, default_frame_note
 from ..modes import get_mode
 from ..progress import Progress, cold_families, compile_note
-from ..simulate import simulate, system_for
+from ..simulate import chain_state_names, simulate, system_for
 from ..system import System
 from .figures import fig_consistency_plane, fig_enclosures, fig_reduction_area
 from .frame_figures import fig_frame_region
@@ -184,6 +184,40 @@ def _phase(bar, name):
         bar.phase(name)
 
 
+def _scene_system(scene, model, mode):
+    """(system, state names, initial box, simulate's keyword arguments with ``mode``) of a
+    scene, its system built once: :func:`reference_system`, under ``[control]`` the closed
+    loop (a PD without ``q_ref`` holds the centre of the initial q box; its state names
+    from :func:`mbs.simulate.chain_state_names` before, the time a point t0 = 0 appended
+    to the box). A bad ``[parameters]`` or ``[control]`` table is a SceneError naming it."""
+    params = scene.simulate_kwargs().get("params")
+    try:
+        if scene.control is None:
+            system = reference_system(model, mode, scene.consistency.get("energy_rate", "unsimplified"),
+                                      params=params)
+            names = system.state_names
+        else:
+            names = chain_state_names(model, params)
+    except ParameterError as e:  # an unknown link or joint of [parameters]
+        raise SceneError(f"{scene.source}: [parameters] {e.detail}") from None
+    except Exception as e:  # noqa: BLE001 - a model that cannot be built is a scene problem
+        raise SceneError(f"{scene.source}: cannot build the model: {type(e).__name__}: {e}") from None
+    x0 = scene.initial_box(names)
+    kw = scene.simulate_kwargs(names)
+    if scene.control is not None:
+        try:
+            system = reference_system(model, mode, params=kw.get("params"), control=scene.control,
+                                      q_init=np.asarray(x0.mid(), float)[:len(names) // 2])
+        except ControlError as e:
+            raise SceneError(f"{scene.source}: [control] {e.detail}") from None
+        except ParameterError as e:
+            raise SceneError(f"{scene.source}: [parameters] {e}") from None
+        if system.n > x0.shape[-1]:   # the time as a state: a point at t0 = 0
+            x0 = Interval(np.r_[np.asarray(x0.lo, float), 0.0], np.r_[np.asarray(x0.hi, float), 0.0])
+    kw["mode"] = mode
+    return system, names, x0, kw
+
+
 def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, samples, figures, max_wall,
                workers, client) -> dict:
     dt = output_dt if output_dt is not None else scene.output_dt
@@ -192,32 +226,8 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
     t0 = time.perf_counter()
     _phase(bar, "building the model")
     model = scene.build_model()
-    kw = scene.simulate_kwargs()
-    try:
-        system = reference_system(model, mode, scene.consistency.get("energy_rate", "unsimplified"),
-                                  params=kw.get("params"))
-    except ParameterError as e:  # an unknown link or joint of [parameters]
-        msg = str(e)
-        raise SceneError(f"{scene.source}: [parameters] {msg[7:] if msg.startswith('params ') else msg}") from None
-    except Exception as e:  # noqa: BLE001 - a model that cannot be built is a scene problem
-        raise SceneError(f"{scene.source}: cannot build the model: {type(e).__name__}: {e}") from None
-    names = system.state_names
-    x0 = scene.initial_box(names)
-    kw = scene.simulate_kwargs(names)
-    if scene.control is not None:
-        try:
-            system = reference_system(model, mode, params=kw.get("params"), control=scene.control,
-                                      q_init=np.asarray(x0.mid(), float)[:len(names) // 2])
-        except ControlError as e:
-            msg = str(e)
-            raise SceneError(f"{scene.source}: [control] {msg[8:] if msg.startswith('control ') else msg}") \
-                from None
-        except ParameterError as e:
-            raise SceneError(f"{scene.source}: [parameters] {e}") from None
-        if system.n > x0.shape[-1]:   # the time as a state: a point at t0 = 0
-            x0 = Interval(np.r_[np.asarray(x0.lo, float), 0.0], np.r_[np.asarray(x0.hi, float), 0.0])
+    system, names, x0, kw = _scene_system(scene, model, mode)
     x_user = x0 if scene.control is None else None
-    kw["mode"] = mode
     t_model = time.perf_counter() - t0
     log(f"{scene.name}: mode {mode}, {len(names)} states ({', '.join(names)}), t_end = {t_end:g} s")
     if system.rhs.n_params:
