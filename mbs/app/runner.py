@@ -220,6 +220,8 @@ def _scene_system(scene, model, mode):
 
 def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, samples, figures, max_wall,
                workers, client) -> dict:
+    """The steps of :func:`run_scene`: the system, the solve, the sampled check, the
+    frames, result.json, the figures and the report lines."""
     dt = output_dt if output_dt is not None else scene.output_dt
     samples = 64 if samples is None else int(samples)
 
@@ -227,21 +229,15 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
     _phase(bar, "building the model")
     model = scene.build_model()
     system, names, x0, kw = _scene_system(scene, model, mode)
-    x_user = x0 if scene.control is None else None
     t_model = time.perf_counter() - t0
     log(f"{scene.name}: mode {mode}, {len(names)} states ({', '.join(names)}), t_end = {t_end:g} s")
     if system.rhs.n_params:
         log("uncertain parameters: " + ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in
                                                  ((k, system.params[k]) for k in system.rhs.param_names)))
     frame_warmup = _start_frame_warmup(model, kw, workers)
-    if bar is not None and bar.enabled:  # (the cache is read only for a terminal that shows the note)
-        families = kernel_families(kw)
-        cold = cold_families(families)  # (None: numba's cache could not be read)
-        bar.note(compile_note(families) if cold else "")
-        bar.phase("compiling" if cold else "solving" if cold is not None else
-                  "first step (compiling, on a first run)", then="solving")
+    _compile_phase(bar, kw)
     try:
-        x_sim = x0 if x_user is not None else x0[:len(names)]
+        x_sim = x0 if scene.control is None else x0[:len(names)]
         sol = simulate(model, x_sim, t_end, output_dt=dt, progress=progress, max_wall=max_wall, **kw,
                        **parallel_kwargs(workers, client))
     except (ValueError, TypeError, ModelError) as e:  # settings the solver refuses
@@ -251,6 +247,44 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
     report = {"solution": sol, "system": system, "escaped": 0, "checked": 0, "paths": {}}
 
     # sampled true trajectories: soundness check, tightness and figure overlay
+    traj, traj_t, spread = _check_sampled(report, sol, system, x0, samples, bar, log)
+    surv = getattr(sol, "surviving", None)
+    _check_surviving(report, sol, system, samples, kw, log)
+
+    extra = {"wall_total_s": wall, "model_s": t_model, "samples_checked": report["checked"],
+             "samples_escaped": report["escaped"], "output_times_requested": len(want) + 1}
+    if surv is not None:
+        extra["surviving_samples_checked"] = report["surviving_checked"]
+    state_names = list(getattr(sol, "state_names", None) or names)
+    report["tightness"] = tight = tightness(sol, spread, state_names, report["checked"] if spread is not None else 0)
+    frames = _enclose_frames(scene, sol, bar, log, frame_warmup, extra)
+    path = write_result(out / "result.json", sol, scene=scene.source, mode=mode, state_names=state_names,
+                        t_end=t_end, extra_stats=extra, frames=frames, tightness=tight)
+    report["frames"] = frames
+    report["paths"]["result"] = path
+    not_drawn = []
+    if figures and not report["interrupted"]:
+        not_drawn = _draw_figures(report, scene, sol, system, out, mode, frames, traj, traj_t, names, bar)
+    if bar is not None:
+        bar.close()  # (the report below without a bar redrawn after every line)
+    _log_summary(log, report, sol, names, wall, not_drawn, tight)
+    return report
+
+
+def _compile_phase(bar, kw):
+    """The bar's phase (and note) while the kernels the run needs compile, if they do."""
+    if bar is not None and bar.enabled:  # (the cache is read only for a terminal that shows the note)
+        families = kernel_families(kw)
+        cold = cold_families(families)  # (None: numba's cache could not be read)
+        bar.note(compile_note(families) if cold else "")
+        bar.phase("compiling" if cold else "solving" if cold is not None else
+                  "first step (compiling, on a first run)", then="solving")
+
+
+def _check_sampled(report, sol, system, x0, samples, bar, log):
+    """(trajectories, their times, spread at the last output) of ``samples`` DOP853 runs
+    from the initial box (Nones without them), their states checked against the
+    enclosures at the output times; sets ``report``'s checked, escaped, interrupted."""
     traj = traj_t = spread = None
     interrupted = sol.status == "interrupted"
     if samples > 0 and len(sol.t) > 1 and not interrupted:
@@ -272,17 +306,24 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
                 log(f"WARNING: {len(bad)} sampled states lie outside the enclosure (first: sample {bad[0][0]} "
                     f"at t = {sol.t[bad[0][1]]:g}); this is a bug, please report it")
     report["interrupted"] = interrupted
+    return traj, traj_t, spread
+
+
+def _check_surviving(report, sol, system, samples, kw, log):
+    """The pieces that went on after others broke down, checked against trajectories
+    sampled from their own boxes; sets ``report``'s surviving_checked, surviving_escaped
+    (added to escaped) and interrupted."""
     surv = getattr(sol, "surviving", None)
     report["surviving_checked"] = report["surviving_escaped"] = 0
-    if samples > 0 and surv is not None and len(surv.t) > 1 and not interrupted and not kw.get("param_subdivision"):
-        # the pieces that went on after others broke down: sampled from their own boxes
+    if samples > 0 and surv is not None and len(surv.t) > 1 and not report["interrupted"] \
+            and not kw.get("param_subdivision"):
         # (with the parameter box cut into pieces a piece holds only some parameter
         # values, which its box does not say: not checked then)
         try:
             s_t = np.asarray(surv.t, float)
             s_traj = surviving_samples(system, sol, samples, s_t, system.params)
         except KeyboardInterrupt:
-            interrupted = report["interrupted"] = True
+            report["interrupted"] = True
             log("interrupted: sampled trajectories of the surviving pieces skipped")
         else:
             bad = check_samples(surv, s_traj)
@@ -292,12 +333,12 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
                 log(f"WARNING: {len(bad)} sampled states of the surviving pieces lie outside their enclosure "
                     f"(first: sample {bad[0][0]} at t = {surv.t[bad[0][1]]:g}); this is a bug, please report it")
 
-    extra = {"wall_total_s": wall, "model_s": t_model, "samples_checked": report["checked"],
-             "samples_escaped": report["escaped"], "output_times_requested": len(want) + 1}
-    if surv is not None:
-        extra["surviving_samples_checked"] = report["surviving_checked"]
-    state_names = list(getattr(sol, "state_names", None) or names)
-    report["tightness"] = tight = tightness(sol, spread, state_names, report["checked"] if spread is not None else 0)
+
+def _enclose_frames(scene, sol, bar, log, frame_warmup, extra) -> list:
+    """The frames enclosed for result.json (``[simulation] frames``, else the end
+    effector; none for a bare System or a run without output), each logged; the
+    background compilation of the affine range waited for, or ended when unused;
+    ``extra["frames_s"]``: their time."""
     frames = []
     if getattr(sol, "frame", None) is not None and len(sol.t):
         frames = list(scene.frames) if scene.frames else [default_frame(sol.frame.chain)]
@@ -326,38 +367,43 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
     if frame_warmup is not None:  # (no frame to enclose after all)
         frame_warmup.kill()
         frame_warmup.wait()
-    path = write_result(out / "result.json", sol, scene=scene.source, mode=mode, state_names=state_names,
-                        t_end=t_end, extra_stats=extra, frames=frames, tightness=tight)
-    report["frames"] = frames
-    report["paths"]["result"] = path
-    if figures and not interrupted:
-        _phase(bar, "figures")
-    if figures and not interrupted and frames:
+    return frames
+
+
+def _draw_figures(report, scene, sol, system, out, mode, frames, traj, traj_t, names, bar) -> list:
+    """frame_region.png, enclosures.png, reduction_area.png and consistency_plane.png
+    (Fig. 3) where they apply, their paths in ``report["paths"]``; returns the lines
+    saying why a figure was not drawn."""
+    _phase(bar, "figures")
+    if frames:
         report["paths"]["frame_region"] = fig_frame_region(
             sol.frame(frames[0]), out / "frame_region.png", title=f"{scene.name}: frame {frames[0]!r}",
             samples=_frame_samples(sol, frames[0], traj, names))
     not_drawn = []
-    if figures and not interrupted:
-        report["paths"]["enclosures"] = fig_enclosures(
-            {mode: sol}, out / "enclosures.png", samples=traj, sample_times=traj_t,
-            title=f"{scene.name}: enclosures, mode {mode}")
-        cons = getattr(sol, "consistency", None)
-        if cons is not None and len(getattr(cons, "ra_t", ())) > 1:
-            report["paths"]["reduction_area"] = fig_reduction_area(sol, out / "reduction_area.png")
-        if cons is not None and getattr(cons, "tests", None) and system.energy is not None:
-            if pruned_anything(sol):
-                pbox = None
-                if system.energy.n_params:  # H over every cell and every parameter value
-                    pn = system.energy.param_names
-                    pbox = Interval(np.array([system.params[k][0] for k in pn], float),
-                                    np.array([system.params[k][1] for k in pn], float))
-                report["paths"]["consistency_plane"] = fig_consistency_plane(
-                    sol, system.energy, out / "consistency_plane.png", params=pbox)
-            else:
-                not_drawn.append(f"nothing pruned by the {len(cons.tests)} energy test"
-                                 f"{'s' if len(cons.tests) > 1 else ''}: Fig. 3 (consistency_plane.png) not drawn")
-    if bar is not None:
-        bar.close()  # (the report below without a bar redrawn after every line)
+    report["paths"]["enclosures"] = fig_enclosures(
+        {mode: sol}, out / "enclosures.png", samples=traj, sample_times=traj_t,
+        title=f"{scene.name}: enclosures, mode {mode}")
+    cons = getattr(sol, "consistency", None)
+    if cons is not None and len(getattr(cons, "ra_t", ())) > 1:
+        report["paths"]["reduction_area"] = fig_reduction_area(sol, out / "reduction_area.png")
+    if cons is not None and getattr(cons, "tests", None) and system.energy is not None:
+        if pruned_anything(sol):
+            pbox = None
+            if system.energy.n_params:  # H over every cell and every parameter value
+                pn = system.energy.param_names
+                pbox = Interval(np.array([system.params[k][0] for k in pn], float),
+                                np.array([system.params[k][1] for k in pn], float))
+            report["paths"]["consistency_plane"] = fig_consistency_plane(
+                sol, system.energy, out / "consistency_plane.png", params=pbox)
+        else:
+            not_drawn.append(f"nothing pruned by the {len(cons.tests)} energy test"
+                             f"{'s' if len(cons.tests) > 1 else ''}: Fig. 3 (consistency_plane.png) not drawn")
+    return not_drawn
+
+
+def _log_summary(log, report, sol, names, wall, not_drawn, tight):
+    """The report's closing lines: status, method, widths, the sampled check, the files."""
+    surv = getattr(sol, "surviving", None)
     st = sol.stats
     log(f"{status_line(sol)}; {st.get('steps')} steps, {st.get('wall_s', 0):.2f} s solver, {wall:.2f} s total")
     if getattr(sol, "method", ""):
@@ -393,7 +439,6 @@ def _run_scene(scene, out, *, bar, progress, log, mode, t_end, output_dt, sample
         log(f"wrote {p}")
     if tight is not None:
         log("\n" + format_tightness(tight))
-    return report
 
 
 def sampled_spread(states) -> np.ndarray:
