@@ -1,7 +1,7 @@
 """Dense-sampling oracle for reachable sets (scipy's DOP853 at tight tolerances): the
-tests' and benchmarks' name for :mod:`mbs.app.sampling`, its one home (the benchmarks
-put tests/ on sys.path and import ``oracles.sampling``). That module imports nothing
-from verified/ or the modeling core; see its docstring for what is in it."""
+tests' name for :mod:`mbs.app.sampling`, its one home (the benchmarks import that module
+itself). That module imports nothing from verified/ or the modeling core; see its
+docstring for what is in it."""
 
 from mbs.app.sampling import (SLACK, Ensemble, count_outside, dop853, end_states, hull_widths, in_union,
                               inside_union, line_points, misses, pinocchio_with, plant_acceleration, sample_initial_points,
