@@ -7,8 +7,10 @@ first rung (:func:`default_rungs`: second-order sets by composition for systems 
 sets cannot be continued is taken up by the next rung from where its sets stopped
 (``Solution.failures``: the sets at the last verified time, :func:`switch_start`), and
 after the last rung its initial box is split (:func:`split_boxes`: bisected along its
-widest components) and its parts are run from ``t0`` with the last rung, until every
-piece reaches ``t1`` or the pieces would exceed ``max_pieces``. (Splitting the sets
+widest components; with uncertain parameters, :func:`split_pieces`: along the states
+and parameters that move the states most, each part with its own parameter box) and
+its parts are run from ``t0`` with the last rung, until every piece reaches ``t1`` or
+the pieces would exceed ``max_pieces``. (Splitting the sets
 where they failed, or half-way there, was measured on the 3-link arm at +-0.01 rad:
 those sets are already too wide to gain from halving, see ``docs/lab``.) A
 continuation that gets no further than where it started (sets already too wide for
@@ -49,7 +51,7 @@ from .methods import Auto, Composition, Lohner, Method
 from .solution import Failure, Solution, Start
 from .time_chain import chain_in_time
 
-__all__ = ["solve_auto", "default_rungs", "split_boxes", "COMPOSITION_MAX_STATES"]
+__all__ = ["solve_auto", "default_rungs", "split_boxes", "split_pieces", "influences", "COMPOSITION_MAX_STATES"]
 
 #: up to this many states (parameters carried as states included) the first rung is the
 #: composition: on every case measured for issue 40 (3-link arm, double pendulum, the
@@ -107,6 +109,100 @@ def split_boxes(boxes: Interval, max_dims: int = SPLIT_DIMS) -> Interval:
             parts = nxt
         out += parts
     return Interval(np.array([a for a, _ in out]), np.array([c for _, c in out]))
+
+
+#: a component of a piece with uncertain parameters (a state or a parameter) is bisected
+#: when moving it across its interval alone moves some state at the failure time at least
+#: this share as much as the component that moves that state most (:func:`influences`)
+INFLUENCE_SHARE = 0.5
+
+
+def influences(graph, lo, hi, plo, phi, T: float):
+    """How much each component of a piece -- its states ``lo..hi`` (n,), then its
+    parameters ``plo..phi`` (p,) -- moves the states at time ``T``: float trajectories
+    (DOP853, rtol = atol = 1e-8) from the piece's centre with that one component at its
+    lower and at its upper end; for each state, the distance between the two ends
+    relative to the largest such distance among the components; the largest over the
+    states. Shape (n + p,), 0 for components of zero or infinite width; None where the
+    integration fails. It guides splitting only, never an enclosure."""
+    from scipy.integrate import solve_ivp
+
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    plo, phi = np.asarray(plo, float), np.asarray(phi, float)
+    n, q = lo.size, plo.size
+    zlo, zhi = np.concatenate([lo, plo]), np.concatenate([hi, phi])
+    with np.errstate(over="ignore", invalid="ignore"):
+        w = zhi - zlo
+    dims = [j for j in range(n + q) if np.isfinite(w[j]) and w[j] > 0]
+    out = np.zeros(n + q)
+    if not dims or T <= 0:
+        return out
+    Z = np.tile(0.5 * (zlo + zhi), (2 * len(dims), 1))
+    for k, j in enumerate(dims):
+        Z[2 * k, j], Z[2 * k + 1, j] = zlo[j], zhi[j]
+    S = Z.shape[0]
+    X0, P = Z[:, :n], (Z[:, n:] if q else None)
+
+    def f(t, y):
+        return graph.eval_float(y.reshape(S, n), P).reshape(-1)
+    with np.errstate(all="ignore"):
+        r = solve_ivp(f, (0.0, float(T)), X0.reshape(-1), method="DOP853", rtol=1e-8, atol=1e-8)
+    if not r.success or not np.all(np.isfinite(r.y[:, -1])):
+        return None
+    end = r.y[:, -1].reshape(len(dims), 2, n)
+    moved = np.abs(end[:, 1] - end[:, 0])  # (dims, n)
+    top = moved.max(axis=0)
+    ok = top > 0
+    if ok.any():
+        out[dims] = (moved[:, ok] / top[ok]).max(axis=1)
+    return out
+
+
+def split_pieces(graph, boxes: Interval, params, span: float):
+    """The failed pieces ``boxes`` (B, n) with their parameters ``params`` ((p,) for all,
+    (B, p) rows, or None), split: ``(parts, part_params)``. Without uncertain parameters,
+    :func:`split_boxes` and the rows repeated. With them, each piece is bisected along the
+    components -- states and parameters alike -- that move its states most over ``span``
+    (:func:`influences`, at least :data:`INFLUENCE_SHARE` of the most, at most
+    :data:`SPLIT_DIMS` of them; the widest parameter with the states' choice where the
+    integration fails), and every part gets its own parameter row: ``part_params`` (parts,
+    p). Every state and parameter of a piece lies in one of its parts (the cut is shared
+    by both halves), so the parts cover the pieces."""
+    wide = params is not None and isinstance(params, Interval) and bool(np.any(params.width() > 0))
+    if not wide:
+        parts = split_boxes(boxes)
+        return parts, _repeat_rows(params, parts.shape[0] // boxes.shape[0])
+    n = boxes.shape[-1]
+    out_x, out_p = [], []
+    for b in range(boxes.shape[0]):
+        lo, hi = np.asarray(boxes.lo[b], float), np.asarray(boxes.hi[b], float)
+        row = params if params.ndim == 1 else params[b]
+        plo, phi = np.asarray(row.lo, float), np.asarray(row.hi, float)
+        infl = influences(graph, lo, hi, plo, phi, span)
+        if infl is None or not np.any(infl > 0):
+            # (the states' own choice, and the widest parameter relative to its size)
+            parts = split_boxes(boxes[b:b + 1])
+            dims = [j for j in range(n) if np.any(parts.lo[:, j] != lo[j]) or np.any(parts.hi[:, j] != hi[j])]
+            rel = np.where(phi > plo, (phi - plo) / np.maximum(np.abs(0.5 * (plo + phi)), 1e-300), 0.0)
+            dims = dims[:SPLIT_DIMS - 1] + [n + int(np.argmax(rel))]
+        else:
+            order = np.argsort(-infl, kind="stable")
+            dims = [int(j) for j in order[:SPLIT_DIMS] if infl[j] > 0 and infl[j] >= INFLUENCE_SHARE * infl[order[0]]]
+        zlo, zhi = np.concatenate([lo, plo]), np.concatenate([hi, phi])
+        cuts = [(zlo, zhi)]
+        for j in dims:
+            cut = 0.5 * (zlo[j] + zhi[j])
+            nxt = []
+            for a, c in cuts:
+                a1, c1, a2, c2 = a.copy(), c.copy(), a.copy(), c.copy()
+                c1[j] = cut
+                a2[j] = cut
+                nxt += [(a1, c1), (a2, c2)]
+            cuts = nxt
+        out_x += [(a[:n], c[:n]) for a, c in cuts]
+        out_p += [(a[n:], c[n:]) for a, c in cuts]
+    return (Interval(np.array([a for a, _ in out_x]), np.array([c for _, c in out_x])),
+            Interval(np.array([a for a, _ in out_p]), np.array([c for _, c in out_p])))
 
 
 @dataclass
@@ -432,15 +528,14 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
         # splitting: the failed pieces' initial boxes, split, from t0 (splitting the sets
         # where they failed gained less: docs/lab, issue 40)
-        parts = split_boxes(fb)
-        per = parts.shape[0] // fb.shape[0]
         if cont is not None:
             t_fail = float(sol.t_reached)
         else:
             t_fail = min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=sol.t_reached)
+        parts, part_params = split_pieces(graph, fb, fp, float(t_fail) - float(t0))
         why = None
         if parts.shape[0] == fb.shape[0]:
-            why = "the pieces cannot be split (no component of finite, nonzero width)"
+            why = "the pieces cannot be split (no state or parameter of finite, nonzero width)"
         elif pieces_total - fb.shape[0] + parts.shape[0] > method.max_pieces:
             why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {method.max_pieces}"
         elif t_fail <= task.parent_t + MIN_GAIN * (t1 - t0):
@@ -456,7 +551,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         if kept:
             done.append((task.boxes[np.asarray(kept)], sol.surviving))
         pieces_total += parts.shape[0] - fb.shape[0]
-        todo.append(_Task(parts, _repeat_rows(fp, per), last, task.splits + 1, t_fail))
+        todo.append(_Task(parts, part_params, last, task.splits + 1, t_fail))
         entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[last].describe()}"
 
     pieces = concatenate([b for b, _ in done], axis=0)
