@@ -140,6 +140,7 @@ def test_interactive_detects_terminals():
     assert interactive(Tty()) and not interactive(io.StringIO())
 
 
+@pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_width_deviations_compare_every_output_time_and_say_which():
     lo, hi = pd.initial_box()
     sols = compare_modes("pendulum_paper", Interval(lo, hi), 0.2, modes=("i", "iii"), subdivision=[2, 2])

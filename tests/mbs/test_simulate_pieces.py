@@ -87,6 +87,7 @@ tol = 1e-10
 """
 
 
+@pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_cli_prints_and_writes_the_pieces(tmp_path, capsys):
     """8 pieces of q2 in [-3, 3]: the pieces about the stretched arm break down within a
     few ms (measured: 5, at 1.4 ms), the others run to the end; exit code 3 (a

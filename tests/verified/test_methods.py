@@ -113,6 +113,7 @@ def test_auto_switches_rungs_and_loses_no_state():
     assert _inside_union(_sampled_final(1.5), sol.boxes[-1]).all()
 
 
+@pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_a_split_that_drops_a_piece_is_caught(monkeypatch):
     """The oracle bites: an ``auto`` whose split keeps only half of each failed piece
     completes, but misses sampled true states."""
@@ -127,6 +128,7 @@ def test_a_split_that_drops_a_piece_is_caught(monkeypatch):
     assert not _inside_union(_sampled_final(3.0), sol.boxes[-1]).all()
 
 
+@pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_auto_gives_up_with_what_it_tried():
     """max_pieces = 1: no split allowed; the break-down says what auto tried."""
     sol = solve(_vdp_like(), BOX, (0.0, 3.0), method=Auto(max_pieces=1))
@@ -144,6 +146,7 @@ def test_split_boxes_covers_each_box():
     assert _inside_union(pts, parts).all()
 
 
+@pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_target_ratio_splits_until_the_enclosure_is_tight_enough():
     """The paper's pendulum swinging below the top (q in [1.0, 1.1], qd in [0, 0.1],
     T = 3): one piece gives ~1.4x the sampled spread; with target_ratio = 1.15 auto

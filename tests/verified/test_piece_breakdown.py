@@ -110,6 +110,7 @@ def _check_whole_run(sol, f, count=12):
         assert _escapes(sol, f, _points(sol.piece_results, count, seed=1)) == []
 
 
+@pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_failing_pieces_are_named_and_the_others_go_on():
     sol = solve(SQUARE, BOX, (0.0, T), subdivision=[6, 1], t_eval=T_EVAL, **ONE)
     assert sol.failed_pieces == [4, 5]
@@ -245,6 +246,7 @@ def test_sets_a_hook_replaced_fail_together():
     _check_whole_run(sol, _square)
 
 
+@pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_chunked_runs_report_every_piece():
     """In chunks (each its own batch) the chunks' reports merge: the failed pieces named
     by their index in the run, the surviving parts of the chunks merged."""

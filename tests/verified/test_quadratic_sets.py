@@ -164,6 +164,7 @@ def test_oracle_bites_when_the_directional_lagrange_term_is_dropped(monkeypatch)
     assert calls and misses_ > 0
 
 
+@pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_oracle_bites_when_the_quadratic_part_is_dropped(monkeypatch):
     real = quadratic.QuadraticStepper.step
 
