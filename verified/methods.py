@@ -244,6 +244,15 @@ class Auto(Method):
         an estimate that guides the work, never the enclosure), and while it is wider
         than ``target_ratio`` times that spread every piece is split and the run
         repeated (up to ``max_pieces``); the tightest run is returned
+    spec : None (default), a :class:`verified.spec.Bounds` or a dict ``{state: (lo, hi)}``
+        (a state by name or index, None for no bound): bounds the states must keep at
+        every time of the run. After a completed run the tube is checked against them
+        and, while they are not proven and refining still shrinks the excess, the pieces
+        whose tube leaves them are split, or the steps shortened where the sets at the
+        step ends keep inside and only the tube between them leaves
+        (:mod:`verified.auto`). ``Solution.spec_proven`` / ``Solution.spec_check``: proven
+        only from the verified tube over the whole span; "false" where a sampled float
+        trajectory leaves the bounds (refining then stops)
     """
 
     name: ClassVar[str] = "auto"
@@ -252,6 +261,7 @@ class Auto(Method):
     rungs: tuple | None = None
     max_pieces: int = 256
     target_ratio: float | None = None
+    spec: object = None
 
     def __post_init__(self):
         super().__post_init__()
@@ -266,6 +276,12 @@ class Auto(Method):
         _int_in("auto: max_pieces", self.max_pieces, 1, 2**21)
         if self.target_ratio is not None and not (_positive("auto: target_ratio", self.target_ratio) > 1):
             raise ValueError(f"auto: target_ratio must be None or a number > 1, got {self.target_ratio!r}")
+        if self.spec is not None:
+            from .spec import as_spec
+            try:
+                object.__setattr__(self, "spec", as_spec(self.spec))
+            except ValueError as e:
+                raise ValueError(f"auto: {e}") from None
 
     def settings(self) -> dict:
         raise TypeError("method 'auto' is a ladder of methods, not one set of solver settings "

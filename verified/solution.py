@@ -225,6 +225,10 @@ class Solution:
         ``method="auto"`` only (:mod:`verified.auto`): per attempt the method, the number
         of pieces, how often they had been split, the span it verified, its status and
         reason, its wall time and what was tried next (``"next"``).
+    spec_check : verified.spec.SpecCheck or None
+        ``method=Auto(spec=...)`` only: the spec's verdict ("proven" only from the
+        verified tube over the whole span, "false" from a sampled trajectory, else
+        "not proven"), the worst excess over a bound and a one-line detail.
     """
 
     t: np.ndarray
@@ -248,10 +252,16 @@ class Solution:
     method: str = ""
     method_log: list | None = None
     failures: list | None = None
+    spec_check: object = None
 
     @property
     def success(self) -> bool:
         return self.status == "completed"
+
+    @property
+    def spec_proven(self) -> bool | None:
+        """Whether the spec of ``Auto(spec=...)`` is proven from the tube (None: no spec)."""
+        return None if self.spec_check is None else bool(self.spec_check.proven)
 
     @property
     def failed_pieces(self) -> list:
