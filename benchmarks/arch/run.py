@@ -29,7 +29,10 @@ Production-Destruction):
   the competition's at T) and 10 in x + y + z at T; metric: volume of the final box.
 
 Every case runs with the library's defaults (``solve(graph, x0, (0, T), params=...,
-t_eval=...)``: ``method="auto"``) and, where it helps, with a hand-picked setting. Each
+t_eval=...)``: ``method="auto"``), the cases with a spec on the states (Laub-Loomis,
+Van der Pol, coupled Van der Pol) also with that spec declared and nothing else
+(``method=Auto(spec={state: (None, bound)})``: auto refines until the tube proves it,
+:mod:`verified.spec`), and, where it helps, with a hand-picked setting. Each
 row: status, the time reached, CPU seconds (``time.process_time``), the metric, whether
 the spec is proven (from the tube, only on a completed run), the published number and
 "inside": sampled true solutions (corners and random points of the initial box and
@@ -89,6 +92,7 @@ class Case:
     stiff: bool = False
     samples: int = 100
     conserved: tuple | None = None   # weights of a linear conserved quantity (x + y + z), for --invariant
+    spec_bounds: dict | None = None  # the spec as bounds for Auto(spec=...): the "auto, spec declared" row
 
     def graph(self):
         return trace(self.f, self.n, 0 if self.params is None else self.params.shape[-1])
@@ -162,7 +166,8 @@ def laub_loomis(W: float) -> Case:
     if W > 0.01:
         hand.append(("composition, 2^4 pieces (x1..x4)", dict(method="composition", subdivision=[2, 2, 2, 2, 1, 1, 1])))
     return Case(f"ll{str(W).replace('.', '')}", f"Laub-Loomis W = {W:g}", f, 7, Interval(c - W, c + W), None,
-                20.0, 2.0, "width x4(T)", width_of(3), upper_spec(3, bound), pub, hand)
+                20.0, 2.0, "width x4(T)", width_of(3), upper_spec(3, bound), pub, hand,
+                spec_bounds={3: (None, bound)})
 
 
 def _vdp(x, p):
@@ -173,7 +178,8 @@ def vdp() -> Case:
     return Case("vdp", "Van der Pol mu = 1", _vdp, 2, Interval([1.25, 2.35], [1.55, 2.45]), None, 7.0, 1.0,
                 "max y on [0, T]", tube_max(1), upper_spec(1, 2.75), "2.72498",
                 [("composition, 2x2 pieces, h_max 0.05", dict(method="composition", subdivision=[2, 2], h_max=0.05)),
-                 ("composition, 4x4 pieces", dict(method="composition", subdivision=[4, 4]))])
+                 ("composition, 4x4 pieces", dict(method="composition", subdivision=[4, 4]))],
+                spec_bounds={1: (None, 2.75)})
 
 
 def _cvdp(x, p):
@@ -211,7 +217,8 @@ def coupled_vdp() -> Case:
     xs, ps = _split_params(x0, b, 4, [2, 1, 2, 1])
     return Case("cvdp", "coupled Van der Pol, b in [1, 3]", _cvdp, 4, x0, b, 7.0, 1.0,
                 "max y1, y2 on [0, T]", tube_max([1, 3]), upper_spec([1, 3], 2.75), "(CORA: 13 splits)",
-                [("composition, b in 4 x x1, x2 in 2 (16 pieces)", dict(method="composition", x0=xs, params=ps))])
+                [("composition, b in 4 x x1, x2 in 2 (16 pieces)", dict(method="composition", x0=xs, params=ps))],
+                spec_bounds={1: (None, 2.75), 3: (None, 2.75)})
 
 
 def robertson(b: float, c: float) -> Case:
@@ -350,6 +357,11 @@ HEADER = ("| case | setting | status | t reached | CPU s | metric | ours | publi
 def format_row(r: dict) -> str:
     m = "—" if not np.isfinite(r["metric"]) else f"{r['metric']:.4g}"
     what = r["method"][:90] + ("" if r["status"] == "completed" else f"; {r['reason'][:80]}")
+    sc = getattr(r["sol"], "spec_check", None)
+    if sc is not None:   # (auto's own verdict, its pieces and refinement rounds)
+        st = r["sol"].stats
+        what = (f"auto's spec verdict: {sc.status}; {st.get('auto_pieces')} piece(s), "
+                f"{st.get('spec_rounds')} refinement round(s); ") + what
     return (f"| {r['case']} | {r['setting']} | {r['status']} | {r['t']:.4g} | {r['cpu']:.1f} | {r['metric_name']} | "
             f"{m} | {r['published']} | {r['spec']} | {r['inside']} | {what.replace('|', '/')} |")
 
@@ -375,7 +387,11 @@ def run_case(key: str, quick: bool = False, cap: float = 120.0, out=print, log=N
     T = case.quick_T if quick else case.T
     samples = min(case.samples, 30) if quick else case.samples
     rows = []
-    for label, settings in with_invariant(case, [("defaults (auto)", {})] + ([] if quick else case.hand), invariant):
+    base = [("defaults (auto)", {})]
+    if case.spec_bounds is not None:   # (auto told the spec, nothing else: verified.spec, Auto(spec=...))
+        from verified.methods import Auto
+        base.append(("auto, spec declared", dict(method=Auto(spec=case.spec_bounds))))
+    for label, settings in with_invariant(case, base + ([] if quick else case.hand), invariant):
         if log:
             log(f"{case.name}: {label} ...")
         r = run_row(case, label, settings, T, cap, samples)
