@@ -374,14 +374,20 @@ def _group_excess(sol, lo, hi, t0, t1) -> float:
     return c.worst if sol.status == "completed" else np.inf
 
 
-def _piece_excess(sol, k: int, lo, hi):
-    """Per piece of a one-attempt completed run whose every output and step keeps one
-    box per piece, in order: the worst excess of its tube boxes over the bounds (k,);
-    None where the rows cannot be told apart (merged attempts, adaptive splitting)."""
+def _piece_excess(sol, k: int, lo, hi, pieces: Interval):
+    """Per piece of a one-attempt, one-batch completed run whose every output and step
+    keeps one box per piece and whose first output is the pieces themselves, in order:
+    the worst excess of its tube boxes over the bounds (k,); None where the rows cannot
+    be told apart (merged attempts, chunks, adaptive splitting, pruning). (Soundness
+    rests on it: the pieces kept and the pieces split must be told apart exactly.)"""
     from .spec import tube_excess
-    if sol.status != "completed" or len(sol.method_log or ()) != 1 or not sol.tube:
+    if sol.status != "completed" or len(sol.method_log or ()) != 1 or not sol.tube or sol.chunks is not None:
         return None
     if any(b.shape[0] != k for b in sol.tube) or any(b.shape[0] != k for b in sol.boxes):
+        return None
+    first = sol.boxes[0]
+    if not (np.array_equal(np.asarray(first.lo), np.asarray(pieces.lo))
+            and np.array_equal(np.asarray(first.hi), np.asarray(pieces.hi))):
         return None
     return np.max(np.stack([tube_excess(b, lo, hi) for b in sol.tube]), axis=0)
 
@@ -538,7 +544,7 @@ def _prove_spec(solve, ode, graph, boxes, pv, t_span, method: Auto, kw: dict, so
             act = _action(g)
             k = g.boxes.shape[0]
             if act == "split":
-                pe = _piece_excess(g.sol, k, lo, hi)
+                pe = _piece_excess(g.sol, k, lo, hi, g.boxes)
                 bad = np.ones(k, bool) if pe is None else pe > 0
                 idx = np.flatnonzero(bad)
                 parts, part_params = split_pieces(graph, g.boxes[idx], _rows(g.params, idx), t1 - t0)

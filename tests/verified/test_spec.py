@@ -131,3 +131,20 @@ def test_bounds_are_a_method_setting():
     assert a.describe() == "auto(spec=Bounds({'x1': (None, 2.75)}))"
     lo, hi = a.spec.resolve(("x0", "x1"))
     assert np.all(lo == -np.inf) and hi[0] == np.inf and hi[1] == 2.75
+
+
+def test_the_tube_rows_are_told_apart_by_piece_and_restricted_exactly():
+    """The pieces kept and the pieces split must be told apart exactly (soundness rests
+    on it): x's peak rises with x(0), so the piece with the largest x(0) has the largest
+    excess; the restricted runs' boxes together are the run's boxes."""
+    import verified.auto as auto_mod
+    sol = solve(_graph(), X0, (0.0, 1.5), subdivision=[4, 1])
+    pieces = sol.boxes[0]
+    lo, hi = np.array([-np.inf, -np.inf]), np.array([2.0, np.inf])
+    pe = auto_mod._piece_excess(sol, 4, lo, hi, pieces)
+    assert pe is not None and list(np.argsort(pe)) == [0, 1, 2, 3]
+    assert auto_mod._piece_excess(sol, 4, lo, hi, pieces[::-1]) is None   # (rows not in the pieces' order)
+    keep = pe < pe.max()
+    a, b = auto_mod._restrict(sol, keep), auto_mod._restrict(sol, ~keep)
+    for j, box in enumerate(sol.tube):
+        assert np.array_equal(np.r_[a.tube[j].hi, b.tube[j].hi], box.hi[np.r_[np.flatnonzero(keep), 3]])
