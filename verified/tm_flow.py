@@ -496,7 +496,9 @@ class TaylorModelFlowStepper(LohnerStepper):
         is a polynomial the models carry exactly: x' = x^2 at degree 4), the rate is
         taken from the first order ``j`` whose remainder is more than that (``e_k >
         2^-30`` times the coefficient's magnitude), as ``sum_{k >= j} e_k h^(k - j)``
-        against ``e_j``: a rounding-level floor would cut the step to nothing."""
+        against ``e_j``: a rounding-level floor would cut the step to nothing. The cut
+        stops once the remainder the step adds, ``sum_k e_k h^k``, is at most
+        :attr:`REMAINDER_SHARE` of the set's widest component."""
         h = super().suggest_step(cX, tol, components)
         cur = getattr(self, "_cur", None)
         if cur is None or not np.isfinite(h) or h <= 0:
@@ -521,15 +523,29 @@ class TaylorModelFlowStepper(LohnerStepper):
         if not floor > 0:
             return h
         powers = np.arange(e.shape[1])  # e_k h^(k - j)
+        first = int(significant[0]) + 1  # (the order of e[:, 0])
+        # (the widest component of each set: what a remainder is small against)
+        width = np.max(np.asarray(cX[:, 0, :components].width(), float), axis=-1)  # (B,)
         for _ in range(40):
-            rate = np.max(np.sum(e * (h ** powers)[None, :, None], axis=1))
-            if rate <= self.REMAINDER_GROWTH * floor:
+            per = np.sum(e * (h ** powers)[None, :, None], axis=1)  # (N', B)
+            if np.max(per) <= self.REMAINDER_GROWTH * floor:
+                break
+            if np.all(np.max(per, axis=0) * h ** first <= self.REMAINDER_SHARE * width):
                 break
             h *= 0.8
         return h
 
     #: see suggest_step
     REMAINDER_GROWTH = 1.5
+
+    #: the growth cut of suggest_step stops once the remainder the step adds is at most
+    #: this share of the set's widest component: below that, shorter steps trade many
+    #: steps for nothing. Without it, an uncertain parameter carried in the models (its
+    #: powers make ``e_k`` grow combinatorially with ``k``) held the steps near 1e-4 s
+    #: (x' = p y, y' = -p x with p in 1 +- 0.05; Production-Destruction with an uncertain
+    #: rate): a stall. With it those complete in a few steps, and the robots' steps and
+    #: widths stay as they were (docs/lab/robot_speed.md)
+    REMAINDER_SHARE = 1e-5
 
     #: symbols for the remainders born inside the model graph at the first
     #: ``POOL_ORDERS`` orders of the recursion (see TaylorModelODE._run's ``pool`` and
