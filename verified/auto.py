@@ -807,6 +807,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
 
     todo = [_Task(boxes, pv, 0)]
     first = None
+    covers = []  # [(boxes, Solution, params), ...] of failed attempts that, with the pieces done, covered everything
     done: list[tuple[Interval, Solution, object]] = []  # (pieces, their Solution, their params)
     log: list[dict] = []
     pieces_total = boxes.shape[0]
@@ -904,6 +905,10 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             # (a blow-up, a singularity, a step-size limit), and more pieces will not help
             why = (f"the split pieces broke down at t = {t_fail:g}, no later than the piece they were "
                    f"split from (t = {task.parent_t:g})")
+        if not todo:
+            # this attempt's pieces and the finished ones cover every initial piece: their
+            # enclosure, verified to where this attempt got, stands if later attempts end earlier
+            covers.append(list(done) + [(task.boxes, sol, task.params)])
         if why is not None:
             entry["next"] = f"gave up: {why}"
             done.append((task.boxes, sol, task.params))  # (the failed attempt encloses all its pieces up to its end)
@@ -917,23 +922,38 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
 
     pieces = concatenate([b for b, _, _ in done], axis=0)
     piece_params = _stack_rows([(b.shape[0], p) for b, _, p in done], pv)
-    if len(done) == 1 and done[0][1] is not None:
-        result = done[0][1]
-    else:
-        initial = concatenate([b for b, _, _ in done], axis=0)
-        ends = np.cumsum([b.shape[0] for b, _, _ in done])
+
+    def merged(parts):
+        if len(parts) == 1 and parts[0][1] is not None:
+            return parts[0][1]
+        initial = concatenate([b for b, _, _ in parts], axis=0)
+        ends = np.cumsum([b.shape[0] for b, _, _ in parts])
         ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
-        result = merge_solutions([s for _, s, _ in done], ranges, initial, outs, t0,
-                                 tuple(graph.input_names[:n]), interrupted=give_up == "interrupted")
-        result.chunks = None  # (the attempts are in method_log)
-    if result.status != "completed" and first is not None and first.t_reached > result.t_reached:
-        # the later attempts ended earlier than the first one, which ran every initial
-        # piece (stopped by a wall-clock cap while splitting, say): its enclosure of the
-        # whole initial set, verified further, is the result
-        why = result.reason
-        result = first
-        result.reason = f"{first.reason} (later attempts: {why})"
-        give_up = give_up or result.status
+        out = merge_solutions([s for _, s, _ in parts], ranges, initial, outs, t0,
+                              tuple(graph.input_names[:n]), interrupted=give_up == "interrupted")
+        out.chunks = None  # (the attempts are in method_log)
+        return out
+
+    result = merged(done)
+    if result.status != "completed":
+        # the later attempts ended earlier than an earlier one that, with the pieces done
+        # by then, covered every initial piece (a wall-clock cap striking while auto
+        # splits, say): that enclosure of the whole initial set, verified further, is the
+        # result (the first attempt, or a split attempt that broke down later)
+        best = first if first is not None and first.t_reached > result.t_reached else None
+        for parts in covers:
+            if min(float(s.t_reached) for _, s, _ in parts if s is not None) <= float(
+                    (result if best is None else best).t_reached):
+                continue  # (a merge reaches no further than its earliest part)
+            cand = merged(parts)
+            if cand.t_reached > (result if best is None else best).t_reached:
+                best, pieces = cand, concatenate([b for b, _, _ in parts], axis=0)
+                piece_params = _stack_rows([(b.shape[0], p) for b, _, p in parts], pv)
+        if best is not None:
+            why = result.reason
+            result = best
+            result.reason = f"{best.reason} (later attempts: {why})"
+            give_up = give_up or result.status
     if result.status == "breakdown" and give_up == "breakdown":
         tried = ", ".join(dict.fromkeys(e["method"] for e in log))
         result.reason = (f"{result.reason} (auto tried {tried} on up to {pieces_total} pieces; "

@@ -316,3 +316,27 @@ def test_a_stop_while_splitting_keeps_the_first_attempts_further_enclosure():
     states = np.array([dop853(_f, p, t, dense=False).y[:, -1] for p in
                        np.random.default_rng(1).uniform(BOX.lo, BOX.hi, (60, 2))])
     assert _inside_union(states, sol.tube[-1]).all()
+
+
+class _StopThirdAttempt(_StopSecondAttempt):
+    def after_step(self, step, sets, run):
+        if self.runs == 3:
+            run.stop("stopped by the test", "stopped")
+        return None
+
+
+@pytest.mark.slow  # (default-run budget)
+def test_a_stop_while_splitting_keeps_the_furthest_cover_of_the_whole_set():
+    """From [-0.7, 0.7]^2: one box breaks down at 1.07 s, its 4 pieces at 2.11 s, and the
+    16-piece attempt is stopped at once. The result is the 4-piece attempt's enclosure of
+    the whole initial set to 2.11 s (before: the first attempt's, to 1.07 s), and every
+    sampled true state at its last step lies inside."""
+    box = Interval([-0.7, -0.7], [0.7, 0.7])
+    sol = solve(_vdp_like(), box, (0.0, 3.0), hooks=[_StopThirdAttempt()])
+    assert [e["pieces"] for e in sol.method_log] == [1, 4, 16] and sol.method_log[2]["status"] == "stopped"
+    assert sol.t_reached == pytest.approx(sol.method_log[1]["t_span"][1]) and sol.t_reached > 2.0
+    assert "stopped by the test" in sol.reason
+    t = sol.tube_t[-1]
+    states = np.array([dop853(_f, p, t, dense=False).y[:, -1] for p in
+                       np.random.default_rng(2).uniform(box.lo, box.hi, (80, 2))])
+    assert _inside_union(states, sol.tube[-1]).all()
