@@ -154,7 +154,10 @@ def parse_pi_expression(text: str) -> tuple[Fraction, Fraction]:
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
                 and not isinstance(node.value, bool):
             seg = ast.get_source_segment(text.strip(), node)
-            return (Fraction(seg.replace("_", "")), Fraction(0))
+            try:
+                return (Fraction(seg.replace("_", "")), Fraction(0))
+            except ValueError:  # (0x10, 0o7, 0b1: Python literals, not decimal numbers)
+                raise ExpressionError(f"{text!r}: {seg!r} is not a decimal number") from None
         if isinstance(node, ast.Name) and node.id == "pi":
             return (Fraction(0), Fraction(1))
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):

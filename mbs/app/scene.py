@@ -160,18 +160,22 @@ def enclose_number(value, where: str = "value") -> tuple[float, float]:
     """(lo, hi) doubles enclosing a scene number (see the module docstring)."""
     if isinstance(value, bool):
         raise SceneError(f"{where}: expected a number, got a boolean")
-    if isinstance(value, int):
-        return enclose_fraction(Fraction(value))
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise SceneError(f"{where}: {value!r} is not a finite number")
-        return enclose_fraction(Fraction(repr(value)))
-    if isinstance(value, str):
-        try:
-            a, b = parse_pi_expression(value)
-        except ExpressionError as e:
-            raise SceneError(f"{where}: {e}") from None
-        return enclose_pi_multiple(a, b)
+    try:
+        if isinstance(value, int):
+            return enclose_fraction(Fraction(value))
+        if isinstance(value, float):
+            if not math.isfinite(value):
+                raise SceneError(f"{where}: {value!r} is not a finite number")
+            return enclose_fraction(Fraction(repr(value)))
+        if isinstance(value, str):
+            try:
+                a, b = parse_pi_expression(value)
+            except ExpressionError as e:
+                raise SceneError(f"{where}: {e}") from None
+            return enclose_pi_multiple(a, b)
+    except OverflowError:  # (a number beyond the largest double: 1e400, 10**400)
+        shown = repr(value) if len(repr(value)) <= 30 else repr(value)[:24] + "..."
+        raise SceneError(f"{where}: {shown} is too large for a double (at most about 1.8e308)") from None
     raise SceneError(f"{where}: expected a number, an expression string or [lo, hi], "
                      f"got {type(value).__name__}")
 

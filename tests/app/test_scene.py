@@ -76,6 +76,12 @@ def test_bad_expressions(text):
     assert str(e.value) == f"[initial] x1: {parsed.value}"
 
 
+@pytest.mark.parametrize("value", ["1e400", "-1e400*pi", 10**400, -(10**400)])
+def test_numbers_beyond_a_double_are_one_line_errors(value):
+    with pytest.raises(SceneError, match=r"^\[initial\] x1: .* is too large for a double"):
+        enclose_number(value, "[initial] x1")
+
+
 def test_output_times_are_multiples():
     assert output_times(1.0, 0.25) == [0.25, 0.5, 0.75, 1.0]
     assert output_times(1.0, 0.3) == [0.3, 0.6, 0.8999999999999999, 1.0]

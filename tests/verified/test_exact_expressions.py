@@ -33,7 +33,8 @@ def test_pi_expressions_are_exact_and_enclosed():
 @pytest.mark.parametrize("text, words", [("pi*pi", "not linear in pi"), ("1/pi", "divides by a multiple of pi"),
                                          ("1/0", "divides by zero"), ("sin(1)", "only numbers"),
                                          ("2**3", "only numbers"), ("import os", "cannot parse"),
-                                         ("x1", "only numbers"), ("1 +", "cannot parse"), ("True", "only numbers")])
+                                         ("x1", "only numbers"), ("1 +", "cannot parse"), ("True", "only numbers"),
+                                         ("0x10", "not a decimal number"), ("2*0b1", "not a decimal number")])
 def test_bad_expressions(text, words):
     with pytest.raises(ExpressionError) as e:
         parse_pi_expression(text)
