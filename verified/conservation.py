@@ -74,6 +74,7 @@ import numpy as np
 from .consistency_graphs import claim_graph, prove_claim
 from .contractor import HC4, contract_linear_row, mean_value_row
 from .energy_contraction import recentre
+from .energy_shell import reset_to_contracted
 from .evaluate import eval_interval
 from .graph import Graph, GraphBuilder
 from .graph_ops import embed, rate_along
@@ -461,20 +462,10 @@ class InvariantHook(Hook):
         if not keep.any():
             return None
         m = self.ny
-        width = H.width()[:, :m]
-        new_w = np.where(keep[:, None], Yn.hi[:, :m] - Yn.lo[:, :m], width)
-        with np.errstate(invalid="ignore"):
-            replace = keep & (new_w < self.cut * width).any(axis=1)
-        if replace.any():
-            idx = np.flatnonzero(replace)
-            blo, bhi = H.lo[idx].copy(), H.hi[idx].copy()
-            blo[:, :m], bhi[:, :m] = Yn.lo[idx, :m], Yn.hi[idx, :m]
-            fresh = type(out).from_boxes(_I(blo, bhi)).with_params(out.C.shape[2])
-            out = out.replaced(idx, fresh)
-            self.resets += idx.size
-        if not keep.all():
-            self.dropped += int((~keep).sum())
-            out = out.take(np.flatnonzero(keep))
+        out, resets, dropped = reset_to_contracted(out, H, np.asarray(Yn.lo)[:, :m], np.asarray(Yn.hi)[:, :m],
+                                                   keep, self.cut)
+        self.resets += resets
+        self.dropped += dropped
         return out
 
     #: parameters per state column a projection may leave a set with before it merges

@@ -67,6 +67,33 @@ def max_energy(H: Graph, boxes: Interval, params=None) -> float:
     return hi
 
 
+def reset_to_contracted(sets, hull: Interval, lo, hi, keep, cut: float):
+    """Sets after a contraction of their hulls' first ``m`` columns to ``lo..hi`` (B, m):
+    each kept set whose contracted box is narrower than ``cut`` times its hull in some of
+    those columns becomes that box (the other columns keep the hull), and the sets not in
+    ``keep`` (proven empty) are dropped. Returns ``(sets, resets, dropped)``; ``sets`` is
+    the argument itself when nothing changed. Sound: a reset set is a box that holds
+    every state of the set the contraction keeps. Shared by the energy shell and the
+    declared invariants (:mod:`verified.conservation`)."""
+    m = lo.shape[1]
+    width = hull.width()[:, :m]
+    new_w = np.where(keep[:, None], hi - lo, width)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        replace = keep & (new_w < cut * width).any(axis=1)
+    out, resets, dropped = sets, 0, 0
+    if replace.any():
+        idx = np.flatnonzero(replace)
+        blo, bhi = hull.lo[idx].copy(), hull.hi[idx].copy()  # (k, N): other states keep their hull
+        blo[:, :m], bhi[:, :m] = lo[idx], hi[idx]
+        fresh = type(sets).from_boxes(Interval(blo, bhi)).with_params(sets.C.shape[2])
+        out = out.replaced(idx, fresh)
+        resets = int(idx.size)
+    if not keep.all():
+        dropped = int((~keep).sum())
+        out = out.take(np.flatnonzero(keep))
+    return out, resets, dropped
+
+
 class EnergyShellHook(Hook):
     """Keep every set inside ``H(q, qd) <= hmax`` (see the module docstring).
 
@@ -172,25 +199,10 @@ class EnergyShellHook(Hook):
             run.stop(f"energy shell H <= {self.hmax:g} excludes every set at t = {step.t:g}: "
                      "the energy is not bounded by hmax", "breakdown")
             return None
-        width = hull.width()[:, :nq2]
-        new_w = np.where(keep[:, None], res.hi - res.lo, width)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            replace = keep & (new_w < self.cut * width).any(axis=1)
-        if not replace.any() and keep.all():
-            return None
-        out = sets
-        if replace.any():
-            idx = np.flatnonzero(replace)
-            lo, hi = hull.lo[idx].copy(), hull.hi[idx].copy()  # (k, N): other states keep their hull
-            lo[:, :nq2], hi[:, :nq2] = res.lo[idx], res.hi[idx]
-            box = Interval(lo, hi)
-            fresh = type(sets).from_boxes(box).with_params(sets.C.shape[2])
-            out = out.replaced(idx, fresh)
-            self.resets += idx.size
-        if not keep.all():
-            self.dropped += int((~keep).sum())
-            out = out.take(np.flatnonzero(keep))
-        return out
+        out, resets, dropped = reset_to_contracted(sets, hull, res.lo, res.hi, keep, self.cut)
+        self.resets += resets
+        self.dropped += dropped
+        return None if out is sets else out
 
     def after_run(self, solution) -> None:
         solution.stats["shell_resets"] = self.resets
