@@ -16,10 +16,11 @@ import pytest
 from models import double_pendulum as dp
 from verified import parallel
 from verified.graph import trace
-from verified.hooks import Hook, StopAfterWall
+from verified.hooks import StopAfterWall
 from verified.interval import Interval
 from verified.solver import VerifiedODE, solve
 
+from oracles.hooks import SlowSteps
 from oracles.sampling import misses, sample_initial_points, trajectories
 
 distributed = pytest.importorskip("distributed")
@@ -124,16 +125,6 @@ def test_breakdown_of_one_chunk_is_the_merged_status(ode, box):
     s = sol.surviving
     assert s.status == "completed" and s.t_reached == 0.7 and [b.shape[0] for b in s.boxes] == [2] * 5
 
-
-class SlowSteps(Hook):
-    """Sleep after every step (so that a worker can be killed while it holds a chunk)."""
-
-    def __init__(self, seconds):
-        self.seconds = seconds
-
-    def after_step(self, step, sets, run):
-        time.sleep(self.seconds)
-        return None
 
 
 @pytest.mark.slow  # default-run budget (CI's cold default step measured 187 s of 180 at ec9790f)

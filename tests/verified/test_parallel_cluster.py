@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 from models import double_pendulum as dp
+from oracles.hooks import SlowSteps
 from verified import parallel
 from verified.graph import trace
-from verified.hooks import Hook
 from verified.interval import Interval
 from verified.solver import VerifiedODE, solve
 
@@ -33,16 +33,6 @@ ROOT = HERE.parents[1]
 T = 0.3
 SUB = [16, 1, 1, 1]
 
-
-class SlowSteps(Hook):
-    """Sleep after every step (a worker can be killed while it holds a chunk)."""
-
-    def __init__(self, seconds):
-        self.seconds = seconds
-
-    def after_step(self, step, sets, run):
-        time.sleep(self.seconds)
-        return None
 
 
 def _spawn(cmd, cwd, env):
