@@ -85,6 +85,31 @@ def default_rungs(graph, boxes: Interval, params=None) -> tuple[Method, ...]:
     return (Lohner(arithmetic="affine"), Lohner(arithmetic="affine", error_basis="auto"))
 
 
+def _widest_dims(lo, hi, max_dims: int) -> list[int]:
+    """The components of a box at least half as wide as its widest (finite, nonzero
+    widths), widest first, at most ``max_dims``."""
+    with np.errstate(over="ignore"):  # (a box of +-1.7e308 is wider than the largest float)
+        w = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+    order = np.argsort(-w, kind="stable")
+    return [int(j) for j in order[:max_dims] if w[j] > 0 and w[j] >= 0.5 * w[order[0]]]
+
+
+def _bisect(lo, hi, dims) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The box ``lo..hi`` bisected along each of ``dims``: 2^len(dims) parts (lo, hi),
+    every point of the box in one of them (the cut is shared by both halves)."""
+    parts = [(np.array(lo, float), np.array(hi, float))]
+    for j in dims:
+        cut = 0.5 * (lo[j] + hi[j])
+        nxt = []
+        for a, c in parts:
+            a1, c1, a2, c2 = a.copy(), c.copy(), a.copy(), c.copy()
+            c1[j] = cut
+            a2[j] = cut
+            nxt += [(a1, c1), (a2, c2)]
+        parts = nxt
+    return parts
+
+
 def split_boxes(boxes: Interval, max_dims: int = SPLIT_DIMS) -> Interval:
     """Each box (B, n) bisected along its widest components (those at least half as wide
     as its widest, at most ``max_dims`` of them): (B * 2^d, n), every point of a box in
@@ -92,22 +117,7 @@ def split_boxes(boxes: Interval, max_dims: int = SPLIT_DIMS) -> Interval:
     out = []
     for b in range(boxes.shape[0]):
         lo, hi = np.asarray(boxes.lo[b], float), np.asarray(boxes.hi[b], float)
-        with np.errstate(over="ignore"):  # (a box of +-1.7e308 is wider than the largest float)
-            w = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
-        order = np.argsort(-w, kind="stable")
-        dims = [int(j) for j in order[:max_dims] if w[j] > 0 and w[j] >= 0.5 * w[order[0]]]
-        parts = [(lo.copy(), hi.copy())]
-        for j in dims:
-            cut = 0.5 * (lo[j] + hi[j])
-            nxt = []
-            for a, c in parts:
-                a1, c1 = a.copy(), c.copy()
-                c1[j] = cut
-                a2, c2 = a.copy(), c.copy()
-                a2[j] = cut
-                nxt += [(a1, c1), (a2, c2)]
-            parts = nxt
-        out += parts
+        out += _bisect(lo, hi, _widest_dims(lo, hi, max_dims))
     return Interval(np.array([a for a, _ in out]), np.array([c for _, c in out]))
 
 
@@ -181,24 +191,12 @@ def split_pieces(graph, boxes: Interval, params, span: float):
         infl = influences(graph, lo, hi, plo, phi, span)
         if infl is None or not np.any(infl > 0):
             # (the states' own choice, and the widest parameter relative to its size)
-            parts = split_boxes(boxes[b:b + 1])
-            dims = [j for j in range(n) if np.any(parts.lo[:, j] != lo[j]) or np.any(parts.hi[:, j] != hi[j])]
             rel = np.where(phi > plo, (phi - plo) / np.maximum(np.abs(0.5 * (plo + phi)), 1e-300), 0.0)
-            dims = dims[:SPLIT_DIMS - 1] + [n + int(np.argmax(rel))]
+            dims = sorted(_widest_dims(lo, hi, SPLIT_DIMS))[:SPLIT_DIMS - 1] + [n + int(np.argmax(rel))]
         else:
             order = np.argsort(-infl, kind="stable")
             dims = [int(j) for j in order[:SPLIT_DIMS] if infl[j] > 0 and infl[j] >= INFLUENCE_SHARE * infl[order[0]]]
-        zlo, zhi = np.concatenate([lo, plo]), np.concatenate([hi, phi])
-        cuts = [(zlo, zhi)]
-        for j in dims:
-            cut = 0.5 * (zlo[j] + zhi[j])
-            nxt = []
-            for a, c in cuts:
-                a1, c1, a2, c2 = a.copy(), c.copy(), a.copy(), c.copy()
-                c1[j] = cut
-                a2[j] = cut
-                nxt += [(a1, c1), (a2, c2)]
-            cuts = nxt
+        cuts = _bisect(np.concatenate([lo, plo]), np.concatenate([hi, phi]), dims)
         out_x += [(a[:n], c[:n]) for a, c in cuts]
         out_p += [(a[n:], c[n:]) for a, c in cuts]
     return (Interval(np.array([a for a, _ in out_x]), np.array([c for _, c in out_x])),
