@@ -283,19 +283,19 @@ def test_a_switch_that_drops_part_of_a_set_is_caught(monkeypatch, quick_stall):
     assert _decay_misses(sol) > 0
 
 
-class _StopSecondAttempt:
-    """A hook that stops the second run it is given at its first step (a wall-clock cap
+class _StopAttempt:
+    """A hook that stops the ``nth`` run it is given at its first step (a wall-clock cap
     that strikes while auto splits, made deterministic)."""
 
-    def __init__(self):
-        self.runs = 0
+    def __init__(self, nth: int):
+        self.nth, self.runs = nth, 0
 
     def before_run(self, setup):
         self.runs += 1
         return None
 
     def after_step(self, step, sets, run):
-        if self.runs == 2:
+        if self.runs == self.nth:
             run.stop("stopped by the test", "stopped")
         return None
 
@@ -303,26 +303,25 @@ class _StopSecondAttempt:
         return None
 
 
+def _last_step_holds_samples(sol, box, n: int, seed: int) -> bool:
+    """True states (DOP853) from ``n`` random points of ``box`` at the run's last step
+    time, all inside the boxes of its last step."""
+    t = sol.tube_t[-1]
+    states = np.array([dop853(_f, p, t, dense=False).y[:, -1] for p in
+                       np.random.default_rng(seed).uniform(box.lo, box.hi, (n, 2))])
+    return bool(_inside_union(states, sol.tube[-1]).all())
+
+
 @pytest.mark.slow  # (default-run budget)
 def test_a_stop_while_splitting_keeps_the_first_attempts_further_enclosure():
     """The first attempt (one box) breaks down at about 1.8 s; the split attempt is
     stopped at once: the result is the first attempt's enclosure of the whole initial
     set to where it got, not the split attempt's few steps."""
-    sol = solve(_vdp_like(), BOX, (0.0, 3.0), hooks=[_StopSecondAttempt()])
+    sol = solve(_vdp_like(), BOX, (0.0, 3.0), hooks=[_StopAttempt(2)])
     assert sol.method_log[0]["status"] == "breakdown" and sol.method_log[1]["status"] == "stopped"
     assert sol.t_reached == pytest.approx(sol.method_log[0]["t_span"][1]) and sol.t_reached > 1.0
     assert "stopped by the test" in sol.reason
-    t = sol.tube_t[-1]
-    states = np.array([dop853(_f, p, t, dense=False).y[:, -1] for p in
-                       np.random.default_rng(1).uniform(BOX.lo, BOX.hi, (60, 2))])
-    assert _inside_union(states, sol.tube[-1]).all()
-
-
-class _StopThirdAttempt(_StopSecondAttempt):
-    def after_step(self, step, sets, run):
-        if self.runs == 3:
-            run.stop("stopped by the test", "stopped")
-        return None
+    assert _last_step_holds_samples(sol, BOX, 60, seed=1)
 
 
 @pytest.mark.slow  # (default-run budget)
@@ -332,11 +331,8 @@ def test_a_stop_while_splitting_keeps_the_furthest_cover_of_the_whole_set():
     the whole initial set to 2.11 s (before: the first attempt's, to 1.07 s), and every
     sampled true state at its last step lies inside."""
     box = Interval([-0.7, -0.7], [0.7, 0.7])
-    sol = solve(_vdp_like(), box, (0.0, 3.0), hooks=[_StopThirdAttempt()])
+    sol = solve(_vdp_like(), box, (0.0, 3.0), hooks=[_StopAttempt(3)])
     assert [e["pieces"] for e in sol.method_log] == [1, 4, 16] and sol.method_log[2]["status"] == "stopped"
     assert sol.t_reached == pytest.approx(sol.method_log[1]["t_span"][1]) and sol.t_reached > 2.0
     assert "stopped by the test" in sol.reason
-    t = sol.tube_t[-1]
-    states = np.array([dop853(_f, p, t, dense=False).y[:, -1] for p in
-                       np.random.default_rng(2).uniform(box.lo, box.hi, (80, 2))])
-    assert _inside_union(states, sol.tube[-1]).all()
+    assert _last_step_holds_samples(sol, box, 80, seed=2)
