@@ -123,7 +123,7 @@ def split_boxes(boxes: Interval, max_dims: int = SPLIT_DIMS) -> Interval:
 
 #: a component of a piece with uncertain parameters (a state or a parameter) is bisected
 #: when moving it across its interval alone moves some state at the failure time at least
-#: this share as much as the component that moves that state most (:func:`influences`)
+#: this share as much as the component that moves any state most (:func:`influences`)
 INFLUENCE_SHARE = 0.5
 
 
@@ -131,10 +131,17 @@ def influences(graph, lo, hi, plo, phi, T: float):
     """How much each component of a piece -- its states ``lo..hi`` (n,), then its
     parameters ``plo..phi`` (p,) -- moves the states at time ``T``: float trajectories
     (DOP853, rtol = atol = 1e-8) from the piece's centre with that one component at its
-    lower and at its upper end; for each state, the distance between the two ends
-    relative to the largest such distance among the components; the largest over the
-    states. Shape (n + p,), 0 for components of zero or infinite width; None where the
-    integration fails. It guides splitting only, never an enclosure."""
+    lower and at its upper end: the largest distance between the two ends over the
+    states, relative to the largest such distance of any component. Shape (n + p,), 0
+    for components of zero or infinite width; None where the integration fails. It
+    guides splitting only, never an enclosure.
+
+    The distances are compared across states, in the states' own units (as
+    :func:`split_boxes` compares widths). Relative to each state's own largest mover
+    instead, a state that barely moves but is moved most by its own initial width
+    scored as high as the parameter that moves the wide states, and a robot holding an
+    uncertain payload was split along joint angles of +- 1 mrad beside the mass
+    (docs/lab/robot_speed.md)."""
     from scipy.integrate import solve_ivp
 
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
@@ -161,10 +168,9 @@ def influences(graph, lo, hi, plo, phi, T: float):
         return None
     end = r.y[:, -1].reshape(len(dims), 2, n)
     moved = np.abs(end[:, 1] - end[:, 0])  # (dims, n)
-    top = moved.max(axis=0)
-    ok = top > 0
-    if ok.any():
-        out[dims] = (moved[:, ok] / top[ok]).max(axis=1)
+    top = moved.max()
+    if top > 0:
+        out[dims] = moved.max(axis=1) / top
     return out
 
 

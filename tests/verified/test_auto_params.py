@@ -46,6 +46,18 @@ def test_states_that_matter_more_than_a_parameter_are_split_instead():
     assert parts.shape == (2, 1) and np.all(rows.lo == 0.0) and np.all(rows.hi == 1.0)
 
 
+def test_a_state_that_only_moves_itself_is_not_split_beside_the_parameter():
+    """x' = 0 (x in [0, 1e-3]), y' = p (p in [0, 1]): x is moved only by its own tiny
+    width, y by p across [0, T]. Scored against each state's own largest mover, x counted
+    as much as p and every piece became four; the parameter alone is split."""
+    g = trace(lambda x, p: [0.0 * x[0], p[0]], 2, 1)
+    infl = auto_mod.influences(g, [0.0, 0.0], [1e-3, 0.0], [0.0], [1.0], 2.0)
+    assert infl[2] == 1.0 and infl[0] < 1e-2
+    parts, rows = auto_mod.split_pieces(g, Interval([[0.0, 0.0]], [[1e-3, 0.0]]), Interval([0.0], [1.0]), 2.0)
+    assert parts.shape == (2, 2) and np.all(parts.hi[:, 0] == 1e-3)
+    assert sorted(map(tuple, np.c_[rows.lo, rows.hi])) == [(0.0, 0.5), (0.5, 1.0)]
+
+
 def test_without_uncertain_parameters_the_states_are_split_as_before():
     boxes = Interval([[0.0, 0.0], [1.0, 1.0]], [[1.0, 0.2], [2.0, 3.0]])
     parts, rows = auto_mod.split_pieces(_oscillator(), boxes, Interval([1.0], [1.0]), 1.0)
