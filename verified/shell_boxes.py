@@ -43,25 +43,32 @@ import numpy as np
 
 from . import interval as iv
 from .contractor import EnergyShell
-from .evaluate import eval_interval
+from .evaluate import eval_interval, jacobian_interval
 from .interval import Interval
 from .solution import Solution
 
 __all__ = ["continue_in_shell", "min_value", "speed_bound"]
 
-_EVALS = 4096  # interval evaluations of V per lower bound (branch and bound)
+_EVALS = 16384  # interval evaluations of V per lower bound (branch and bound)
 _APRIORI_TRIES = 40
 
 
-def min_value(V, Q: Interval, params=None, *, periods=None, evals: int = _EVALS) -> float:
-    """A lower bound of ``V(q)`` (a one-output graph) over the box ``Q`` (n_q,):
-    branch and bound on interval evaluations, about ``evals`` of them; components with a
-    period ``P`` wider than ``P`` are evaluated over one period."""
+def min_value(V, Q: Interval, params=None, *, periods=None, evals: int = _EVALS, memo: dict | None = None) -> float:
+    """A lower bound of ``V(q)`` (a one-output graph) over the box ``Q`` (n_q,): branch
+    and bound on interval evaluations, about ``evals`` of them, always splitting the box
+    with the lowest bound along the component with the largest ``width * |dV/dq_i|``
+    (interval derivative; the widest where that is not finite). Components with a
+    period ``P`` and a width of at least ``P`` are evaluated over ``[0, P]``. ``memo``:
+    a dict that keeps the results by box (a run's later steps ask for the same full
+    periods again)."""
     lo, hi = _one_period(np.asarray(Q.lo, float), np.asarray(Q.hi, float), periods)
+    key = (lo.tobytes(), hi.tobytes(), evals)
+    if memo is not None and key in memo:
+        return memo[key]
     lo, hi = lo[None], hi[None]
-    lb = _eval_lo(V, lo, hi, params)
+    lb, smear = _bound(V, lo, hi, params)
     used = 1
-    best = float(V.eval_float(0.5 * (lo + hi), params)[0, 0]) if hasattr(V, "eval_float") else np.inf
+    best = float(V.eval_float(0.5 * (lo + hi), params)[0, 0])
     while used < evals:
         k = min(64, lo.shape[0], max(1, (evals - used) // 2))
         order = np.argsort(lb)
@@ -69,26 +76,36 @@ def min_value(V, Q: Interval, params=None, *, periods=None, evals: int = _EVALS)
         if not lb[pick[0]] < best - 1e-9 * max(1.0, abs(best)):
             break  # proven within rounding of the best sampled value
         plo, phi = lo[pick], hi[pick]
-        j = np.argmax(phi - plo, axis=1)
-        cut = 0.5 * (plo[np.arange(k), j] + phi[np.arange(k), j])
+        j = np.argmax(smear[pick], axis=1)
+        rows = np.arange(k)
+        cut = 0.5 * (plo[rows, j] + phi[rows, j])
         alo, ahi, blo, bhi = plo.copy(), phi.copy(), plo.copy(), phi.copy()
-        ahi[np.arange(k), j] = cut
-        blo[np.arange(k), j] = cut
+        ahi[rows, j] = cut
+        blo[rows, j] = cut
         nlo, nhi = np.concatenate([alo, blo]), np.concatenate([ahi, bhi])
-        nlb = _eval_lo(V, nlo, nhi, params)
+        nlb, nsmear = _bound(V, nlo, nhi, params)
         used += 2 * k
-        if hasattr(V, "eval_float"):
-            best = min(best, float(np.min(V.eval_float(0.5 * (nlo + nhi), params)[:, 0])))
+        best = min(best, float(np.min(V.eval_float(0.5 * (nlo + nhi), params)[:, 0])))
         lo, hi = np.concatenate([lo[rest], nlo]), np.concatenate([hi[rest], nhi])
-        lb = np.concatenate([lb[rest], nlb])
-    return float(np.min(lb))
+        lb, smear = np.concatenate([lb[rest], nlb]), np.concatenate([smear[rest], nsmear])
+    out = float(np.min(lb))
+    if memo is not None:
+        memo[key] = out
+    return out
 
 
-def _eval_lo(V, lo, hi, params):
+def _bound(V, lo, hi, params):
+    """(lower bounds (B,), split scores (B, n)) of V over the boxes."""
+    X = Interval(lo, hi)
     with np.errstate(all="ignore"):
-        r = eval_interval(V, Interval(lo, hi), params)[..., 0]
+        r = eval_interval(V, X, params)[..., 0]
+        J = jacobian_interval(V, X, params)[..., 0, :]
+        mag = np.maximum(np.abs(np.asarray(J.lo, float)), np.abs(np.asarray(J.hi, float)))
+        smear = np.where(np.isfinite(mag), mag * (hi - lo), np.inf)
+        smear = np.where(np.isnan(smear), np.inf, smear)
+    smear = np.where(np.isinf(smear).any(axis=1, keepdims=True), hi - lo, smear)  # (the widest)
     out = np.asarray(r.lo, float)
-    return np.where(np.isnan(out), -np.inf, out)
+    return np.where(np.isnan(out), -np.inf, out), smear
 
 
 def _one_period(lo, hi, periods):
@@ -96,16 +113,16 @@ def _one_period(lo, hi, periods):
         return lo, hi
     P = np.asarray(periods, float)
     wide = np.isfinite(P) & (hi - lo >= P)
-    return lo, np.where(wide, lo + P, hi)
+    return np.where(wide, 0.0, lo), np.where(wide, P, hi)
 
 
 def speed_bound(shell: EnergyShell, hmax: float, inv_mass_diag, Q: Interval, params=None, *,
-                periods=None, evals: int = _EVALS) -> np.ndarray:
+                periods=None, evals: int = _EVALS, memo: dict | None = None) -> np.ndarray:
     """Upper bounds (n_q,) of ``|qd_i|`` over the states with ``H <= hmax`` and ``q`` in
     ``Q``: ``sqrt(2 (hmax - min V(Q)) c_i)`` (rounded up), and the shell's interval
     ellipsoid bound where that is finite and smaller."""
     c = np.asarray(inv_mass_diag, float)
-    vlow = min_value(shell.V_graph, Q, params, periods=periods, evals=evals)
+    vlow = min_value(shell.V_graph, Q, params, periods=periods, evals=evals, memo=memo)
     if not np.isfinite(vlow):
         return np.full(shell.nq, np.inf)
     slack = max(float((iv.point(hmax) - iv.point(vlow)).hi), 0.0)
@@ -185,14 +202,15 @@ def continue_in_shell(sol: Solution, shell: EnergyShell, hmax: float, inv_mass_d
     tb, T = float(sol.tube_t[-1]) if sol.tube else float(sol.t_reached), float(t_end)
     Qb = Interval(np.asarray(X.lo, float)[:nq], np.asarray(X.hi, float)[:nq])
     span = iv.point(T) - iv.point(tb)
+    memo = {}
 
     def grown(Q, u, dt):
         return Q + Interval(-np.ones(nq), np.ones(nq)) * (Interval(u, u) * dt)
 
     # the a-priori box over [tb, T]
-    cand = speed_bound(shell, hmax, c, Qb, params, periods=periods, evals=evals)
+    cand = speed_bound(shell, hmax, c, Qb, params, periods=periods, evals=evals, memo=memo)
     for _ in range(_APRIORI_TRIES):
-        w = speed_bound(shell, hmax, c, grown(Qb, cand, span), params, periods=periods, evals=evals)
+        w = speed_bound(shell, hmax, c, grown(Qb, cand, span), params, periods=periods, evals=evals, memo=memo)
         if np.all(w <= cand):
             u_all = w  # (speeds <= w on the box, so the positions stay in the smaller grown(Qb, w, span))
             break
@@ -209,7 +227,7 @@ def continue_in_shell(sol: Solution, shell: EnergyShell, hmax: float, inv_mass_d
     for a, b in itertools.pairwise(edges):
         h = iv.point(b) - iv.point(a)
         Qstep = grown(Q, u_all, h)
-        u_k = np.minimum(u_all, speed_bound(shell, hmax, c, Qstep, params, periods=periods, evals=evals))
+        u_k = np.minimum(u_all, speed_bound(shell, hmax, c, Qstep, params, periods=periods, evals=evals, memo=memo))
         Qstep = grown(Q, u_k, h)
         V = Interval(-u_k, u_k)
         new_tube.append(iv.concatenate([Qstep, V]).reshape(1, -1))
