@@ -65,6 +65,23 @@ chunk together may exceed it: each checks only its own). Measured on the mixed b
 nothing from it); never with a consistency test (its record cannot be continued:
 ``rechunk=True`` is an error then) or with per-box exact parameters that differ.
 
+Work stealing (on Dask, unless ``rechunk=False``; never with a consistency test): the
+driver keeps each running piece's rate from its progress reports (over the last
+``RATE_WINDOW`` s: a piece whose steps shorten late would look nearly done at its mean
+rate). When a worker thread holds none of the run's pieces, the running piece with the
+most time left -- if more than ``STEAL_MIN_S`` and it started with at least
+``2 * STEAL_MIN_SETS`` sets -- is asked to pause after its current step (``client.run``
+sets a flag in the workers that its :class:`_Pause` hook reads), and its sets are cut, as
+above, into twice as many pieces as there are free threads (at least ``STEAL_MIN_SETS``
+sets each: the last, smaller pieces even out the end). A piece in which some initial
+pieces broke down is not paused (as above). Which pieces are cut, and when, depends on
+timing; the result depends only on the cuts: ``Solution.stats["cuts"]`` records each
+(the piece's place in the tree ``path``, ``steps`` taken when it paused, ``k`` pieces,
+``why``: "sets", "lag" or "replay") and ``with replaying(sol): solve(..., workers=1,
+chunks=len(sol.chunks))`` with ``sol``'s arguments reproduces ``sol`` in this process
+float for float. When there are no more chunks than workers, chunk i is offered to
+worker i first (Dask would otherwise queue several on the worker that holds the graph).
+
 What the merged Solution means (the union is the same set a single batch encloses,
 up to the step-size differences):
 
@@ -101,10 +118,13 @@ up to the step-size differences):
     (chunks or pieces that paused and were cut),
     ``chunk_wall_s`` (each chunk's own solve time), ``setup_s`` (cluster start and
     graph shipping), ``sent_bytes`` / ``received_bytes`` (pickled sizes per run),
-    ``merge_s`` (stitching and merging the chunks here); on Dask ``warm_s`` (each new
+    ``merge_s`` (stitching and merging the chunks here after the last result; a family
+    of pieces is stitched as soon as its last piece is in, during the run: ``stitch_s``),
+    ``steal`` (on or off), ``cuts`` (see work stealing); on Dask ``warm_s`` (each new
     worker's first step of this problem: its kernels loaded) and ``timeline`` (per
-    piece run: worker pid, task start and end on the worker, result here; seconds
-    after the call: where the time went, benchmarks/bench_parallel.py).
+    piece run: worker pid, parent piece, sets, start time, steps, task start and end on
+    the worker, its thread's CPU seconds, result here, why it paused; seconds after the
+    call: where the time went, benchmarks/bench_parallel.py).
 ``chunks``
     Per initial chunk: boxes, status, steps, its tube, ...; with re-chunking ``pieces``:
     each piece's parent, start time, sets at its start, status, steps, wall time, worker.
@@ -131,6 +151,8 @@ This module knows nothing about robots.
 from __future__ import annotations
 
 import atexit
+import contextlib
+import contextvars
 import copy
 import ctypes
 import hashlib
@@ -163,7 +185,8 @@ from .solver_args import _subdivision, check_arithmetic, check_graph, check_para
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "auto_workers", "subprocess_workers_supported", "SchedulerError",
            "WorkerStartError", "WorkersLostError", "NO_WORKERS_TIMEOUT", "CONNECT_TIMEOUT", "CHUNK_TARGET",
-           "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs", "start_local_cluster", "prepare_worker"]
+           "MIN_CHUNK_BOXES", "RECHUNK_GROWTH", "interrupt_runs", "start_local_cluster", "prepare_worker", "replaying",
+           "STEAL_MIN_S", "STEAL_MIN_SETS"]
 
 #: seconds to wait for a scheduler before :class:`SchedulerError`
 CONNECT_TIMEOUT = 10.0
@@ -202,6 +225,15 @@ RECHUNK_GROWTH = 2
 #: ~2 ms of Python per step and batch, against ~0.15 ms per set: MIN_CHUNK_BOXES); a test
 #: may lower it
 RECHUNK_MIN_SETS = MIN_CHUNK_BOXES
+#: work stealing (``rechunk``, on Dask): when a worker thread is free and no piece waits
+#: for one, the running piece with the most time left (estimated from its progress
+#: reports), if that is more than STEAL_MIN_S seconds, is asked to pause after its step
+#: and its sets are cut into new pieces for the free threads; a piece starting with
+#: fewer than 2 * STEAL_MIN_SETS sets is not cut (a test may lower both)
+STEAL_MIN_S = 1.0
+#: seconds of a piece's latest progress reports its rate is taken over
+RATE_WINDOW = 1.5
+STEAL_MIN_SETS = MIN_CHUNK_BOXES // 2
 #: solve's default max_boxes (each initial chunk's budget of sets)
 _MAX_BOXES = inspect.signature(solve_batch).parameters["max_boxes"].default
 _STATUS_RANK = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
@@ -381,10 +413,11 @@ class _Deadline(Hook):
 
 
 class _Report(Hook):
-    """On a Dask worker: publish ``(chunk, t)`` on the run's topic every ``every`` s."""
+    """On a Dask worker: publish ``(chunk, piece, t)`` on the run's topic every ``every``
+    s (the combined progress, and the driver's estimate of each piece's time left)."""
 
-    def __init__(self, topic: str, index: int, every: float = 0.3):
-        self.topic, self.index, self.every = topic, index, every
+    def __init__(self, topic: str, index: int, every: float = 0.3, piece: int | None = None):
+        self.topic, self.index, self.every, self.piece = topic, index, every, piece
         self._last = 0.0
 
     def after_step(self, step, sets, run):
@@ -393,7 +426,7 @@ class _Report(Hook):
             self._last = now
             try:
                 from distributed import get_worker  # (the optional extra, loaded on a Dask worker)
-                get_worker().log_event(self.topic, {"i": self.index, "t": float(step.t)})
+                get_worker().log_event(self.topic, {"i": self.index, "p": self.piece, "t": float(step.t)})
             except Exception:  # noqa: BLE001 - progress is best effort
                 pass
         return None
@@ -444,17 +477,46 @@ def _split_hooks(hooks, t_start_wall: float):
     return out, deadline
 
 
-class _Pause(Hook):
-    """Re-chunking: stop after the step at which the run holds ``at`` sets or more and
-    keep where it stands (:class:`verified.solver.Start`) in ``start``; not on the step
-    that records the last output (the run is done then)."""
+#: on a Dask worker: the task keys of the pieces the driver asked to pause (a lagging
+#: piece whose sets go to idle workers; :func:`_request_pause`, run on the workers'
+#: event loop while the piece's task runs in the worker's thread)
+_PAUSE_REQUESTS: set = set()
 
-    def __init__(self, at: int):
-        self.at = int(at)
+
+async def _request_pause(key: str) -> None:
+    """On every worker (``client.run(..., wait=False)``, which takes a coroutine): ask the
+    piece running as task ``key`` to pause after its current step (a worker not running
+    it just keeps the key)."""
+    _PAUSE_REQUESTS.add(key)
+
+
+class _Pause(Hook):
+    """Re-chunking: stop after the step at which the run holds ``at`` sets or more (set
+    growth), after step ``at_step`` (a replayed cut), or after the step during which the
+    driver asked task ``key`` to pause (a lag: :data:`_PAUSE_REQUESTS`), and keep where it
+    stands (:class:`verified.solver.Start`) in ``start``; never on the step that records
+    the last output (the run is done then). ``steps``: the steps taken when it paused
+    (what a replay needs); ``why``: "sets", "lag" or "replay"."""
+
+    def __init__(self, at: int | None = None, at_step: int | None = None, key: str | None = None):
+        self.at = None if at is None else int(at)
+        self.at_step = None if at_step is None else int(at_step)
+        self.key = key
         self.start = None
+        self.steps = 0
+        self.why = None
 
     def after_step(self, step, sets, run):
-        if sets.n_sets < self.at or run.landed_on_last_output(step):
+        self.steps += 1
+        if self.at_step is not None and self.steps == self.at_step:
+            why = "replay"
+        elif self.at is not None and sets.n_sets >= self.at:
+            why = "sets"
+        elif self.key is not None and sets.n_sets >= 2 and self.key in _PAUSE_REQUESTS:
+            why = "lag"
+        else:
+            return None
+        if run.landed_on_last_output(step):
             return None
         if getattr(getattr(run, "pieces", None), "events", None):
             # some of its pieces broke down: its Solution stops at the first failure and
@@ -462,6 +524,7 @@ class _Pause(Hook):
             # not be stitched to; it goes on whole, as a chunk without re-chunking
             return None
         self.start = run.resume_point()
+        self.why = why
         run.stop(f"paused at {sets.n_sets} sets to be cut into new chunks", "stopped")
         return None
 
@@ -480,6 +543,10 @@ class _Piece:
     start: Start | None
     max_boxes: int
     pause_at: int | None
+    path: tuple = ()  # (family, child position, ...): its place in the tree, what a replay names
+    at_step: int | None = None  # a replayed cut: pause after this many steps ...
+    cut_k: int | None = None  # ... into this many pieces
+    stealable: bool = False  # the driver may ask it to pause when it lags (its sets resumable)
     sol: Solution | None = None
     paused: Start | None = None
     children: list = field(default_factory=list)
@@ -500,51 +567,89 @@ def _resume_params(params):
 
 class _Pieces:
     """The pieces of a chunked run: the initial chunks and, with re-chunking, the pieces
-    cut from the sets of those that paused; :meth:`families` stitches each initial
-    chunk's pieces into one Solution for :func:`merge_solutions`."""
+    cut from the sets of those that paused (their sets doubled, they lagged, or a replay
+    said so); :meth:`families` stitches each initial chunk's pieces into one Solution for
+    :func:`merge_solutions`, each as soon as its last piece is in (:meth:`done`), so the
+    stitching is off the critical path of a run whose chunks end at different times.
 
-    def __init__(self, boxes, ranges, chunk_params, rechunk: bool, max_boxes: int):
+    ``replay``: ``{path: (steps, k)}`` from a run's ``stats["cuts"]``: the piece at that
+    place pauses after that many steps and is cut into ``k`` pieces, which reproduces that
+    run's pieces (and, the arithmetic being deterministic, its result float for float)."""
+
+    def __init__(self, boxes, ranges, chunk_params, rechunk: bool, max_boxes: int, steal: bool = False,
+                 replay: dict | None = None, outs=None, t0=None):
         self.n = boxes.shape[-1]
         self.ranges = ranges
         # pieces of about the plan's mean chunk size, not below RECHUNK_MIN_SETS
         self.target = max(1, RECHUNK_MIN_SETS, int(round(boxes.shape[0] / len(ranges))))
+        self.rechunk, self.steal = bool(rechunk), bool(steal)
+        self.replay = dict(replay or {})
+        self.outs, self.t0 = outs, t0
         self.items: list[_Piece] = []
         self.cuts = 0
+        self.cut_log: list = []  # per cut: path, steps, k, why (Solution.stats["cuts"])
         self.family_params = []
+        self.resumable = []
+        self.stitched: dict = {}  # family -> its Solution, stitched when its last piece came in
+        self.stitch_s = 0.0
         for i, (a, b) in enumerate(ranges):
             p = chunk_params(a, b)
             ok, rp = _resume_params(p)
             self.family_params.append(rp)
-            self.items.append(_Piece(family=i, parent=None, lo=boxes.lo[a:b], hi=boxes.hi[a:b], params=p,
-                                     start=None, max_boxes=max_boxes,
-                                     pause_at=self._pause_at(b - a) if rechunk and ok else None))
+            self.resumable.append(ok)
+            self._add(_Piece(family=i, parent=None, lo=boxes.lo[a:b], hi=boxes.hi[a:b], params=p, start=None,
+                             max_boxes=max_boxes, pause_at=self._pause_at(b - a) if rechunk and ok else None,
+                             path=(i,)))
+
+    def _add(self, piece: _Piece) -> int:
+        got = self.replay.get(piece.path)
+        if got is not None and self.resumable[piece.family]:
+            piece.at_step, piece.cut_k = int(got[0]), int(got[1])
+        piece.stealable = (self.steal and self.resumable[piece.family] and got is None
+                           and piece.lo.shape[0] >= 2 * STEAL_MIN_SETS)
+        self.items.append(piece)
+        return len(self.items) - 1
 
     def _pause_at(self, n_sets: int) -> int:
         return RECHUNK_GROWTH * max(int(n_sets), self.target)
 
-    def done(self, index: int, sol, paused) -> list[int]:
+    def done(self, index: int, sol, paused, k: int | None = None, why: str | None = None) -> list[int]:
         """Record piece ``index``'s Solution; when it paused (``paused``: its Start), cut
-        its sets into new pieces and return their indices (to be run)."""
+        its sets into new pieces (``k`` of them; None: a replay's number, else about the
+        plan's mean chunk size each) and return their indices (to be run). A family whose
+        last piece this was is stitched now."""
         piece = self.items[index]
         piece.sol, piece.paused = sol, paused
-        if paused is None:
-            return []
-        return self._cut(index)
+        new = [] if paused is None else self._cut(index, piece.cut_k if piece.cut_k is not None else k, why)
+        if not new and self.outs is not None and self._family_done(piece.family):
+            t = time.perf_counter()
+            self.stitched[piece.family] = self._stitch(piece.family, self.outs, self.t0)
+            self.stitch_s += time.perf_counter() - t
+        return new
 
-    def _cut(self, index: int) -> list[int]:
+    def _family_done(self, family: int) -> bool:
+        return all(self.items[i].sol is not None for i in _dfs(self.items, family))
+
+    def _cut(self, index: int, k: int | None = None, why: str | None = None) -> list[int]:
         parent = self.items[index]
         st = parent.paused
         sets = st.sets
         S = sets.n_sets
-        k = max(2, min(S, int(S // self.target)))
+        if k is None:
+            k = int(S // self.target)
+        k = max(2, min(S, int(k)))
         edges = np.linspace(0, S, k + 1).round().astype(int)
+        # every set in exactly one piece: contiguous ranges covering 0..S (none empty)
+        edges = np.unique(edges)
+        if edges[0] != 0 or edges[-1] != S:  # (cannot happen: linspace's ends are exact)
+            raise RuntimeError(f"re-chunking would not cover the {S} sets (a bug)")
         X = sets.hull()  # (S, N)
         W = np.asarray(hull(X, axis=0).width(), float)  # the union the parent's splitting judged against
         # (the paused run's own scale: the Start it was given; a pause hook's Start has none)
         own = None if parent.start is None else parent.start.split_scale
         scale0 = np.ones_like(W) if own is None else np.asarray(own, float)
         new = []
-        for a, b in zip(edges[:-1], edges[1:]):
+        for j, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
             idx = np.arange(a, b)
             part = sets.take(idx)
             Xp = X[idx]
@@ -554,12 +659,16 @@ class _Pieces:
             start = Start(sets=part, t_exact=st.t_exact, h_limit=st.h_limit, split_scale=scale)
             # splitting budget: the parent's, less the sets its other pieces held when cut
             budget = int(max(b - a, parent.max_boxes - (S - (b - a))))
-            self.items.append(_Piece(family=parent.family, parent=index, lo=np.asarray(Xp.lo[:, :self.n]),
-                                     hi=np.asarray(Xp.hi[:, :self.n]), params=self.family_params[parent.family],
-                                     start=start, max_boxes=budget, pause_at=self._pause_at(b - a)))
-            new.append(len(self.items) - 1)
+            new.append(self._add(_Piece(family=parent.family, parent=index, lo=np.asarray(Xp.lo[:, :self.n]),
+                                        hi=np.asarray(Xp.hi[:, :self.n]), params=self.family_params[parent.family],
+                                        start=start, max_boxes=budget,
+                                        pause_at=self._pause_at(b - a) if self.rechunk else None,
+                                        path=parent.path + (j,))))
         parent.children = new
         self.cuts += 1
+        steps, why = parent.sol.stats.get("pause", (None, why)) if parent.sol is not None else (None, why)
+        self.cut_log.append(dict(path=list(parent.path), steps=steps, k=len(new), sets=int(S),
+                                 t=float(st.t_exact), why=why))
         return new
 
     # ------------------------------------------------------------------ stitching
@@ -567,8 +676,10 @@ class _Pieces:
         return _dfs(self.items, root)
 
     def families(self, outs, t0):
-        """One Solution per initial chunk (None: it never ran): see :func:`_stitch`."""
-        return [self._stitch(i, outs, t0) for i in range(len(self.ranges))]
+        """One Solution per initial chunk (None: it never ran): see :func:`_stitch`; the
+        families stitched as they completed are taken as they are."""
+        return [self.stitched[i] if i in self.stitched else self._stitch(i, outs, t0)
+                for i in range(len(self.ranges))]
 
     def _stitch(self, root: int, outs, t0):
         """See :func:`stitch`."""
@@ -900,10 +1011,11 @@ def _identity(x):
     return x
 
 
-def _worker_count(client) -> int:
-    """Workers connected to ``client``'s scheduler now (-1 when it cannot be asked)."""
+def _thread_count(client) -> int:
+    """Threads of the workers connected to ``client``'s scheduler now (0 when it cannot
+    be asked)."""
     try:
-        return len(client.nthreads())
+        return int(sum(client.nthreads().values()))
     except Exception:  # noqa: BLE001 - the scheduler may be gone too: not this check's error
         return -1
 
@@ -926,31 +1038,79 @@ def _warm_problem(problem: _Problem, box_lo, box_hi, params, kwargs: dict) -> fl
     return time.perf_counter() - t
 
 
-def _solve_piece(ode, piece: _Piece, kwargs: dict, extra_hooks=()):
+_WARM_HERE: set = set()  # problem tokens whose kernels this (driving) process has loaded
+
+
+def _warm_here(graph, arithmetic, piece, kwargs) -> None:
+    """In the driving process (a daemon thread): one step of one box with the run's
+    settings, so that the first cut of a paused piece's sets (:meth:`_Pieces._cut`) does
+    not load the set kernels on the critical path (measured: 1.3 s in a process that had
+    run nothing)."""
+    kw = {k: v for k, v in kwargs.items() if k in ("order", "tol", "error_basis", "set_order", "set_step",
+                                                 "model_degree", "h_min", "wrap_target")}
+    params = piece.params[:1] if piece.params is not None and piece.params.ndim == 2 else piece.params
+    try:
+        solve_batch(VerifiedODE(graph, arithmetic), Interval(piece.lo[:1], piece.hi[:1]), kwargs["t_span"],
+                    params=params, max_steps=1, **kw)
+    except Exception:  # noqa: BLE001 - best effort: the cut itself reports a real problem
+        pass
+
+
+def _solve_piece(ode, piece: _Piece, kwargs: dict, extra_hooks=(), key: str | None = None):
     """``solve`` of one piece; returns ``(Solution, Start or None)`` (None: it did not
-    pause for re-chunking)."""
+    pause for re-chunking). ``key``: the Dask task key under which the driver may ask a
+    stealable piece to pause. A paused piece's ``stats["pause"]`` is ``(steps, why)``."""
     kw = dict(kwargs)
-    pause = _Pause(piece.pause_at) if piece.pause_at is not None else None
+    key = key if piece.stealable else None
+    pause = (_Pause(piece.pause_at, piece.at_step, key)
+             if piece.pause_at is not None or piece.at_step is not None or key is not None else None)
     kw["hooks"] = list(kw.get("hooks") or ()) + list(extra_hooks) + ([pause] if pause is not None else [])
     kw["max_boxes"] = piece.max_boxes
     sol = solve_batch(ode, Interval(piece.lo, piece.hi), kw.pop("t_span"), params=piece.params, start=piece.start,
                       **kw)  # (one batch: never a cluster of its own)
-    paused = pause.start if pause is not None and sol.status == "stopped" else None
+    paused = pause.start if pause is not None and pause.start is not None and sol.status == "stopped" else None
+    if paused is not None:
+        sol.stats["pause"] = (pause.steps, pause.why)  # (a tuple: not summed by the merge)
     return sol, paused
 
 
-def _run_chunk(problem: _Problem, piece: _Piece, kwargs: dict, topic: str):
+def _run_chunk(problem: _Problem, piece: _Piece, kwargs: dict, topic: str, key: str | None = None):
     """One piece on a worker (a Dask task): ``(Solution, Start or None)``."""
-    t, t_unix = time.perf_counter(), time.time()
+    t, t_unix, t_cpu = time.perf_counter(), time.time(), time.thread_time()
     ode = _prepared(problem)
-    sol, paused = _solve_piece(ode, piece, kwargs, [_Report(topic, piece.family)])
+    try:
+        sol, paused = _solve_piece(ode, piece, kwargs, [_Report(topic, piece.family, piece=key)],
+                                   key=key)
+    finally:
+        _PAUSE_REQUESTS.discard(key)
     sol.stats["chunk_task_s"] = time.perf_counter() - t
+    sol.stats["chunk_cpu_s"] = (time.thread_time() - t_cpu,)  # (this task's thread; a tuple: not summed)
     sol.stats["worker_pid"] = os.getpid()
     sol.stats["chunk_span_unix"] = (t_unix, time.time())  # (not summed by the merge: a tuple)
     return sol, paused
 
 
 # ----------------------------------------------------------------------------- driver
+_REPLAY: contextvars.ContextVar = contextvars.ContextVar("mbs_verified_replay", default=None)
+
+
+@contextlib.contextmanager
+def replaying(run):
+    """Inside ``with replaying(sol):`` a chunked ``solve`` (``chunks=``, ``workers=``,
+    ``client=``) runs ``sol``'s plan and cuts: its chunks' boxes and, from
+    ``sol.stats["cuts"]``, each re-chunked piece paused after the same number of steps
+    and cut into the same number of pieces; no new cut is made (no stealing). Work
+    stealing depends on timing; the result depends only on the cuts, so
+    ``with replaying(sol): solve(..., workers=1, chunks=len(sol.chunks))`` with ``sol``'s
+    other arguments reproduces ``sol`` in this process float for float. ``run``: a
+    chunked run's Solution, or its ``stats["cuts"]`` (then the plan is this call's)."""
+    token = _REPLAY.set(run)
+    try:
+        yield
+    finally:
+        _REPLAY.reset(token)
+
+
 def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, **kwargs):
     """``solve(ode, x0, t_span, **kwargs)`` in chunks (see the module docstring).
 
@@ -994,6 +1154,21 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
         raise ValueError("rechunk=True cannot continue a consistency test in new chunks: pass rechunk=False "
                          "(or None)")
     kwargs.pop("start", None)
+    replay = kwargs.pop("replay", None)
+    if replay is None:
+        replay = _REPLAY.get()
+    replay_ranges = None
+    if replay is not None:
+        if isinstance(replay, Solution):  # its plan and its cuts
+            if not replay.chunks or "cuts" not in replay.stats:
+                raise ValueError("replay=: a Solution of a chunked run (with chunks and stats['cuts'])")
+            replay_ranges = [tuple(int(v) for v in c["boxes"]) for c in replay.chunks]
+            replay = replay.stats["cuts"]
+        try:
+            replay = {tuple(int(v) for v in c["path"]): (int(c["steps"]), int(c["k"])) for c in replay}
+        except (TypeError, KeyError, ValueError):
+            raise ValueError("replay must be a chunked run's Solution or its stats['cuts'] (dicts with path, "
+                             "steps and k)") from None
     if workers is not None and workers != "auto" and (isinstance(workers, bool) or
                                                       not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be None, 'auto' or an integer >= 1, got {workers!r}")
@@ -1030,6 +1205,11 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
         n_workers = 1
     # with a wall-clock cap every chunk should be running when it strikes: one per worker
     ranges = plan_chunks(nb, n_workers, chunks, max_per_worker=1 if deadline is not None else MAX_CHUNKS_PER_WORKER)
+    if replay_ranges is not None:
+        if replay_ranges[0][0] != 0 or replay_ranges[-1][1] != nb or any(
+                a[1] != b[0] for a, b in zip(replay_ranges, replay_ranges[1:])):
+            raise ValueError(f"replay=: its chunks {replay_ranges} do not cover the {nb} boxes of this run")
+        ranges = replay_ranges
     adaptive = bool(kwargs.get("adaptive", False))
     rechunk_on = adaptive and consistency is None and (bool(rechunk) if rechunk is not None
                                                        else backend != "inprocess")
@@ -1052,7 +1232,7 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
             backend, n_workers = "inprocess", 1
             ranges = [(0, nb)] if chunks is None else plan_chunks(nb, 1, chunks)
             rechunk_on = adaptive and consistency is None and bool(rechunk)
-    if backend == "inprocess" and len(ranges) == 1 and not rechunk_on:  # one batch: exactly solve's own result
+    if backend == "inprocess" and len(ranges) == 1 and not rechunk_on and not replay:  # one batch: solve's own result
         sol = solve_batch(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
                           hooks=list(hooks_in), **kwargs)
         sol.stats.update(chunks=1, workers=1, backend="inprocess")
@@ -1061,14 +1241,19 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     base.pop("max_boxes", None)  # (per piece: _Piece.max_boxes)
     board = _Board(progress, t0, t1, [b - a for a, b in ranges])
     interrupted = False
-    stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend, "rechunk": rechunk_on}
+    # work stealing: a lagging piece's sets go to free threads (Dask only; not with a
+    # consistency test, whose record cannot be continued; not when replaying a run's cuts)
+    steal = backend != "inprocess" and consistency is None and replay is None and rechunk is not False
+    stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend, "rechunk": rechunk_on,
+                   "steal": steal}
 
     def chunk_params(a, b):
         if params is None:
             return None
         return params[a:b] if params.ndim == 2 else params
 
-    pieces = _Pieces(boxes, ranges, chunk_params, rechunk_on, int(kwargs.get("max_boxes", _MAX_BOXES)))
+    pieces = _Pieces(boxes, ranges, chunk_params, rechunk_on, int(kwargs.get("max_boxes", _MAX_BOXES)),
+                     steal=steal, replay=replay, outs=outs, t0=t0)
     if backend == "inprocess":
         prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(graph, arithmetic)
         stats_extra["setup_s"] = time.perf_counter() - wall0
@@ -1113,6 +1298,8 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     results = pieces.families(outs, t0)
     stats_extra["pieces"] = sum(1 for p in pieces.items if p.sol is not None)
     stats_extra["rechunks"] = pieces.cuts
+    stats_extra["cuts"] = pieces.cut_log
+    stats_extra["stitch_s"] = pieces.stitch_s  # (stitching of families as they completed, during the run)
     sol = merge_solutions(results, ranges, boxes[:, :graph.n_inputs], outs, t0,
                           tuple(graph.input_names[:graph.n_inputs]), interrupted=interrupted)
     stats_extra["merge_s"] = time.perf_counter() - t_merge
@@ -1189,8 +1376,22 @@ def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, 
         sent += len(blob) * max(1, len(workers))
     fut_problem, warmed = got
     topic = f"mbs-verified-progress-{uuid.uuid4().hex}"
-    if board.progress is not None:
-        client.subscribe_topic(topic, lambda event: board.update(event[1]["i"], event[1]["t"]))
+    steal = any(p.stealable for p in pieces.items) or pieces.steal
+    seen: dict = {}  # task key -> deque of (monotonic, t) of its reports over the last RATE_WINDOW s
+
+    def on_report(event):
+        msg = event[1]
+        board.update(msg["i"], msg["t"])
+        key = msg.get("p")
+        if key is not None:
+            now = time.monotonic()
+            got = seen.setdefault(key, deque())
+            got.append((now, msg["t"]))
+            while len(got) > 2 and now - got[1][0] >= RATE_WINDOW:
+                got.popleft()
+
+    if board.progress is not None or steal:
+        client.subscribe_topic(topic, on_report)
     kw = dict(base)
     kw["consistency"] = consistency
     kw["hooks"] = hooks
@@ -1205,18 +1406,80 @@ def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, 
     warmed |= workers
     done_q: queue.Queue = queue.Queue()
     running: dict = {}  # piece index -> future
+    keys: dict = {}  # piece index -> its task key
+    asked: dict = {}  # piece index -> when the driver asked it to pause (it lagged)
+    t1 = float(base["t_span"][1])
+    threads = [_thread_count(client)]
 
-    def submit(i):
+    def submit(i, where=None):
         nonlocal sent
         piece = pieces.items[i]
         sent += len(pickle.dumps(piece)) + kw_bytes
-        f = client.submit(_run_chunk, fut_problem, piece, kw, topic, key=f"verified-chunk-{i}-{topic[-12:]}",
-                          pure=False)
+        key = keys[i] = f"verified-chunk-{i}-{topic[-12:]}"
+        f = client.submit(_run_chunk, fut_problem, piece, kw, topic, key, key=key, pure=False, workers=where,
+                          allow_other_workers=where is not None)  # (a preference: a dead worker cannot block)
         running[i] = f
         f.add_done_callback(lambda fut, i=i: done_q.put(i))
 
+    def free_threads():
+        """Threads without a piece of this run (running or queued there): Dask may queue
+        two pieces on one worker while another idles (the problem's graph was on that one)."""
+        try:
+            proc = client.processing()
+            nthreads = client.nthreads()
+        except Exception:  # noqa: BLE001 - asked again at the next tick
+            return 0
+        ours = {keys[i] for i in running}
+        return sum(max(0, nthreads.get(w, 1) - sum(1 for k in ks if k in ours)) for w, ks in proc.items())
+
+    def time_left(i, now):
+        """Seconds piece i still needs at its rate over the last RATE_WINDOW s (a piece
+        whose steps shorten, as near a separatrix, slows down late: its mean rate since
+        the start would say it is nearly done); None: not two reports yet."""
+        got = seen.get(keys[i])
+        if got is None or len(got) < 2:
+            return None
+        (wa, ta), (wb, tb) = got[0], got[-1]
+        if wb - wa < 0.25:
+            return None
+        if tb <= ta:
+            return math.inf  # (no progress in the window: stuck on short steps)
+        return (t1 - tb) * (wb - wa) / (tb - ta) - (now - wb)
+
+    def maybe_steal():
+        """A thread is free and nothing waits for one: ask the running piece with the
+        most time left (at least STEAL_MIN_S) to pause; its sets go to the free threads."""
+        now = time.monotonic()
+        if not steal or len(running) > threads[0] or now - last_free[0] < 0.5:
+            return
+        if any(i in running and now - a < 2.0 for i, a in asked.items()):
+            return  # (one request at a time; one not answered in 2 s, e.g. on its last step, is given up)
+        last_free[0] = now
+        if free_threads() <= 0:
+            return
+        best, left = None, STEAL_MIN_S
+        for i in running:
+            if pieces.items[i].stealable and i not in asked:
+                r = time_left(i, now)
+                if r is not None and r > left:
+                    best, left = i, r
+        if best is not None:
+            asked[best] = now
+            client.run(_request_pause, keys[best], wait=False)
+
+    last_free = [0.0]
+    if steal and problem.token not in _WARM_HERE:
+        # a cut runs here, on the paused piece's sets (their hulls: the set kernels): load
+        # those kernels now, in the background, not on the run's critical path at its end
+        _WARM_HERE.add(problem.token)
+        threading.Thread(target=_warm_here, args=(graph, arithmetic, first, kw), daemon=True,
+                         name="mbs-verified-warm").start()
+    # the initial chunks spread over the workers when there are no more chunks than
+    # workers (else Dask may queue several on the worker that holds the graph)
+    addrs = sorted(workers)
+    spread = steal and 0 < len(pieces.items) <= len(addrs)
     for i in range(len(pieces.items)):
-        submit(i)
+        submit(i, [addrs[i]] if spread else None)
     setup_s = time.perf_counter() - t_setup
     interrupted = False
     received = 0
@@ -1228,10 +1491,19 @@ def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, 
         received += len(pickle.dumps(out))
         sol, paused = out
         a, b = sol.stats.get("chunk_span_unix", (math.nan, math.nan))
-        timeline.append(dict(piece=i, worker_pid=sol.stats.get("worker_pid"), start_s=a - t_wall0, end_s=b - t_wall0,
-                             received_s=time.time() - t_wall0))
+        why = sol.stats.get("pause", (None, None))[1] if paused is not None else None
+        timeline.append(dict(piece=i, parent=pieces.items[i].parent, worker_pid=sol.stats.get("worker_pid"),
+                             start_s=a - t_wall0, end_s=b - t_wall0, received_s=time.time() - t_wall0,
+                             cpu_s=sol.stats.get("chunk_cpu_s", (math.nan,))[0], sets=int(pieces.items[i].lo.shape[0]),
+                             t_start=float(pieces.items[i].start.t_exact) if pieces.items[i].start else None,
+                             steps=sol.stats.get("steps"), paused=why))
         board.update(pieces.items[i].family, sol.t_reached)
-        return pieces.done(i, sol, paused)
+        # a piece that lagged goes to every free thread, twice as many pieces as threads
+        # (so the last of them, smaller, even out the end); set growth: the plan's size
+        k = max(2, 2 * (threads[0] - len(running))) if why == "lag" else None
+        if why == "lag" and paused is not None:
+            k = min(k, max(2, paused.sets.n_sets // STEAL_MIN_SETS))
+        return pieces.done(i, sol, paused, k=k, why=why)
 
     last_check, lost_since = time.monotonic(), None
     try:
@@ -1246,16 +1518,20 @@ def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, 
                     now = time.monotonic()
                     if now - last_check >= 1.0:  # a cluster left without workers: say so, never hang
                         last_check = now
-                        lost_since = (lost_since or now) if _worker_count(client) == 0 else None
+                        n_now = _thread_count(client)
+                        threads[0] = n_now if n_now > 0 else threads[0]  # (-1: not known now)
+                        lost_since = (lost_since or now) if n_now == 0 else None
                         if lost_since is not None and now - lost_since >= NO_WORKERS_TIMEOUT:
                             client.cancel(list(running.values()))
                             raise WorkersLostError(
                                 f"every Dask worker left and none joined within {NO_WORKERS_TIMEOUT:g} s; "
                                 f"{len(running)} of {len(pieces.items)} chunks did not finish (start workers "
                                 "for the scheduler, or run with workers=1)")
+                    maybe_steal()
                     continue
                 for j in take(i):
                     submit(j)
+                maybe_steal()
     except KeyboardInterrupt:
         interrupted = True
         for i, f in list(running.items()):
@@ -1263,7 +1539,7 @@ def _run_on_dask(client, graph, arithmetic, pieces: _Pieces, base, consistency, 
                 take(i)  # (pieces it cuts are not run: they count as interrupted)
         client.cancel(list(running.values()))
     finally:
-        if board.progress is not None:
+        if board.progress is not None or steal:
             try:
                 client.unsubscribe_topic(topic)
             except Exception:  # noqa: BLE001

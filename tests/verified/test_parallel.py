@@ -698,8 +698,8 @@ def test_rechunked_run_contains_samples(ode, mixed, mixed_oracle, mixed_plain, m
 def test_a_rechunking_that_drops_a_set_is_caught(ode, mixed, mixed_oracle, mixed_plain, monkeypatch):
     cut = parallel._Pieces._cut
 
-    def dropping(self, index):  # the wide chunk's first cut loses one set of its first piece
-        new = cut(self, index)
+    def dropping(self, index, *args):  # the wide chunk's first cut loses one set of its first piece
+        new = cut(self, index, *args)
         if self.items[index].family == 1 and not getattr(self, "dropped", False):
             # (in the narrow chunk the neighbours' hull boxes cover a dropped set; in the
             # wide one dropping set 1, 2, ... or 6 instead of 0 is caught too, set 7 is not)
