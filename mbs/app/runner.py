@@ -1,3 +1,4 @@
+# Long (720 lines) on purpose: a scene's run and the scenario batch; tests patch both through this module.
 """Run a scene: simulate, check against sampled trajectories, write result.json and
 the figures (the body of ``python -m mbs simulate``)."""
 from __future__ import annotations
@@ -585,87 +586,133 @@ def run_scenarios(scenes, out, *, log=None, workers=None, client=None, **run_kw)
     log = log or (lambda *a, **k: None)
     out = Path(out)
     t0 = time.perf_counter()
-    if client is None and workers not in (None, 1):
-        n = default_workers() if workers == "auto" else int(workers)
-        if dask_available() and n > 1:
-            client = local_client(n)  # one cluster for every scenario's chunks
+    client = _batch_client(client, workers)
     lines = {}
-    # one bar over the batch: the simulated seconds of every scenario summed (interactive only)
-    horizon = {name: float(run_kw.get("t_end") or scene.t_end) for name, scene in scenes}
-    bar = Progress(sum(horizon.values()), f"{len(scenes)} scenarios", enabled=run_kw.pop("progress", None))
-    done, lock = dict.fromkeys(horizon, 0.0), threading.Lock()
-
-    def advance(name):
-        def tick(t_now, t_end=None):
-            with lock:
-                done[name] = min(float(t_now), horizon[name])
-                bar(sum(done.values()))
-        return tick
+    bar = _BatchBar(scenes, run_kw)
 
     def one(item):
         name, scene = item
         def say(*a, **k):
             lines.setdefault(name, []).append(" ".join(str(x) for x in a))
-        rep = run_scene(scene, out / _safe_name(name), log=say, progress=advance(name), figures=False,
+        rep = run_scene(scene, out / _safe_name(name), log=say, progress=bar.tick(name), figures=False,
                         client=client, workers=None if client is not None else workers, **run_kw)
         return name, scene, rep
 
     try:
-        if client is not None:
-            with ThreadPoolExecutor(max_workers=len(scenes)) as ex:
-                futures = [ex.submit(one, x) for x in scenes]
-                try:
-                    reports = [f.result() for f in futures]
-                except KeyboardInterrupt:
-                    # Ctrl-C reaches this thread only (and the local workers, which die of it):
-                    # the scenarios' threads wait on Dask, so tell their runs to stop as Ctrl-C
-                    # stops one, and collect what each verified
-                    interrupt_runs()
-                    try:
-                        reports = [f.result() for f in futures]
-                    finally:
-                        interrupt_runs(False)
-        else:
-            reports = []
-            for k, x in enumerate(scenes):
-                reports.append(one(x))
-                if reports[-1][2]["solution"].status == "interrupted":  # Ctrl-C stops the batch
-                    skipped = [name for name, _ in scenes[k + 1:]]
-                    if skipped:
-                        log(f"interrupted: scenario(s) not run: {', '.join(skipped)}")
-                    break
+        reports = _on_cluster(scenes, one) if client is not None else _one_by_one(scenes, one, log)
     finally:
         bar.close()
+    rows, worst, t_min = _combined(reports, lines, log)
+    combined = {"scene": str(scenes[0][1].source).split(" [scenario")[0], "status": worst, "t_reached": t_min,
+                "wall_s": time.perf_counter() - t0, "scenarios": rows}
+    path = _write_batch(out, combined, log)
+    return {"scenarios": rows, "status": worst, "t_reached": t_min, "escaped": sum(r["samples_escaped"] for r in rows),
+            "interrupted": any(r["status"] == "interrupted" for r in rows), "paths": {"scenarios": path},
+            "solution": None}
+
+
+def _batch_client(client, workers):
+    """The Dask client every scenario's chunks go to: ``client``, or a local cluster of
+    ``workers`` (> 1, or "auto": every core) where Dask is installed; None: in process."""
+    if client is None and workers not in (None, 1):
+        n = default_workers() if workers == "auto" else int(workers)
+        if dask_available() and n > 1:
+            client = local_client(n)  # one cluster for every scenario's chunks
+    return client
+
+
+class _BatchBar:
+    """One bar over the batch: the simulated seconds of every scenario summed
+    (interactive only; ``run_kw``'s ``progress`` is taken out of it for the bar)."""
+
+    def __init__(self, scenes, run_kw: dict):
+        self.horizon = {name: float(run_kw.get("t_end") or scene.t_end) for name, scene in scenes}
+        self.bar = Progress(sum(self.horizon.values()), f"{len(scenes)} scenarios",
+                            enabled=run_kw.pop("progress", None))
+        self.done, self.lock = dict.fromkeys(self.horizon, 0.0), threading.Lock()
+
+    def tick(self, name):
+        """The progress callable of scenario ``name`` (called from its thread)."""
+        def tick(t_now, t_end=None):
+            with self.lock:
+                self.done[name] = min(float(t_now), self.horizon[name])
+                self.bar(sum(self.done.values()))
+        return tick
+
+    def close(self):
+        self.bar.close()
+
+
+def _on_cluster(scenes, one) -> list:
+    """``one`` of every scenario at once, a thread each (their chunks share the cluster)."""
+    with ThreadPoolExecutor(max_workers=len(scenes)) as ex:
+        futures = [ex.submit(one, x) for x in scenes]
+        try:
+            return [f.result() for f in futures]
+        except KeyboardInterrupt:
+            # Ctrl-C reaches this thread only (and the local workers, which die of it):
+            # the scenarios' threads wait on Dask, so tell their runs to stop as Ctrl-C
+            # stops one, and collect what each verified
+            interrupt_runs()
+            try:
+                return [f.result() for f in futures]
+            finally:
+                interrupt_runs(False)
+
+
+def _one_by_one(scenes, one, log) -> list:
+    """``one`` of each scenario in turn; an interrupted one (Ctrl-C) stops the batch."""
+    reports = []
+    for k, x in enumerate(scenes):
+        reports.append(one(x))
+        if reports[-1][2]["solution"].status == "interrupted":  # Ctrl-C stops the batch
+            skipped = [name for name, _ in scenes[k + 1:]]
+            if skipped:
+                log(f"interrupted: scenario(s) not run: {', '.join(skipped)}")
+            break
+    return reports
+
+
+def _combined(reports, lines, log):
+    """``(rows, worst status, smallest t_reached)`` of the scenarios' reports; each
+    scenario's own log lines are logged after it, prefixed with its name."""
     rank = {"completed": 0, "stopped": 1, "interrupted": 2, "breakdown": 3}
     rows, worst, t_min = [], "completed", float("inf")
     for name, scene, rep in reports:
         sol = rep["solution"]
-        t_w, w = final_widths(sol)
-        rows.append({"name": name, "status": sol.status, "t_reached": float(sol.t_reached), "reason": sol.reason,
-                     "widths_at": t_w, "final_widths": None if w is None else [float(v) for v in w],
-                     "parameters": {k: [float(a), float(b)] for k, (a, b) in (getattr(sol, "params", {}) or {}).items()},
-                     "samples_checked": rep["checked"], "samples_escaped": rep["escaped"],
-                     "wall_s": float(sol.stats.get("wall_s", 0.0)), "chunks": sol.stats.get("chunks", 1),
-                     "result": str(Path(_safe_name(name)) / "result.json")})
+        rows.append(_scenario_row(name, rep))
         if rank.get(sol.status, 3) > rank[worst]:
             worst = sol.status
         t_min = min(t_min, float(sol.t_reached))
         for line in lines.get(name, []):
             log(f"[{name}] {line}")
-    combined = {"scene": str(scenes[0][1].source).split(" [scenario")[0], "status": worst, "t_reached": t_min,
-                "wall_s": time.perf_counter() - t0, "scenarios": rows}
+    return rows, worst, t_min
+
+
+def _scenario_row(name, rep) -> dict:
+    """One scenario's entry of scenarios.json."""
+    sol = rep["solution"]
+    t_w, w = final_widths(sol)
+    return {"name": name, "status": sol.status, "t_reached": float(sol.t_reached), "reason": sol.reason,
+            "widths_at": t_w, "final_widths": None if w is None else [float(v) for v in w],
+            "parameters": {k: [float(a), float(b)] for k, (a, b) in (getattr(sol, "params", {}) or {}).items()},
+            "samples_checked": rep["checked"], "samples_escaped": rep["escaped"],
+            "wall_s": float(sol.stats.get("wall_s", 0.0)), "chunks": sol.stats.get("chunks", 1),
+            "result": str(Path(_safe_name(name)) / "result.json")}
+
+
+def _write_batch(out: Path, combined: dict, log) -> Path:
+    """Write ``out/scenarios.json`` and log its table; the path written."""
     out.mkdir(parents=True, exist_ok=True)
     path = out / "scenarios.json"
     path.write_text(json.dumps(combined, indent=1))
     log(f"{'scenario':<24} {'status':<11} {'t_reached':>9} {'wall s':>7}  final widths")
-    for r in rows:
+    for r in combined["scenarios"]:
         ws = ", ".join(_fmt_width(v) for v in (r["final_widths"] or []))
         log(f"{r['name']:<24} {r['status']:<11} {r['t_reached']:>9.4g} {r['wall_s']:>7.2f}  {ws}"
             + (f"  ({r['samples_escaped']} sampled states OUTSIDE)" if r["samples_escaped"] else ""))
     log(f"wrote {path}")
-    return {"scenarios": rows, "status": worst, "t_reached": t_min, "escaped": sum(r["samples_escaped"] for r in rows),
-            "interrupted": any(r["status"] == "interrupted" for r in rows), "paths": {"scenarios": path},
-            "solution": None}
+    return path
 
 
 def _safe_name(name: str) -> str:
