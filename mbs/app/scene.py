@@ -1,3 +1,4 @@
+# Long (760 lines) on purpose: the scene format's documentation (120 lines) and one checker per table.
 """Scene files: one TOML file describes a whole guaranteed simulation.
 
 ``python -m mbs simulate SCENE --out DIR`` reads a scene with :func:`load_scene`
@@ -420,14 +421,32 @@ def _build_model(scene: Scene):
 
 
 def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) -> Scene:
-    """Validate a scene given as a dict (the parsed TOML); see :func:`load_scene`."""
+    """Validate a scene given as a dict (the parsed TOML); see :func:`load_scene`.
+    Its tables are checked in this order, each by its own step."""
     _unknown(data, _TOP, source)
     name = data.get("name", Path(source).stem if source != "<string>" else "scene")
     description = data.get("description", "")
     if not isinstance(name, str) or not isinstance(description, str):
         raise SceneError(f"{source}: 'name' and 'description' must be strings")
+    spec = _model_table(data, source, base)
+    params, physical = _parameters(_table(data, "parameters", source), spec, f"{source}: [parameters]")
+    initial = _initial_table(data, source)
+    t_end, output_dt, frames, mode = _simulation_table(data, source)
+    solver = _solver_table(data, source)
+    cons = _consistency_table(data, source)
+    control = _control_table(data, source, mode)
+    scene = Scene(source=source, name=name, description=description, model_spec=spec,
+                  parameters=params, physical=physical, initial=initial, t_end=t_end, output_dt=output_dt,
+                  mode=mode, solver=solver, consistency=cons, control=control, frames=tuple(frames))
+    if isinstance(initial, list) and isinstance(solver.get("subdivision"), list) \
+            and len(solver["subdivision"]) != len(initial):
+        raise SceneError(f"{source}: [solver] subdivision has {len(solver['subdivision'])} entries, "
+                         f"the initial box {len(initial)}")
+    return scene
 
-    # [model]
+
+def _model_table(data: dict, source: str, base) -> dict:
+    """[model]: exactly one of name, urdf, dh, and what applies to it; the model spec."""
     where = f"{source}: [model]"
     model = _table(data, "model", source, required=True)
     _unknown(model, _MODEL, where)
@@ -466,11 +485,11 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         if not isinstance(g, list) or len(g) != 3:
             raise SceneError(f"{where} gravity: expected [gx, gy, gz]")
         spec["gravity"] = [_number(v, f"{where} gravity[{i}]") for i, v in enumerate(g)]
+    return spec
 
-    # [parameters]
-    params, physical = _parameters(_table(data, "parameters", source), spec, f"{source}: [parameters]")
 
-    # [initial]
+def _initial_table(data: dict, source: str):
+    """[initial]: the initial box, a list (``box = [...]``) or {state: interval}."""
     where = f"{source}: [initial]"
     if "initial" not in data:
         raise SceneError(f"{source}: missing [initial] table (the initial box)")
@@ -486,8 +505,11 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
         initial = [_interval(v, f"{where} box[{i}]") for i, v in enumerate(box)]
     else:
         initial = {k: _interval(v, f"{where} {k}") for k, v in init.items()}
+    return initial
 
-    # [simulation]
+
+def _simulation_table(data: dict, source: str):
+    """[simulation]: ``(t_end, output_dt, frames, mode)``."""
     where = f"{source}: [simulation]"
     sim = _table(data, "simulation", source, required=True)
     _unknown(sim, _SIMULATION, where)
@@ -505,8 +527,11 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     mode = sim.get("mode", "ii")
     if mode not in MODES:
         raise SceneError(f"{where} mode: {mode!r} is not one of {', '.join(MODES)}")
+    return t_end, output_dt, frames, mode
 
-    # [solver]
+
+def _solver_table(data: dict, source: str) -> dict:
+    """[solver]: the solver settings, the method made from them."""
     where = f"{source}: [solver]"
     solver = {}
     for k, v in _table(data, "solver", source).items():
@@ -530,8 +555,11 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
             solver.pop(k, None)
     else:
         _scene_legacy_method(solver, where)
+    return solver
 
-    # [consistency]
+
+def _consistency_table(data: dict, source: str) -> dict:
+    """[consistency]: the energy test's settings."""
     where = f"{source}: [consistency]"
     cons = {}
     for k, v in _table(data, "consistency", source).items():
@@ -545,8 +573,12 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
     if "energy_rate" in cons and cons["energy_rate"] not in _ENERGY_RATES:
         raise SceneError(f"{where} energy_rate: {cons['energy_rate']!r} is not one of "
                          f"{', '.join(_ENERGY_RATES)}")
+    return cons
 
-    # [control]
+
+def _control_table(data: dict, source: str, mode: str):
+    """[control]: its structure checked (joints and gains against the model when it
+    runs), and only in modes i and ii; the table or None."""
     control = data.get("control")
     if control is not None:
         try:
@@ -555,15 +587,7 @@ def parse_scene(data: dict, source: str = "<string>", base: Path | None = None) 
             raise SceneError(f"{source}: {e}") from None
         if get_mode(mode).symbolic:
             raise SceneError(f"{source}: [control] needs mode i or ii (the numeric model), not iii")
-
-    scene = Scene(source=source, name=name, description=description, model_spec=spec,
-                  parameters=params, physical=physical, initial=initial, t_end=t_end, output_dt=output_dt,
-                  mode=mode, solver=solver, consistency=cons, control=control, frames=tuple(frames))
-    if isinstance(initial, list) and isinstance(solver.get("subdivision"), list) \
-            and len(solver["subdivision"]) != len(initial):
-        raise SceneError(f"{source}: [solver] subdivision has {len(solver['subdivision'])} entries, "
-                         f"the initial box {len(initial)}")
-    return scene
+    return control
 
 
 def _table_of_intervals(value, where: str, what: str) -> dict:
