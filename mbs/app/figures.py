@@ -249,18 +249,7 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
     for k in range(n):
         ax, axw = axes[k][0], axes[k][1]
         axr = axes[k][2] if ncol == 3 else None
-        # the width scale of what was verified well: completed modes' output hulls, samples
-        ref = [np.asarray(s_.hull.width(), float)[:, k] for s_ in solutions.values() if s_.status == "completed"]
-        scale = max([float(np.nanmax(w)) for w in ref if w.size] or [0.0])
-        if samples is not None:
-            sk = samples[:, :, k]
-            if np.isfinite(sk).any():
-                scale = max(scale, float(np.nanmax(sk) - np.nanmin(sk)))
-        if scale <= 0:
-            scale = max([float(np.nanmedian(np.asarray(s_.tube_hull.width(), float)[:, k]))
-                         for s_ in solutions.values() if len(s_.tube_t) > 1] or [1.0])
-        cap = 4.0 * scale
-        floor = 1e-9 * scale  # (widths below: the outward rounding of a point value)
+        cap, floor = _width_scale(solutions, samples, k)
         ylo, yhi = np.inf, -np.inf
         if samples is not None:
             S = samples.shape[0]
@@ -269,35 +258,9 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
                 ax.plot(sample_times, samples[s, :, k], color="tab:orange", lw=0.4, alpha=0.35, zorder=1,
                         label="sampled trajectories" if s == 0 else None)
         for mode, sol in solutions.items():
-            style = dict(MODE_STYLE.get(mode, dict(color="black", ls="-", lw=1.0, label=str(mode))))
-            label = style.pop("label")
-            style["zorder"] = 3 + 1.0 / style.get("lw", 1.0)  # (thin lines over thick ones: mode i over ii)
-            if sol.status != "completed":
-                label += f" (breakdown t={sol.t_reached:.3g})"
-            if tube and len(sol.tube_t) > 1:
-                tt = np.repeat(np.asarray(sol.tube_t, float), 2)[1:-1]
-                lo = np.repeat(np.asarray(sol.tube_hull.lo, float)[:, k], 2)
-                hi = np.repeat(np.asarray(sol.tube_hull.hi, float)[:, k], 2)
-            else:
-                tt = np.asarray(sol.t, float)
-                lo, hi = np.asarray(sol.hull.lo, float)[:, k], np.asarray(sol.hull.hi, float)[:, k]
-            ax.plot(tt, lo, label=label, **style)
-            ax.plot(tt, hi, **style)
-            ext = _finite_extent(np.asarray(lo, float), np.asarray(hi, float), cap)
+            ext = _draw_mode(ax, axw, axr, mode, sol, k, cap, floor, spread_t, spread, tube)
             if ext is not None:
                 ylo, yhi = min(ylo, ext[0]), max(yhi, ext[1])
-            # the widths at the output times, where the modes are compared
-            t_out = np.asarray(sol.t, float)
-            w = np.asarray(sol.hull.width(), float)[:, k]
-            ok = np.isfinite(w) & (w > floor)
-            if ok.any():
-                axw.plot(t_out[ok], w[ok], marker="o", ms=2.5, label=label, **style)
-            if axr is not None:
-                sp = spread[np.searchsorted(spread_t, t_out), k]
-                ok = np.isfinite(w) & np.isfinite(sp) & (sp > floor)
-                if ok.any():
-                    excess = np.maximum(w[ok] / sp[ok] - 1.0, EXCESS_FLOOR)
-                    axr.plot(t_out[ok], excess, marker="o", ms=2.5, label=label, **style)
         if spread is not None:
             sk = spread[:, k]
             ok = np.isfinite(sk) & (sk > floor)
@@ -307,27 +270,7 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
         if samples is not None and np.isfinite(samples[:, :, k]).any():
             ylo = min(ylo, float(np.nanmin(samples[:, :, k])))
             yhi = max(yhi, float(np.nanmax(samples[:, :, k])))
-        if np.isfinite(ylo) and np.isfinite(yhi) and yhi > ylo:
-            pad = 0.05 * (yhi - ylo)
-            ax.set_ylim(ylo - pad, yhi + pad)
-        ax.set_ylabel(names[k] + units[k])
-        axw.set_ylabel(f"width of {names[k]}" + units[k])
-        for a in (axw, axr):
-            if a is None:
-                continue
-            if a.lines:
-                a.set_yscale("log")
-            a.grid(True, which="both", alpha=0.25)
-        if axr is not None:
-            axr.set_ylabel(f"{names[k]}: width / spread - 1")
-            if axr.lines:
-                axr.set_ylim(bottom=EXCESS_FLOOR * 0.7)
-        if k == n - 1:
-            for a in axes[k]:
-                a.set_xlabel("t [s]")
-        if k == 0:
-            ax.legend(fontsize=7, loc="best")
-            axw.legend(fontsize=7, loc="best")
+        _label_state_axes(axes[k], axr, (ylo, yhi), names[k], units[k], first=(k == 0), last=(k == n - 1))
     axes[0][0].set_title("enclosure (hull of all boxes)", fontsize=9)
     axes[0][1].set_title("its width at the output times (log scale)", fontsize=9)
     if ncol == 3:
@@ -335,6 +278,87 @@ def fig_enclosures(solutions, path, samples=None, sample_times=None, title=None,
     fig.suptitle(title or "State enclosures over time")
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _width_scale(solutions, samples, k: int):
+    """``(cap, floor)`` of state ``k`` in Fig. 5: enclosures wider than ``cap`` do not set
+    the axis range, widths below ``floor`` are not drawn; both from the width scale of
+    what was verified well (completed modes' output hulls, the samples)."""
+    ref = [np.asarray(s_.hull.width(), float)[:, k] for s_ in solutions.values() if s_.status == "completed"]
+    scale = max([float(np.nanmax(w)) for w in ref if w.size] or [0.0])
+    if samples is not None:
+        sk = samples[:, :, k]
+        if np.isfinite(sk).any():
+            scale = max(scale, float(np.nanmax(sk) - np.nanmin(sk)))
+    if scale <= 0:
+        scale = max([float(np.nanmedian(np.asarray(s_.tube_hull.width(), float)[:, k]))
+                     for s_ in solutions.values() if len(s_.tube_t) > 1] or [1.0])
+    cap = 4.0 * scale
+    floor = 1e-9 * scale  # (widths below: the outward rounding of a point value)
+    return cap, floor
+
+
+def _draw_mode(ax, axw, axr, mode, sol, k: int, cap, floor, spread_t, spread, tube: bool):
+    """One mode's lines for state ``k`` in Fig. 5: its enclosure on ``ax``, its widths at
+    the output times on ``axw``, its excess over the sampled spread on ``axr`` (if any).
+    Returns the (lo, hi) extent that may set ``ax``'s range, or None."""
+    style = dict(MODE_STYLE.get(mode, dict(color="black", ls="-", lw=1.0, label=str(mode))))
+    label = style.pop("label")
+    style["zorder"] = 3 + 1.0 / style.get("lw", 1.0)  # (thin lines over thick ones: mode i over ii)
+    if sol.status != "completed":
+        label += f" (breakdown t={sol.t_reached:.3g})"
+    if tube and len(sol.tube_t) > 1:
+        tt = np.repeat(np.asarray(sol.tube_t, float), 2)[1:-1]
+        lo = np.repeat(np.asarray(sol.tube_hull.lo, float)[:, k], 2)
+        hi = np.repeat(np.asarray(sol.tube_hull.hi, float)[:, k], 2)
+    else:
+        tt = np.asarray(sol.t, float)
+        lo, hi = np.asarray(sol.hull.lo, float)[:, k], np.asarray(sol.hull.hi, float)[:, k]
+    ax.plot(tt, lo, label=label, **style)
+    ax.plot(tt, hi, **style)
+    ext = _finite_extent(np.asarray(lo, float), np.asarray(hi, float), cap)
+    # the widths at the output times, where the modes are compared
+    t_out = np.asarray(sol.t, float)
+    w = np.asarray(sol.hull.width(), float)[:, k]
+    ok = np.isfinite(w) & (w > floor)
+    if ok.any():
+        axw.plot(t_out[ok], w[ok], marker="o", ms=2.5, label=label, **style)
+    if axr is not None:
+        sp = spread[np.searchsorted(spread_t, t_out), k]
+        ok = np.isfinite(w) & np.isfinite(sp) & (sp > floor)
+        if ok.any():
+            excess = np.maximum(w[ok] / sp[ok] - 1.0, EXCESS_FLOOR)
+            axr.plot(t_out[ok], excess, marker="o", ms=2.5, label=label, **style)
+    return ext
+
+
+def _label_state_axes(row, axr, extent, name: str, unit: str, first: bool, last: bool):
+    """One state's row of axes in Fig. 5 (``axr``, its third, or None): the enclosure's
+    range (``extent`` padded by 5 %), labels, log scales where lines were drawn, legends
+    on the first row, the time axis on the last."""
+    ax, axw = row[0], row[1]
+    ylo, yhi = extent
+    if np.isfinite(ylo) and np.isfinite(yhi) and yhi > ylo:
+        pad = 0.05 * (yhi - ylo)
+        ax.set_ylim(ylo - pad, yhi + pad)
+    ax.set_ylabel(name + unit)
+    axw.set_ylabel(f"width of {name}" + unit)
+    for a in (axw, axr):
+        if a is None:
+            continue
+        if a.lines:
+            a.set_yscale("log")
+        a.grid(True, which="both", alpha=0.25)
+    if axr is not None:
+        axr.set_ylabel(f"{name}: width / spread - 1")
+        if axr.lines:
+            axr.set_ylim(bottom=EXCESS_FLOOR * 0.7)
+    if last:
+        for a in row:
+            a.set_xlabel("t [s]")
+    if first:
+        ax.legend(fontsize=7, loc="best")
+        axw.legend(fontsize=7, loc="best")
 
 
 # --------------------------------------------------------------------------- benchmarks
