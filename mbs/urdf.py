@@ -159,6 +159,28 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
     if unknown:
         raise ModelError(f"cannot lock unknown joint(s) {sorted(unknown)}; joints are {jn}")
 
+    inertias = _link_inertias(links, joints)
+    friction = {}  # kept joints with Coulomb friction (not modeled: one warning below)
+    raw = [_raw_joint(j, lock, friction) for j in joints]
+
+    children = {j.child for j in joints}
+    roots = [n for n in names if n not in children]
+    if len(roots) != 1:
+        raise ModelError(f"malformed URDF: expected exactly one root link, found {roots}")
+    src = {"kind": "urdf", "xml": xml, "locked": {k: float(v) for k, v in lock.items()}}
+    chain = build_tree(roots[0], inertias, raw, gravity=gravity,
+                       name=name or robot.robot.name or "urdf", source=src)
+    if friction:  # once per model, after it was built (a refused model says only why)
+        listed = ", ".join(f"{k!r} ({v:g})" for k, v in friction.items())
+        warnings.warn(
+            f"URDF {chain.name!r}: Coulomb friction (<dynamics friction>) of joint(s) {listed} "
+            "is not modeled, only the viscous damping: the model and its enclosures are "
+            "those without Coulomb friction", UserWarning, stacklevel=2)
+    return chain
+
+
+def _link_inertias(links, joints) -> dict:
+    """{link name: RigidInertia} of the URDF's links, each validated (zero without <inertial>)."""
     inertias = {}
     # the base link is fixed to the world: its inertia never enters the dynamics, so a
     # placeholder tensor there (anymal, go1, hyq ship one) is no reason to refuse the model
@@ -180,70 +202,55 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
         ri.validate(where, triangle=l.name in children)
         inertias[l.name] = ri.transformed(T) if T is not IDENTITY else \
             RigidInertia(ri.mass, T[1], ri.inertia)
+    return inertias
 
-    raw = []
-    friction = {}  # kept joints with Coulomb friction (not modeled: one warning below)
-    for j in joints:
-        where = f"joint {j.name!r}"
-        kind = j.type
-        if j.parent is None or j.child is None:
-            raise ModelError(f"{where}: missing <parent> or <child>")
-        T = _placement(j.origin, where)
-        if j.name in lock:
-            val = float(lock[j.name])
-            if kind in ("revolute", "continuous", "prismatic"):
-                axis = _axis(j, where)
-                T = sp3.compose(T, joint_motion("revolute" if kind != "prismatic" else "prismatic",
-                                                axis, val))
-            elif val != 0.0:
-                raise ModelError(f"{where}: a {kind} joint can only be locked at 0")
-            raw.append(RawJoint(j.name, "fixed", j.parent, j.child, T))
-            continue
-        if kind == "fixed":
-            raw.append(RawJoint(j.name, "fixed", j.parent, j.child, T))
-            continue
-        if kind in ("floating", "planar"):
-            raise UnsupportedJointError(
-                f"{where}: {kind} joints are not supported (only revolute, continuous, "
-                "prismatic and fixed); lock it with lock={...: 0.0} or model a fixed base")
-        if kind not in ("revolute", "continuous", "prismatic"):
-            raise ModelError(f"{where}: unknown joint type {kind!r}")
-        if j.mimic is not None:
-            raise UnsupportedJointError(
-                f"{where}: mimic joints (mimicking {j.mimic.joint!r}) are not supported; "
-                f"lock it, e.g. chain_from_urdf(path, lock={{{j.name!r}: 0.0, ...}})")
-        damping = 0.0
-        if j.dynamics is not None and j.dynamics.damping is not None:
-            try:
-                damping = _to_float(j.dynamics.damping)
-            except (TypeError, ValueError):
-                raise ModelError(f"{where}: damping {j.dynamics.damping!r} is not a number") from None
-            if not np.isfinite(damping) or damping < 0:
-                raise ModelError(f"{where}: damping {damping} must be finite and >= 0")
-        if j.dynamics is not None and j.dynamics.friction is not None:
-            try:
-                fr = float(j.dynamics.friction)
-            except (TypeError, ValueError):
-                raise ModelError(f"{where}: friction {j.dynamics.friction!r} is not a number") from None
-            if fr != 0.0:
-                friction[j.name] = fr
-        raw.append(RawJoint(j.name, "prismatic" if kind == "prismatic" else "revolute",
-                            j.parent, j.child, T, _axis(j, where), damping))
 
-    children = {j.child for j in joints}
-    roots = [n for n in names if n not in children]
-    if len(roots) != 1:
-        raise ModelError(f"malformed URDF: expected exactly one root link, found {roots}")
-    src = {"kind": "urdf", "xml": xml, "locked": {k: float(v) for k, v in lock.items()}}
-    chain = build_tree(roots[0], inertias, raw, gravity=gravity,
-                       name=name or robot.robot.name or "urdf", source=src)
-    if friction:  # once per model, after it was built (a refused model says only why)
-        listed = ", ".join(f"{k!r} ({v:g})" for k, v in friction.items())
-        warnings.warn(
-            f"URDF {chain.name!r}: Coulomb friction (<dynamics friction>) of joint(s) {listed} "
-            "is not modeled, only the viscous damping: the model and its enclosures are "
-            "those without Coulomb friction", UserWarning, stacklevel=2)
-    return chain
+def _raw_joint(j, lock: dict, friction: dict) -> RawJoint:
+    """The RawJoint of URDF joint ``j``: welded where ``lock`` names it, refused where
+    unsupported; a nonzero Coulomb friction goes into ``friction`` (not modeled)."""
+    where = f"joint {j.name!r}"
+    kind = j.type
+    if j.parent is None or j.child is None:
+        raise ModelError(f"{where}: missing <parent> or <child>")
+    T = _placement(j.origin, where)
+    if j.name in lock:
+        val = float(lock[j.name])
+        if kind in ("revolute", "continuous", "prismatic"):
+            axis = _axis(j, where)
+            T = sp3.compose(T, joint_motion("revolute" if kind != "prismatic" else "prismatic",
+                                            axis, val))
+        elif val != 0.0:
+            raise ModelError(f"{where}: a {kind} joint can only be locked at 0")
+        return RawJoint(j.name, "fixed", j.parent, j.child, T)
+    if kind == "fixed":
+        return RawJoint(j.name, "fixed", j.parent, j.child, T)
+    if kind in ("floating", "planar"):
+        raise UnsupportedJointError(
+            f"{where}: {kind} joints are not supported (only revolute, continuous, "
+            "prismatic and fixed); lock it with lock={...: 0.0} or model a fixed base")
+    if kind not in ("revolute", "continuous", "prismatic"):
+        raise ModelError(f"{where}: unknown joint type {kind!r}")
+    if j.mimic is not None:
+        raise UnsupportedJointError(
+            f"{where}: mimic joints (mimicking {j.mimic.joint!r}) are not supported; "
+            f"lock it, e.g. chain_from_urdf(path, lock={{{j.name!r}: 0.0, ...}})")
+    damping = 0.0
+    if j.dynamics is not None and j.dynamics.damping is not None:
+        try:
+            damping = _to_float(j.dynamics.damping)
+        except (TypeError, ValueError):
+            raise ModelError(f"{where}: damping {j.dynamics.damping!r} is not a number") from None
+        if not np.isfinite(damping) or damping < 0:
+            raise ModelError(f"{where}: damping {damping} must be finite and >= 0")
+    if j.dynamics is not None and j.dynamics.friction is not None:
+        try:
+            fr = float(j.dynamics.friction)
+        except (TypeError, ValueError):
+            raise ModelError(f"{where}: friction {j.dynamics.friction!r} is not a number") from None
+        if fr != 0.0:
+            friction[j.name] = fr
+    return RawJoint(j.name, "prismatic" if kind == "prismatic" else "revolute",
+                    j.parent, j.child, T, _axis(j, where), damping)
 
 
 def _axis(j, where):
