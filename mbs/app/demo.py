@@ -136,6 +136,26 @@ def _run(out, t_end, pieces, samples, log, bar) -> int:
         at = traj[:, np.searchsorted(dense, np.asarray(s.t, float)), :]
         escaped += len(check_samples(s, at))
 
+    _log_widths(sols, walls, traj, dense, t_end, log)
+    paths = _figures(out, sols, traj, dense, bar)
+    s2 = sols[MODE_II.name]
+    bar.close()  # (the report below without a bar redrawn after every line)
+    log("\nFigures: " + ", ".join(str(p) for p in paths))
+    if s2.consistency is not None and s2.consistency.tests and not pruned_anything(s2):
+        log(f"nothing pruned by mode {MODE_II.name}'s {len(s2.consistency.tests)} energy tests: Fig. 3 not drawn")
+    verdict = "every enclosure contains all" if not escaped else f"{escaped} sampled states OUTSIDE the enclosures of"
+    log(f"Checked against {samples} sampled trajectories: {verdict} sampled states. "
+        f"({time.perf_counter() - t_all:.1f} s)")
+    short = [m for m, s in sols.items() if s.status != "completed" or s.t_reached < t_end]
+    if short:
+        log("FAILED: mode " + ", ".join(f"{m} broke down at t = {sols[m].t_reached:.3f} s" for m in short)
+            + f" before T = {t_end:g} s")
+    return 0 if not escaped and not short else 1
+
+
+def _log_widths(sols, walls, traj, dense, t_end, log):
+    """The demo's two tables: the widths per state at a few common times against the
+    sampled ones, and each mode's run (status, steps, tests, pruned boxes, times)."""
     # comparison table: widths per state at a few common times
     common = [t for t in (0.25, 0.5, 0.6, 0.75, 1.0) if t <= t_end]
     rows = []
@@ -162,6 +182,9 @@ def _run(out, t_end, pieces, samples, log, bar) -> int:
     log("\n" + _table(rows, ["mode", "status", "t reached", "steps", "tests", "pruned", "max boxes",
                             "test s", "wall s", "reason"]))
 
+
+def _figures(out, sols, traj, dense, bar) -> list:
+    """Fig. 5 of the three modes, and mode ii's Figs. 2 and 3 (where it pruned); the paths."""
     out = Path(out)
     bar.phase("figures")
     paths = [fig_enclosures(sols, out / "fig5_enclosures.png", samples=traj, sample_times=dense,
@@ -173,15 +196,4 @@ def _run(out, t_end, pieces, samples, log, bar) -> int:
     if s2.consistency is not None and s2.consistency.tests and pruned_anything(s2):
         paths.append(fig_consistency_plane(s2, system_for("double_pendulum_paper", MODE_II).energy,
                                            out / "fig3_consistency_plane.png"))
-    bar.close()  # (the report below without a bar redrawn after every line)
-    log("\nFigures: " + ", ".join(str(p) for p in paths))
-    if s2.consistency is not None and s2.consistency.tests and not pruned_anything(s2):
-        log(f"nothing pruned by mode {MODE_II.name}'s {len(s2.consistency.tests)} energy tests: Fig. 3 not drawn")
-    verdict = "every enclosure contains all" if not escaped else f"{escaped} sampled states OUTSIDE the enclosures of"
-    log(f"Checked against {samples} sampled trajectories: {verdict} sampled states. "
-        f"({time.perf_counter() - t_all:.1f} s)")
-    short = [m for m, s in sols.items() if s.status != "completed" or s.t_reached < t_end]
-    if short:
-        log("FAILED: mode " + ", ".join(f"{m} broke down at t = {sols[m].t_reached:.3f} s" for m in short)
-            + f" before T = {t_end:g} s")
-    return 0 if not escaped and not short else 1
+    return paths
