@@ -1,3 +1,4 @@
+# Long (680 lines) on purpose: references, controllers and the closed loop share one generic-scalar _Context.
 """Joint torques and controllers in the equations of motion (issue 14 item 1).
 
 A closed loop ``M(q) qdd = tau(t, q, qd, p) - D qd - c(q, qd) - g(q)`` (eq. (2)/(6))

@@ -1,3 +1,4 @@
+# Long (1200 lines) on purpose: one pipeline, recover_hamiltonian's phases in order, sharing private problem state.
 """Recover the Hamiltonian form from bare state equations (paper sec. 2 and sec. 4, step 2).
 
 A user may only have ``x' = f(x)`` with ``x = (q, qd)``, ``qd' = Phi(q, qd)`` (for

@@ -1,3 +1,4 @@
+# Long (700 lines) on purpose: NumericModel's recursive algorithms and the LDL^T of M(q) they all use.
 """Numeric multibody model, the SMARTMOBILE way: recursive algorithms written once over
 a generic scalar (see :mod:`mbs.scalar`).
 
