@@ -27,7 +27,10 @@ positive semidefinite (Schur complement). That matrix is a polynomial in ``cos q
 ``sin q_i``; its LDL^T pivots are proven positive over pieces covering one turn of
 ``q_i`` (:func:`mbs.simulate.mass_matrix.pivots_proven`) for ``L`` a little below the
 float minimum of ``w`` on a grid. A joint on the fixed base has ``V_p = 0`` and
-``w = S^T I_i S``. Then ``c_i = 1 / L``.
+``w = S^T I_i S``. Where the parent is itself a revolute joint on the fixed base, its
+twist is ``S_p t`` only, and ``w(q_i) = M22 - M12^2 / M11`` of the two bodies' own 2 x 2
+mass matrix (tighter, and it needs no positive definite spatial inertia: point masses
+work), proven the same way. Then ``c_i = 1 / L``.
 
 No bound (``inf``) for a prismatic joint (its range is not one turn), a body without positive definite spatial inertia, or a chain with symbolic
 (non-numeric) data; with uncertain parameters use the chain at each end of the
@@ -168,6 +171,65 @@ def _axis_floor(child) -> float:
     return float(np.asarray(val.lo))
 
 
+def _child_in_parent(parent, child, c, s):
+    """(M11, M12, M22) of the two bodies alone with the parent on a fixed revolute joint
+    (the fixed-base mass matrix of joints p, i), all in the parent's frame: the child's
+    inertia moved there (it turns with q_i), the child's joint axis as the constant
+    twist ``[R a; p x R a]``, the parent's ``[a_p; 0]``."""
+    m, com, Ic, a, (R, p) = child[:5]
+    Rpc = _mat(R, _rot(a, c, s))
+    cc = [sum(Rpc[r][k] * com[k] for k in range(3)) + p[r] for r in range(3)]
+    Icc = _mat(_mat(Rpc, Ic), _T(Rpc))
+    Ii = _spatial(m, cc, Icc)
+    Ip = _spatial(*parent[:3])
+    Ra = [sum(R[r][k] * a[k] for k in range(3)) for r in range(3)]
+    S = Ra + [p[1] * Ra[2] - p[2] * Ra[1], p[2] * Ra[0] - p[0] * Ra[2], p[0] * Ra[1] - p[1] * Ra[0]]
+    Sp = list(parent[3]) + [0.0, 0.0, 0.0]
+
+    def quad(u, A, v):
+        return sum(u[r] * sum(A[r][k] * v[k] for k in range(6) if v[k] != 0.0) for r in range(6) if u[r] != 0.0)
+    return quad(Sp, Ip, Sp) + quad(Sp, Ii, Sp), quad(Sp, Ii, S), quad(S, Ii, S)
+
+
+def _w_base_float(parent, child, q):
+    """w(q) = M22 - M12^2 / M11 of :func:`_child_in_parent` in floats."""
+    out = np.empty(len(q))
+    for k, qk in enumerate(q):
+        a, b, d = _child_in_parent(parent, child, np.cos(qk), np.sin(qk))
+        out[k] = d - b * b / a
+    return out
+
+
+def _proven_floor_base(parent, child, L: float, pieces: int) -> bool:
+    """Whether M22 - M12^2 / M11 >= L over one turn (pivots of [[M11, M12], [M12, M22 - L]] > 0)."""
+    from .simulate.mass_matrix import pivots_proven
+
+    def fn(x, _p):
+        a, b, d = _child_in_parent(parent, child, np.cos(x[0]), np.sin(x[0]))
+        return _pivots([[a, b], [b, d - L]])
+
+    e = np.linspace(-np.pi, np.pi, pieces + 1)
+    e[0], e[-1] = -4.0, 4.0
+    return bool(pivots_proven(trace(fn, 1), e[:-1, None], e[1:, None]).all())
+
+
+def _floor(parent, child, w_float, proven, pieces) -> float:
+    """1 / L rounded up for the largest L in (0.98, 0.9, 0.7, 0.5) x the float grid
+    minimum of w (``w_float(parent, child, q)``) that ``proven(parent, child, L, pieces)``
+    proves; inf if none."""
+    try:
+        wmin = float(np.min(w_float(parent, child, np.linspace(-np.pi, np.pi, _GRID))))
+    except np.linalg.LinAlgError:
+        return np.inf
+    if not wmin > 0:
+        return np.inf
+    for frac in (0.98, 0.9, 0.7, 0.5):
+        L = frac * wmin
+        if proven(parent, child, L, pieces):
+            return float(np.nextafter(1.0 / L, np.inf))  # (the next float above the quotient)
+    return np.inf
+
+
 def inverse_mass_bounds(chain, *, pieces: int = _PIECES) -> np.ndarray:
     """Proven upper bounds ``c`` (n,) of the diagonal of ``M(q)^-1`` valid for every
     configuration ``q`` of ``chain`` (an :class:`mbs.Chain` with numeric data; see the
@@ -181,22 +243,15 @@ def inverse_mass_bounds(chain, *, pieces: int = _PIECES) -> np.ndarray:
         if par < 0:
             low = _axis_floor(child)
             if low > 0:
-                out[i] = 1.0 / low
+                out[i] = float(np.nextafter(1.0 / low, np.inf))
             continue
-        parent = data[par]  # (free to move in the relaxation, whatever its own joint)
+        parent = data[par]
         if parent is None:
             continue
-        try:
-            if min(np.linalg.eigvalsh(np.array(_spatial(*d[:3])))[0] for d in (parent, child)) <= 0:
-                continue
-            wmin = float(np.min(_w_float(parent, child, np.linspace(-np.pi, np.pi, _GRID))))
-        except np.linalg.LinAlgError:
-            continue
-        if not wmin > 0:
-            continue
-        for frac in (0.98, 0.9, 0.7, 0.5):
-            if _proven_floor(parent, child, frac * wmin, pieces):
-                # 1 / L rounded up: the next float above the quotient
-                out[i] = float(np.nextafter(1.0 / (frac * wmin), np.inf))
-                break
+        if parent[5] == "revolute" and chain.bodies[par].joint.parent < 0:
+            # the parent turns about its fixed axis only: the two bodies' own mass matrix
+            out[i] = _floor(parent, child, _w_base_float, _proven_floor_base, pieces)
+        if np.isinf(out[i]) and min(np.linalg.eigvalsh(np.array(_spatial(*d[:3])))[0] for d in (parent, child)) > 0:
+            # the parent free to move (whatever its own joint)
+            out[i] = _floor(parent, child, _w_float, _proven_floor, pieces)
     return out
