@@ -150,8 +150,13 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         else non-increasing, checked on every step (the declared rate graph, proven equal to
         ``grad H . f``, or ``grad H . f`` itself; :mod:`verified.conservation`). A
         controller, or a bare System without energy, is a ValueError. It keeps wide enclosures (the pendulum over
-        the top) from breaking down (docs/lab/code_notes.md). Default False: on enclosures
-        that stay narrow it only costs time.
+        the top) from breaking down (docs/lab/code_notes.md). Where a chain's sets still
+        break down (a chaotic free fall), the run is carried on to ``t_end`` with boxes
+        from the energy bound alone (:mod:`mbs.shell_continuation`; revolute joints, no
+        uncertain parameters): every joint rate bounded by the energy, the positions grown
+        by it; crude but sound. ``status`` is then "completed", while ``reason``,
+        ``method`` and ``stats["shell_from"]`` say where the sets gave up. Default False:
+        on enclosures that stay narrow it only costs time.
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
         an unknown keyword raises ``TypeError`` naming ``simulate()``. ``workers``: as in
         ``solve``, default None: every core of this machine when worthwhile (>= 128
