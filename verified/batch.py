@@ -671,7 +671,7 @@ class _Run:
         step.t_exact, step.landed = t_exact, landing
         self.sets, self.t, self.t_exact, self.step = step.sets, step.t, t_exact, step
         self.recent = (self.recent + [step])[-2:]
-        self.tube.append(E[:, :self.n_state])
+        self.tube.append(step.tube[:, :self.n_state])  # (E, or a narrower box the stepper proved)
         self.tube_views.append(_state_view(step.tube_view, E.shape[0], self.n_state))
         self.tube_pieces.append(self.pieces.origin)
         self.tube_t.append(step.t)

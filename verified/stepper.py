@@ -44,8 +44,10 @@ class StepResult:
         taken over (``N`` = states integrated, including parameters carried as
         states and states appended by hooks).
     tube : Interval (B, N)
-        The validated a-priori enclosure: every solution from ``hull`` stays in it
-        over ``[t_start, t]``.
+        Every solution from ``previous`` stays in it over ``[t_start, t]``: the
+        validated a-priori enclosure (every solution from ``hull`` stays in it), or a
+        narrower box inside it that the stepper proved (the composition step:
+        :func:`verified.tm_flow.step_tube`).
     nonlinear_width : ndarray (B, N)
         Width of the error the step's linearization injected into each set (the
         spread of the Jacobian over the set times the set's linear part), in state

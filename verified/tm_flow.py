@@ -88,7 +88,7 @@ from .stepper import StepResult
 from .taylor_model import (_acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length,
                            models_to_interval, star_base)
 
-__all__ = ["TaylorModelFlowStepper", "set_models", "ModelCaps", "tube_view", "tube_coefficients"]
+__all__ = ["TaylorModelFlowStepper", "set_models", "ModelCaps", "tube_view", "tube_coefficients", "step_tube"]
 
 #: default cap on the symbols with cubic monomials in degree-3 arithmetic (the set's
 #: widest parameters first); a product costs O(cap^3). See TaylorModelFlowStepper.
@@ -362,6 +362,78 @@ def _horner_models(out, h):
                 Z[:] = T
             y[i, b] = Z
     return y
+
+
+@njit(cache=True)
+def _derivative_models(out):
+    """The models of ``d/dt sum_k out[:, k] t^k``: ``(k + 1) out[:, k + 1]``, rounding into
+    the remainder: out (n, K, B, L) -> (n, K - 1, B, L)."""
+    n, K, nb, L = out.shape
+    d = np.zeros((n, K - 1, nb, L))
+    for i in range(n):
+        for k in range(1, K):
+            for b in range(nb):
+                _scale_into(d[i, k - 1, b], out[i, k, b], float(k))
+    return d
+
+
+#: sub-intervals of a step over which :func:`step_tube` bounds the solutions
+TUBE_PIECES = 4
+
+
+@njit(cache=True)
+def _horner_at(out, taus):
+    """:func:`_horner_models` at each of the times ``taus`` (P,): (P, n, B, L)."""
+    n, K, nb, L = out.shape
+    y = np.zeros((taus.size, n, nb, L))
+    for j in range(taus.size):
+        y[j] = _horner_models(out, taus[j])
+    return y
+
+
+def _model_ranges(F: np.ndarray, M: int, mq: int) -> Interval:
+    """Ranges of models (..., n, B, L) as intervals (..., B, n)."""
+    lo, hi = models_to_interval(F, M, mq)
+    return Interval._from_bounds(np.ascontiguousarray(np.swapaxes(lo, -1, -2)),
+                                 np.ascontiguousarray(np.swapaxes(hi, -1, -2)))
+
+
+def step_tube(out: np.ndarray, cE: Interval, h_top: float, M: int, mq: int, pieces: int = TUBE_PIECES) -> Interval:
+    """A box (B, n) holding every solution from the sets over a step of length at most
+    ``h_top``, narrower than the a-priori enclosure ``E`` the step was validated with.
+
+    ``out`` (n, K, B, L): the models of the Taylor coefficients ``x_[0..K-1]`` over the
+    sets' symbols; ``cE`` (B, K + 1, n): the coefficients over ``E``. By Taylor's theorem
+    with ``x_[K]`` over ``E``, at every ``tau`` in ``[0, h_top]``
+
+        x(tau)  in  sum_k x_[k] tau^k + cE_K tau^K,
+        x'(tau) in  sum_k k x_[k] tau^(k-1) + K cE_K tau^(K-1)
+
+    (the second is the theorem for ``x'``, whose ``(K-1)``-th derivative is ``x^(K)``).
+    Both are taken at ``pieces + 1`` points ``tau_j`` as models, whose ranges keep the
+    dependence on the set's symbols. Between two points, ``x(tau_j + d) in x(tau_j) +
+    x'(tau_j) d + cE_2 d^2`` for ``d`` in ``[0, tau_j+1 - tau_j]`` (``cE_2`` encloses
+    ``x''/2`` over ``E``), and the same from the right end; the box is the hull over the
+    pieces of the two bounds' intersection. The a-priori enclosure holds the step's
+    motion with the slack of its validation; this box is about the sets' own width plus
+    the motion, which is what a bound checked on the tube (a spec, a frame) needs."""
+    K = out.shape[1]
+    out = np.ascontiguousarray(out)
+    taus = np.array([h_top * j / pieces for j in range(pieces)] + [h_top])
+    t = Interval(taus)[:, None, None]                                    # (P, 1, 1)
+    cK, c2 = cE[:, K][None], cE[:, 2][None]                               # (1, B, n)
+    X = _model_ranges(_horner_at(out, taus), M, mq) + cK * t ** K          # (P, B, n)
+    V = _model_ranges(_horner_at(_derivative_models(out), taus), M, mq) + K * (cK * t ** (K - 1))
+    d = Interval(np.zeros(pieces), (Interval(taus[1:]) - Interval(taus[:-1])).hi)[:, None, None]
+    bend = c2 * d ** 2
+    left = X[:-1] + V[:-1] * d + bend
+    right = X[1:] - V[1:] * d + bend
+    both = left.intersect(right)
+    # (an empty intersection cannot hold a true solution; left alone keeps the box sound anyway)
+    empty = both.is_empty()
+    lo = np.where(empty, left.lo, both.lo).min(axis=0)
+    hi = np.where(empty, left.hi, both.hi).max(axis=0)
+    return Interval._from_bounds(lo, hi)
 
 
 class TaylorModelFlowStepper(LohnerStepper):
@@ -760,5 +832,12 @@ class TaylorModelFlowStepper(LohnerStepper):
         tube = getattr(self, "_tube", None)
         view = tube[1] if tube is not None and tube[0] is E else None
         self._tube = None
-        return StepResult(sets=new, previous=sets, h=h, hull=X, tube=E, nonlinear_width=nonlinear.width(),
+        with np.errstate(over="ignore", invalid="ignore"):
+            narrow = step_tube(out, cE, float(h_iv.hi), M, mq)
+        # (a row that is not finite, a model lost: E alone)
+        ok = np.isfinite(narrow.lo) & np.isfinite(narrow.hi)
+        inside = E.intersect(Interval._from_bounds(np.where(ok, narrow.lo, E.lo), np.where(ok, narrow.hi, E.hi)))
+        empty = inside.is_empty()
+        tube_box = E if empty.any() else inside
+        return StepResult(sets=new, previous=sets, h=h, hull=X, tube=tube_box, nonlinear_width=nonlinear.width(),
                           tube_view=view)

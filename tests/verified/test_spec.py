@@ -3,7 +3,7 @@ prove (:mod:`verified.spec`, :func:`verified.auto._prove_spec`).
 
 Van der Pol (mu = 1) from x in [1.25, 1.55], y in [2.35, 2.45] (the ARCH-COMP box): x
 rises to about 2.124 at t = 0.55 and falls back; over [0, 1.5] the plain run's tube
-reaches 2.140, so ``x <= 2.13`` is true but not proven without refining, and
+reaches 2.127, so ``x <= 2.126`` is true but not proven without refining, and
 ``x <= 2`` is false between the output times 0 and 1.5 (x is 1.55 and 1.69 there).
 """
 
@@ -58,13 +58,13 @@ def _assert_sound(sol, state: int, bound: float, T: float):
 def test_a_spec_the_plain_run_does_not_prove_is_proven_and_holds():
     g = _graph()
     plain = solve(g, X0, (0.0, 1.5))
-    assert plain.spec_proven is None and float(np.max(plain.tube_hull.hi[:, 0])) > 2.13
-    sol = solve(g, X0, (0.0, 1.5), method=Auto(spec=Bounds({"x0": (None, 2.13)})))
+    assert plain.spec_proven is None and float(np.max(plain.tube_hull.hi[:, 0])) > 2.126
+    sol = solve(g, X0, (0.0, 1.5), method=Auto(spec=Bounds({"x0": (None, 2.126)})))
     assert sol.status == "completed" and sol.spec_proven and sol.stats["spec"] == "proven"
-    assert sol.spec_check.worst <= 0 and float(np.max(sol.tube_hull.hi[:, 0])) <= 2.13
-    assert sol.stats["spec_rounds"] >= 1 and "spec x0 <= 2.13: proven" in sol.method
+    assert sol.spec_check.worst <= 0 and float(np.max(sol.tube_hull.hi[:, 0])) <= 2.126
+    assert sol.stats["spec_rounds"] >= 1 and "spec x0 <= 2.126: proven" in sol.method
     assert any("spec round 1" in e.get("spec", "") for e in sol.method_log)
-    _assert_sound(sol, 0, 2.13, 1.5)
+    _assert_sound(sol, 0, 2.126, 1.5)
 
 
 def test_a_false_spec_is_reported_false_not_proven():
