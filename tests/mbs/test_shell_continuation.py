@@ -103,7 +103,7 @@ def test_uncertain_parameters_are_not_carried_on():
     assert sol.status == "breakdown" and "cannot carry the run on: uncertain parameters" in sol.reason
 
 
-@pytest.mark.slow  # ~3-5 min: the Taylor sets' part to their break-down at ~0.46 s dominates
+@pytest.mark.slow  # ~100 s CPU (130 s wall loaded): the sets up to their break-down at 0.46 s, then the shell
 def test_free_falling_panda_never_breaks_down_to_5_s():
     chain = panda_arm()
     q0 = np.array((0.0, -math.pi / 4, 0.0, -3 * math.pi / 4, 0.0, math.pi / 2, math.pi / 4))
