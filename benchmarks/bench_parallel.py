@@ -5,6 +5,7 @@ overhead, scaling, and a paper estimate for a 64-worker cluster.
     python benchmarks/bench_parallel.py --only speedup --repeat 2
     python benchmarks/bench_parallel.py --quick         # small sizes (smoke test)
     python benchmarks/bench_parallel.py --only first,model16 --repeat 2   # issue 42 (~6 min)
+    python benchmarks/bench_parallel.py --only unequal --repeat 2         # issue 42 item 2 (~10 min)
 
 Every timing is printed with the load averages of /proc/loadavg at that moment (other
 jobs on the machine distort the ratios: read them next to the load). Sections:
@@ -54,6 +55,15 @@ model16   the 16-core numbers modelled from measured costs (issue 42 has no 16-c
           timed), plus the cluster start, first-task latency and result latency measured
           in ``first``. It is a model: no memory-bandwidth, turbo or SMT effects of 16
           busy cores
+unequal   pieces of very unequal cost (issue 42 item 2; unequal_boxes: x3(0) from 0.43 to 10
+          along the pieces, the fast-rotating ones take ~3x the steps), T = 2, a warm local
+          cluster of 2: one in-process batch, the plain plan (rechunk=False: one chunk per
+          worker) and the default (work stealing), the cluster rows alternated; per row the
+          workers' busy time and their tasks' CPU per worker (the balance without the other
+          jobs' load), idle at end, results after, merge, the cuts
+model16so the issue's second-order target (128 pieces, T = 3, method="second_order"; 176 s on
+          one core of the 16-core machine) modelled for 16 workers from one in-process batch
+          and 16 in-process chunks of 8 pieces (not run; see section_model16so)
 granular  chunk granularity on a warm local cluster of 2 (issue 42 item 2): the speedup run
           with chunks=2 (the default plan for 1024 boxes), 4 and 8, interleaved --repeat
           times: wall, workers idle at the end, the workers' busy time in all
@@ -418,6 +428,109 @@ def section_first(pieces, T, repeat, log, workers=2):
     return rows
 
 
+def unequal_boxes(box, n, x3_max=10.0):
+    """Pieces of very unequal cost (issue 42 item 2): n pieces, each as narrow in x1 as
+    one of 65536 pieces of the paper's box (the first n of them), with the start rate x3 a
+    point value from the paper's 0.43 up to ``x3_max`` along the pieces: from about 3.2
+    on the first link starts with enough energy to pass over the top (beyond the
+    separatrix) and the pendulum rotates, faster the higher x3, and the steps shorten
+    with it: 110 steps to T = 2 at x3 = 0.43, 135 at 4, 226 at 6, 346 at 10 (one piece
+    alone). Neighbouring pieces cost alike (contiguous chunks). Pieces as wide as one of
+    1024 break down near the separatrix and beyond (their steps shorten only in the
+    last few % of the run, just before)."""
+    from verified.interval import Interval
+    lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
+    w = (hi[0] - lo[0]) / 65536
+    L, H = np.repeat(lo[None], n, 0), np.repeat(hi[None], n, 0)
+    k = np.arange(n) % 65536
+    L[:, 0], H[:, 0] = lo[0] + k * w, lo[0] + (k + 1) * w
+    L[:, 2] = H[:, 2] = np.linspace(0.43, x3_max, n)
+    return Interval(L, H)
+
+
+def busy(sol) -> dict:
+    """From a cluster call's timeline: the workers' busy time and CPU in all, the
+    busiest worker's busy time, the mean time a worker idled after its last piece."""
+    tl = sol.stats.get("timeline") or []
+    if not tl:
+        return {}
+    per, last, cpu, work = {}, {}, {}, {}
+    for r in tl:
+        per[r["worker_pid"]] = per.get(r["worker_pid"], 0.0) + r["end_s"] - r["start_s"]
+        cpu[r["worker_pid"]] = cpu.get(r["worker_pid"], 0.0) + r["cpu_s"]
+        # (box-steps: steps x sets, the work whatever the load; not adaptive runs' grown sets)
+        work[r["worker_pid"]] = work.get(r["worker_pid"], 0) + (r.get("steps") or 0) * r.get("sets", 0)
+        last[r["worker_pid"]] = max(last.get(r["worker_pid"], 0.0), r["end_s"])
+    end = max(last.values())
+    # (cpu_busiest_s: the largest CPU time one worker spent on its pieces, what its busy
+    # wall would be on an idle core: the balance measured without the other jobs' load)
+    return dict(busy_total_s=sum(per.values()), cpu_total_s=float(np.nansum([r["cpu_s"] for r in tl])),
+                cpu_busiest_s=max(cpu.values()), cpu_per_worker_s=sorted(cpu.values()),
+                box_steps_per_worker=sorted(work.values()),
+                busiest_s=max(per.values()), idle_at_end_s=float(np.mean([end - e for e in last.values()])),
+                first_task_s=min(r["start_s"] for r in tl), results_after_s=max(r["received_s"] for r in tl) - end)
+
+
+def section_unequal(ode, box, pieces, T, repeat, log, workers=2, x3_max=10.0):
+    """Pieces of very unequal cost on a warm local cluster: the plain plan without work
+    stealing (rechunk=False: one chunk per worker) against the default (a lagging piece
+    paused and cut for the free worker), interleaved; for reference one in-process batch
+    (one core) and the same pieces as 16 in-process chunks (each chunk's own steps: what
+    an ideal cost-based plan could start from)."""
+    from verified.parallel import local_client
+    from verified.solver import solve
+    boxes = unequal_boxes(box, pieces, x3_max)
+    log(f"\n## unequal cost: {pieces} pieces, x3(0) from 0.43 to {x3_max} along the pieces, T = {T}, warm local "
+        f"cluster of {workers}")
+    client = local_client(workers)
+    solve(ode, boxes[:workers * 2], (0, 0.05), client=client, chunks=workers)  # graph shipped, first steps
+    c0 = time.process_time()
+    t, ref = timed(lambda: solve(ode, boxes, (0, T), workers=1, chunks=16))
+    ref_cpu = time.process_time() - c0
+    log(f"reference, 16 in-process chunks: {t:.2f} s, CPU {ref_cpu:.1f} s ({load()}); chunk steps {ref.stats['chunk_steps']}, "
+        f"chunk walls {', '.join(f'{x:.2f}' for x in ref.stats['chunk_wall_s'])} s; {ref.status} at "
+        f"{ref.t_reached:g}")
+    rows = []
+    for r in range(repeat):
+        out = dict(run=r + 1)
+        cases = [("one batch (1 core)", dict(workers=1)), ("plain plan", dict(client=client, rechunk=False)),
+                 ("stealing", dict(client=client))]
+        if r % 2:  # (alternate the order of the two cluster rows)
+            cases = [cases[0], cases[2], cases[1]]
+        for label, kw in cases:
+            ld = load()
+            c0 = time.process_time()
+            w, sol = timed(lambda: solve(ode, boxes, (0, T), **kw))
+            cpu_here = time.process_time() - c0
+            b = busy(sol)
+            out[label] = dict(wall_s=w, load=ld, cpu_here_s=cpu_here, status=sol.status, t_reached=sol.t_reached,
+                              widths=np.asarray(sol.hull[-1].width(), float).tolist(), pieces=sol.stats.get("pieces"),
+                              cuts=sol.stats.get("cuts"), chunk_steps=sol.stats.get("chunk_steps"),
+                              merge_s=sol.stats.get("merge_s"), stitch_s=sol.stats.get("stitch_s"),
+                              timeline=sol.stats.get("timeline"), **b)
+            extra = ""
+            if b:
+                extra = (f" | busy {b['busy_total_s']:.1f} s (CPU {b['cpu_total_s']:.1f} s; per worker "
+                         f"{', '.join(f'{x:.1f}' for x in b['cpu_per_worker_s'])} s; box-steps per worker "
+                         f"{', '.join(str(x) for x in b['box_steps_per_worker'])}), busiest "
+                         f"{b['busiest_s']:.1f} s, idle at end {b['idle_at_end_s']:.2f} s, results after "
+                         f"{b['results_after_s']:.2f} s, merge {sol.stats['merge_s']:.3f} s (+ stitched during "
+                         f"the run {sol.stats['stitch_s']:.3f} s), pieces {sol.stats['pieces']}, cuts "
+                         + ", ".join(f"{c['why']}@t={c['t']:.2f}:{c['sets']}->{c['k']}" for c in sol.stats["cuts"]))
+            log(f"run {r + 1}, {label}: {w:6.2f} s ({ld}), CPU here {cpu_here:.1f} s, {sol.status} at "
+                f"{sol.t_reached:g}{extra}")
+        a = np.asarray(out["plain plan"]["widths"])
+        for label in ("one batch (1 core)", "stealing"):
+            out[label]["width_vs_plain"] = float(np.max(np.abs(np.asarray(out[label]["widths"]) / a - 1)))
+        log(f"run {r + 1}: stealing {out['plain plan']['wall_s'] / out['stealing']['wall_s']:.2f}x the plain plan, "
+            f"{out['one batch (1 core)']['wall_s'] / out['stealing']['wall_s']:.2f}x one core; widths at T against "
+            f"the plain plan: stealing {out['stealing']['width_vs_plain']:.1e}, one batch "
+            f"{out['one batch (1 core)']['width_vs_plain']:.1e}")
+        rows.append(out)
+    return dict(reference=dict(wall_s=t, cpu_s=ref_cpu, chunk_steps=ref.stats["chunk_steps"],
+                               chunk_wall_s=ref.stats["chunk_wall_s"]), rows=rows)
+
+
 def section_granular(ode, box, pieces, T, repeat, log, workers=2, plans=(2, 4, 8)):
     from verified.parallel import local_client
     from verified.solver import solve
@@ -436,35 +549,118 @@ def section_granular(ode, box, pieces, T, repeat, log, workers=2, plans=(2, 4, 8
     return rows
 
 
+def slowest_share(sol, cpu_s) -> float:
+    """The slowest chunk of an in-process chunked run on an idle core: the run's CPU
+    seconds times that chunk's share of the box-steps (steps x boxes). Single chunks'
+    walls carry the other jobs' load (16 chunks of equal steps measured 2.27..10.54 s)."""
+    w = np.array([(s or 0) * (b - a) for s, (a, b) in zip(sol.stats["chunk_steps"], [c["boxes"] for c in sol.chunks])],
+                 float)
+    return float(cpu_s * w.max() / w.sum())
+
+
 def section_model16(ode, box, pieces, T, first_rows, log, workers=16):
     """16 workers modelled from this machine's measured costs (see the module docstring)."""
     from verified.solver import solve
     log(f"\n## model of {workers} workers (MODELLED from measured costs, not run): {pieces} pieces, T = {T}")
     ld = load()
+    c0 = time.process_time()
+    w1, _ = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], workers=1))
+    cpu1 = time.process_time() - c0  # (one core, idle: the reference of the speed-ups)
+    c0 = time.process_time()
     w, sol = timed(lambda: solve(ode, box, (0, T), subdivision=[pieces, 1, 1, 1], workers=1, chunks=workers))
+    cpu16 = time.process_time() - c0
     cw = np.asarray(sol.stats["chunk_wall_s"], float)
+    slow_cpu = slowest_share(sol, cpu16)
     merge = float(sol.stats["merge_s"])
     firsts = [c for x in first_rows if x["workers"] > 1 for c in x["calls"] if c.get("breakdown")]
-    one = [x["calls"][0]["wall_s"] for x in first_rows if x["workers"] == 1]
-    t1 = float(np.median(one)) if one else float(w)
-    med = (lambda key, call: float(np.median([c["breakdown"][key] for c in firsts if c["call"] == call]))
-           if any(c["call"] == call for c in firsts) else 0.0)
-    start, lat_first, lat_later = med("cluster_start_s", "first"), med("to_first_task_s", "first"), \
-        med("to_first_task_s", "later")
-    res = max(med("results_after_s", "first"), med("results_after_s", "later"))
-    model_first = start + lat_first + cw.max() + res + merge
-    model_later = lat_later + cw.max() + res + merge
-    log(f"measured here ({ld}): 16 chunks in-process {w:.1f} s in all (one batch of {pieces}: {t1:.1f} s); chunk "
-        f"walls {cw.min():.2f}..{cw.max():.2f} s (mean {cw.mean():.2f}); merge of 16 chunks {merge:.2f} s; from "
+    t1 = cpu1  # (the one batch's CPU here: what one idle core takes; the 'first' rows' walls carry the load)
+    if firsts:
+        med = (lambda key, call: float(np.median([c["breakdown"][key] for c in firsts if c["call"] == call]))
+               if any(c["call"] == call for c in firsts) else 0.0)
+        start, lat_first, lat_later = med("cluster_start_s", "first"), med("to_first_task_s", "first"), \
+            med("to_first_task_s", "later")
+        res = max(med("results_after_s", "first"), med("results_after_s", "later"))
+    else:  # (measured earlier: MEASURED_CLUSTER)
+        m = MEASURED_CLUSTER
+        start, lat_first, lat_later, res = (m["cluster_start_s"], m["to_first_task_first_s"],
+                                            m["to_first_task_later_s"], m["results_after_s"])
+    model_first = start + lat_first + slow_cpu + res + merge
+    model_later = lat_later + slow_cpu + res + merge
+    log(f"measured here ({ld}): one batch of {pieces} {w1:.1f} s, {cpu1:.1f} s CPU; 16 chunks in-process {w:.1f} s "
+        f"in all, {cpu16:.1f} s CPU (+{100 * (cpu16 / cpu1 - 1):.0f} %); chunk walls {cw.min():.2f}..{cw.max():.2f} s (mean {cw.mean():.2f}), steps "
+        f"{sol.stats['chunk_steps']}; slowest chunk by its share of the CPU in box-steps {slow_cpu:.2f} s; merge of "
+        f"16 chunks {merge:.2f} s; from "
         f"'first': cluster start {start:.2f} s, to the first task {lat_first:.2f} s (first cluster) / "
         f"{lat_later:.2f} s (later), results after the last chunk {res:.2f} s")
     log(f"model, first cluster: start + to first task + slowest chunk + results + merge = {model_first:.1f} s "
         f"-> {t1 / model_first:.1f}x one core; later cluster: {model_later:.1f} s -> {t1 / model_later:.1f}x "
         f"(assumes 16 idle cores as fast as one of these, each worker's start and kernel load in parallel)")
-    return dict(inprocess_16_chunks_s=w, one_batch_s=t1, chunk_wall_s=cw.tolist(), merge_s=merge,
+    return dict(inprocess_16_chunks_s=w, inprocess_16_chunks_cpu_s=cpu16, slowest_cpu_s=slow_cpu, one_batch_s=w1,
+                one_batch_cpu_s=cpu1,
+                chunk_wall_s=cw.tolist(), chunk_steps=sol.stats["chunk_steps"], merge_s=merge,
                 cluster_start_s=start, to_first_task_first_s=lat_first, to_first_task_later_s=lat_later,
                 results_after_s=res, model_first_s=model_first, model_later_s=model_later,
                 speedup_first=t1 / model_first, speedup_later=t1 / model_later, load=ld)
+
+
+#: cluster costs measured on the 2-core machine (docs/lab/parallel.md: the 'first' row of
+#: 2026-11-28 18:18 UTC with work stealing, --only first --repeat 1), used by model16 and
+#: model16so when 'first' did not run in the same call
+MEASURED_CLUSTER = dict(cluster_start_s=3.82, to_first_task_first_s=0.74, to_first_task_later_s=0.03,
+                        results_after_s=0.03)
+
+
+def section_model16so(box, log, pieces=128, T=3.0, workers=16, first_rows=None, issue_one_core_s=176.0):
+    """The issue's second-order target modelled for 16 workers (not run): double pendulum,
+    ``method="second_order"``, 128 pieces, T = 3. Measured here: one in-process batch
+    (one core) and the same pieces as 16 in-process chunks of 8 (each chunk's own wall
+    and the CPU of all: what each of 16 workers would compute alone; 8 boxes a chunk
+    pay the fixed cost of a step 16 times), the merge of 16 chunks. Model as model16:
+    cluster start + first task + slowest chunk + results + merge, each chunk scaled to
+    the issue's machine by its one-core time (``issue_one_core_s``) over ours."""
+    from models import double_pendulum as dp
+    from verified.graph import trace
+    from verified.solver import solve
+    g = trace(dp.rhs, 4)
+    kw = dict(method="second_order", subdivision=[pieces, 1, 1, 1])
+    log(f"\n## model of {workers} workers, second-order sets (MODELLED, not run): {pieces} pieces, T = {T}")
+    solve(g, box, (0, 0.05), workers=1, **kw)  # this process's kernels
+    ld1 = load()
+    c0 = time.process_time()
+    w1, one = timed(lambda: solve(g, box, (0, T), workers=1, **kw))
+    c1 = time.process_time() - c0
+    ld16 = load()
+    c0 = time.process_time()
+    w16, sol = timed(lambda: solve(g, box, (0, T), workers=1, chunks=workers, **kw))
+    c16 = time.process_time() - c0
+    cw = np.asarray(sol.stats["chunk_wall_s"], float)
+    merge = float(sol.stats["merge_s"])
+    cost = dict(MEASURED_CLUSTER)
+    firsts = [c for x in (first_rows or []) if x["workers"] > 1 for c in x["calls"] if c.get("breakdown")]
+    if firsts:
+        med = (lambda key, call: float(np.median([c["breakdown"][key] for c in firsts if c["call"] == call])))
+        cost = dict(cluster_start_s=med("cluster_start_s", "first"), to_first_task_first_s=med("to_first_task_s", "first"),
+                    to_first_task_later_s=med("to_first_task_s", "later"),
+                    results_after_s=max(med("results_after_s", "first"), med("results_after_s", "later")))
+    # the slowest chunk on an idle core (its share of the CPU), then on the issue's machine
+    slow_cpu = slowest_share(sol, c16)
+    scale = issue_one_core_s / c1
+    tail = cost["results_after_s"] + merge
+    m_first = cost["cluster_start_s"] + cost["to_first_task_first_s"] + slow_cpu * scale + tail
+    m_later = cost["to_first_task_later_s"] + slow_cpu * scale + tail
+    ratios = [r for r in (one.stats.get("steps"),) if r]
+    log(f"measured here: one batch {w1:.1f} s wall, {c1:.1f} s CPU ({ld1}), {one.status} at {one.t_reached:g}, "
+        f"steps {ratios}; 16 chunks {w16:.1f} s wall, {c16:.1f} s CPU ({ld16}) (+{100 * (c16 / c1 - 1):.0f} % CPU: "
+        f"the fixed cost per step and chunk), chunk walls {cw.min():.2f}..{cw.max():.2f} s (mean {cw.mean():.2f}), "
+        f"steps {sol.stats['chunk_steps']}, merge {merge:.3f} s")
+    log(f"model on the issue's machine (one core {issue_one_core_s:.0f} s = {scale:.2f}x ours): slowest chunk "
+        f"{slow_cpu * scale:.1f} s; first cluster {m_first:.1f} s -> {issue_one_core_s / m_first:.1f}x, later cluster "
+        f"{m_later:.1f} s -> {issue_one_core_s / m_later:.1f}x (target >= 10x); cluster costs {cost}")
+    return dict(one_batch_s=w1, one_batch_cpu_s=c1, chunks16_s=w16, chunks16_cpu_s=c16, chunk_wall_s=cw.tolist(),
+                chunk_steps=sol.stats["chunk_steps"], merge_s=merge, cluster=cost, scale=scale,
+                slowest_cpu_s=slow_cpu, model_first_s=m_first, model_later_s=m_later,
+                speedup_first=issue_one_core_s / m_first, speedup_later=issue_one_core_s / m_later,
+                status=(one.status, sol.status), load=(ld1, ld16))
 
 
 def estimate(scaling, pieces, log, target_pieces=65536, target_workers=64, bandwidth=100e6, task_overhead=0.005):
@@ -537,10 +733,15 @@ def main(argv=None):
         res["cluster"] = section_cluster(ode, box, pieces, T, args.repeat, log)
     if "first" in only:
         res["first"] = section_first(pieces, T, args.repeat, log)
+    if "unequal" in only:
+        res["unequal"] = section_unequal(ode, box, 64 if args.quick else (args.pieces or 512), T, args.repeat, log)
     if "granular" in only:
         res["granular"] = section_granular(ode, box, pieces, T, args.repeat, log)
     if "model16" in only:
         res["model16"] = section_model16(ode, box, pieces, T, res.get("first", []), log)
+    if "model16so" in only:
+        res["model16so"] = section_model16so(box, log, pieces=32 if args.quick else 128, T=0.5 if args.quick else 3.0,
+                                             first_rows=res.get("first"))
     if "scaling" in only:
         res["scaling"] = section_scaling(ode, box, pieces, T, log)
         res["estimate"] = estimate(res["scaling"], pieces, log)
