@@ -32,9 +32,11 @@ twist is ``S_p t`` only, and ``w(q_i) = M22 - M12^2 / M11`` of the two bodies' o
 mass matrix (tighter, and it needs no positive definite spatial inertia: point masses
 work), proven the same way. Then ``c_i = 1 / L``.
 
-No bound (``inf``) for a prismatic joint (its range is not one turn), a body without positive definite spatial inertia, or a chain with symbolic
-(non-numeric) data; with uncertain parameters use the chain at each end of the
-parameter box or no bound (the continuation is then not offered).
+No bound (``inf``) for a prismatic joint (its range is not one turn), for a joint where
+neither relaxation applies (a parent not on the base and a body without positive
+definite spatial inertia), or for a chain with symbolic (non-numeric) data. Uncertain
+parameters are not covered: the bounds are of the chain as given
+(:mod:`mbs.shell_continuation` does not carry such runs on).
 """
 from __future__ import annotations
 
