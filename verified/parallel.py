@@ -744,20 +744,22 @@ def stitch(items: list, root: int, outs, t0, n: int):
     tube = []
     lo_h, hi_h = [], []
     if grid.size > 1:
-        mids = 0.5 * (grid[:-1] + grid[1:])
-        rows_lo = [[] for _ in mids]
-        rows_hi = [[] for _ in mids]
+        # grid step j is [grid[j], grid[j+1]]: found by its start (its midpoint, for a step
+        # one ulp long, rounds to its end)
+        starts = grid[:-1]
+        rows_lo = [[] for _ in starts]
+        rows_hi = [[] for _ in starts]
         for i in order:
             sol = items[i].sol
             if sol is None or not len(sol.tube):
                 continue
             tt = np.asarray(sol.tube_t, float)
             tl, th = _chunk_tube_hulls(sol)
-            js = np.flatnonzero((mids > tt[0]) & (mids < tt[-1]))
-            for j, s in zip(js, np.searchsorted(tt, mids[js], side="right") - 1):
+            js = np.flatnonzero((starts >= tt[0]) & (starts < tt[-1]))
+            for j, s in zip(js, np.searchsorted(tt, starts[js], side="right") - 1):
                 rows_lo[j].append(tl[s])
                 rows_hi[j].append(th[s])
-        for j in range(mids.size):
+        for j in range(starts.size):
             if not rows_lo[j]:  # every path of pieces covers every interval up to t_reached
                 raise RuntimeError(f"re-chunking lost the tube on [{grid[j]}, {grid[j + 1]}] (a bug)")
             lo, hi = np.array(rows_lo[j]), np.array(rows_hi[j])
@@ -1643,10 +1645,13 @@ def _merge(results, ranges, initial, outs, t0, state_names, interrupted=False, i
         C = len(results)
         lo = np.empty((steps, C, n))
         hi = np.empty((steps, C, n))
-        mids = 0.5 * (grid[:-1] + grid[1:])
+        # each grid step [g_i, g_i+1] lies in the chunk's last step starting at or before g_i
+        # (not found from the midpoints: the midpoint of a last step one ulp long rounds to
+        # its end, past the chunk's last step)
+        starts = grid[:-1]
         for c, s in enumerate(results):
             tl, th = _chunk_tube_hulls(s)
-            j = np.searchsorted(np.asarray(s.tube_t, float), mids, side="right") - 1
+            j = np.minimum(np.searchsorted(np.asarray(s.tube_t, float), starts, side="right") - 1, len(tl) - 1)
             lo[:, c, :], hi[:, c, :] = tl[j], th[j]
         tube = [Interval._from_bounds(lo[j], hi[j]) for j in range(steps)]
         tube_hull = Interval._from_bounds(lo.min(axis=1), hi.max(axis=1))
