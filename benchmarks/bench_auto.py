@@ -87,17 +87,9 @@ def _chain_case(name, chain, q0, eps, T, quick_T, mode, best, label):
         return simulate(chain, x0, t_end, mode=mode, progress=False, max_wall=cap, **settings)
 
     def sample(t_end):
-        from mbs.app.sampling import Ensemble, pinocchio_with, plant_acceleration, sample_initial_points
-        qdd = plant_acceleration(pinocchio_with(chain))
-
-        def f(X):
-            out = np.empty_like(X)
-            for s in range(X.shape[1]):
-                out[:n, s] = X[n:, s]
-                out[n:, s] = qdd(X[:n, s], X[n:, s], np.zeros(n))
-            return out
+        from mbs.app.sampling import Ensemble, passive_plant, sample_initial_points
         pts = sample_initial_points(x0.lo, x0.hi, 64, seed=1, corner_limit=64)
-        return Ensemble(f, pts, t_end, dense=False).final
+        return Ensemble(passive_plant(chain), pts, t_end, dense=False).final
     return Case(name, T, quick_T, run, sample, best, label)
 
 

@@ -29,8 +29,7 @@ import numpy as np
 from mbs.app.sampling import (
     Ensemble,
     count_outside,
-    pinocchio_with,
-    plant_acceleration,
+    passive_plant,
     sample_points,
 )
 from mbs.simulate import simulate
@@ -40,25 +39,11 @@ from verified.interval import Interval
 Q0_PANDA = (0.0, -math.pi / 4, 0.0, -3 * math.pi / 4, 0.0, math.pi / 2, math.pi / 4)
 
 
-def plant(chain):
-    """x' of the chain by Pinocchio's aba with the joints' damping, on columns (2n, S)."""
-    acc = plant_acceleration(pinocchio_with(chain))
-    n = chain.n
-
-    def f(X):
-        out = np.empty_like(X)
-        out[:n] = X[n:]
-        for k in range(X.shape[1]):
-            out[n:, k] = acc(X[:n, k], X[n:, k], np.zeros(n))
-        return out
-    return f
-
-
 def panda(T=5.0, cap=3000.0):
     chain = panda_arm()
     q0 = np.array(Q0_PANDA)
     lo, hi = np.r_[q0 - 1e-3, np.zeros(7)], np.r_[q0 + 1e-3, np.zeros(7)]
-    ens = Ensemble(plant(chain), sample_points(lo, hi, 24), T, rtol=1e-13, atol=1e-13)
+    ens = Ensemble(passive_plant(chain), sample_points(lo, hi, 24), T, rtol=1e-13, atol=1e-13)
     allst = ens.states(np.linspace(0, T, 501))
     print(f"## (a) free-falling Panda, q0 +- 1e-3, T = {T}\n")
     print("sampled max |qd| over [0, T]:", np.array2string(np.abs(allst[..., 7:]).max(axis=(0, 1)), precision=1))
@@ -82,7 +67,7 @@ def panda(T=5.0, cap=3000.0):
 
 def pendulum(T=1.0):
     chain = double_pendulum()
-    f = plant(chain)
+    f = passive_plant(chain)
     print(f"\n## (b) damped double pendulum (example-robot-data), widths at T = {T}\n")
     scene, case6 = (2.39, 2.41), (np.pi - 0.3, np.pi - 0.29)
     every = (("i", False), ("ii", False), ("ii", True))

@@ -37,7 +37,7 @@ import numpy as np
 
 __all__ = ["SLACK", "sample_initial_points", "sample_points", "line_points", "dop853", "trajectories",
            "states_at", "end_states", "Ensemble", "sample_trajectories", "hull_widths", "inside_union",
-           "in_union", "misses", "count_outside", "pinocchio_with", "plant_acceleration"]
+           "in_union", "misses", "count_outside", "pinocchio_with", "plant_acceleration", "passive_plant"]
 
 SLACK = 1e-9  # DOP853 at rtol = atol = 1e-12 is accurate to well below this
 
@@ -337,6 +337,22 @@ def plant_acceleration(model):
     def qdd(q, qd, tau):
         return pin.aba(model, data, q, qd, np.asarray(tau, float) - damping * qd)
     return qdd
+
+
+def passive_plant(chain):
+    """``f(X)``, the unforced chain's ``x' = (qd, qdd)`` on columns ``X`` (2n, S) by
+    Pinocchio's ``aba`` with the joints' damping (:func:`plant_acceleration`): the
+    oracle's right-hand side for :class:`Ensemble` and :func:`trajectories`."""
+    acc = plant_acceleration(pinocchio_with(chain))
+    n = chain.n
+
+    def f(X):
+        out = np.empty_like(X)
+        out[:n] = X[n:]
+        for k in range(X.shape[1]):
+            out[n:, k] = acc(X[:n, k], X[n:, k], np.zeros(n))
+        return out
+    return f
 
 
 def pinocchio_with(chain, payloads=(), scale=1.0):

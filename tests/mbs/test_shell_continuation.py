@@ -15,27 +15,13 @@ import verified.shell_boxes as sb
 from mbs.app.sampling import (
     Ensemble,
     count_outside,
-    pinocchio_with,
-    plant_acceleration,
+    passive_plant,
     sample_points,
 )
 from mbs.simulate import simulate
 from models import double_pendulum as dp_paper
 from models.robots import double_pendulum, panda_arm
 from verified.interval import Interval
-
-
-def _rhs(chain):
-    acc = plant_acceleration(pinocchio_with(chain))
-    n = chain.n
-
-    def f(X):
-        out = np.empty_like(X)
-        out[:n] = X[n:]
-        for k in range(X.shape[1]):
-            out[n:, k] = acc(X[:n, k], X[n:, k], np.zeros(n))
-        return out
-    return f
 
 
 def _dp_box():
@@ -45,7 +31,7 @@ def _dp_box():
 @pytest.fixture(scope="module")
 def dp_samples():
     lo, hi = _dp_box()
-    return Ensemble(_rhs(double_pendulum()), sample_points(lo, hi, 25), 1.0, rtol=1e-13, atol=1e-13)
+    return Ensemble(passive_plant(double_pendulum()), sample_points(lo, hi, 25), 1.0, rtol=1e-13, atol=1e-13)
 
 
 def _dp_run():
@@ -71,7 +57,7 @@ def paper_run():
     sets, broken down at 0.28 s, and its samples."""
     chain = dp_paper.dh_chain()
     lo, hi = dp_paper.initial_box()
-    ens = Ensemble(_rhs(chain), sample_points(lo, hi, 25), 1.5, rtol=1e-13, atol=1e-13)
+    ens = Ensemble(passive_plant(chain), sample_points(lo, hi, 25), 1.5, rtol=1e-13, atol=1e-13)
 
     def run():
         return simulate(chain, Interval(lo, hi), 1.5, mode="i", method="lohner", output_dt=0.1, progress=False,
@@ -114,6 +100,6 @@ def test_free_falling_panda_never_breaks_down_to_5_s():
     assert sol.status == "completed" and sol.t_reached == T
     assert 0.1 < sol.stats["shell_from"] < T
     assert all(np.isfinite(b.lo).all() and np.isfinite(b.hi).all() for b in sol.boxes + sol.tube)
-    ens = Ensemble(_rhs(chain), sample_points(lo, hi, 24), T, rtol=1e-13, atol=1e-13)
+    ens = Ensemble(passive_plant(chain), sample_points(lo, hi, 24), T, rtol=1e-13, atol=1e-13)
     outside, checked = count_outside(sol, ens, 400)
     assert checked > 1000 and outside == 0
