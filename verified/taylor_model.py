@@ -65,6 +65,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 
 import numpy as np
 from numba import njit
@@ -825,6 +826,14 @@ def models_to_interval(F: np.ndarray, m: int, mq: int) -> tuple[np.ndarray, np.n
     return np.where(bad, -np.inf, lo), np.where(bad, np.inf, hi)
 
 
+def _memory_bytes() -> float:
+    """Physical memory of this machine in bytes (inf where the OS does not say)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return math.inf
+
+
 class TaylorModelODE:
     """Taylor-coefficient enclosures like :class:`verified.affine_taylor.AffineTaylorODE`,
     computed in Taylor models of degree 2, 3 or 4 over the symbols of the inputs.
@@ -939,6 +948,13 @@ class TaylorModelODE:
         to share: the kernel holds the GIL and returns fresh arrays."""
         shape = (slots, order + 1, nb, L)
         sizes = (int(np.prod(shape)), slots * nb * L)
+        need = 8 * 1.25 * (sizes[0] + sizes[1])
+        if need > _memory_bytes():
+            raise MemoryError(
+                f"the Taylor-model kernel needs {need / 2**30:.1f} GiB of work memory ({nb} sets x {slots} "
+                f"graph slots x order {order} x models of {L} coefficients), more than this machine's "
+                f"{_memory_bytes() / 2**30:.1f} GiB: fewer sets per batch (chunks=), fewer symbols "
+                f"(params_per_state, model_caps) or a lower order")
         bufs = getattr(self, "_work_buffers", None)
         if bufs is None or bufs[0].size < sizes[0] or bufs[1].size < sizes[1]:
             bufs = (np.empty(int(sizes[0] * 1.25)), np.empty(int(sizes[1] * 1.25)))
