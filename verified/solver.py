@@ -169,7 +169,8 @@ def solve(
     rechunk : None, True or False (chunked runs with ``adaptive``): a chunk whose sets
         split to twice its size pauses and its sets are cut into new chunks that continue
         from that time, each with its own step sizes (:mod:`verified.parallel`). None: on
-        Dask workers, off in this process.
+        Dask workers, off in this process. ``False`` also turns off work stealing (on
+        Dask, an idle worker takes over part of the chunk with the most time left).
     start : :class:`Start` or None: continue from these sets at their exact time instead
         of from ``x0`` at ``t_span[0]`` (``x0`` must be their hull boxes over the
         ``n`` states; ``params`` as the run that made them got them, or their hull).
