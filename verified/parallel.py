@@ -1651,7 +1651,9 @@ def _merge(results, ranges, initial, outs, t0, state_names, interrupted=False, i
         starts = grid[:-1]
         for c, s in enumerate(results):
             tl, th = _chunk_tube_hulls(s)
-            j = np.minimum(np.searchsorted(np.asarray(s.tube_t, float), starts, side="right") - 1, len(tl) - 1)
+            j = np.searchsorted(np.asarray(s.tube_t, float), starts, side="right") - 1
+            if j.size and (j.max() >= len(tl) or j.min() < 0):  # (every chunk's tube reaches t_reached)
+                raise RuntimeError(f"chunk {c}'s tube does not cover [{grid[0]}, {grid[-1]}] (a bug)")
             lo[:, c, :], hi[:, c, :] = tl[j], th[j]
         tube = [Interval._from_bounds(lo[j], hi[j]) for j in range(steps)]
         tube_hull = Interval._from_bounds(lo.min(axis=1), hi.max(axis=1))
