@@ -4,9 +4,10 @@ itself). That module imports nothing from verified/ or the modeling core; see it
 docstring for what is in it."""
 
 from mbs.app.sampling import (SLACK, Ensemble, count_outside, dop853, end_states, hull_widths, in_union,
-                              inside_union, line_points, misses, pinocchio_with, plant_acceleration, sample_initial_points,
-                              sample_points, sample_trajectories, states_at, trajectories)
+                              inside_union, line_points, misses, passive_plant, pinocchio_with,
+                              plant_acceleration, sample_initial_points, sample_points, sample_trajectories,
+                              states_at, trajectories)
 
 __all__ = ["SLACK", "Ensemble", "count_outside", "dop853", "end_states", "hull_widths", "in_union",
-           "inside_union", "line_points", "misses", "pinocchio_with", "plant_acceleration", "sample_initial_points",
-           "sample_points", "sample_trajectories", "states_at", "trajectories"]
+           "inside_union", "line_points", "misses", "passive_plant", "pinocchio_with", "plant_acceleration",
+           "sample_initial_points", "sample_points", "sample_trajectories", "states_at", "trajectories"]
