@@ -948,16 +948,17 @@ class TaylorModelODE:
         to share: the kernel holds the GIL and returns fresh arrays."""
         shape = (slots, order + 1, nb, L)
         sizes = (int(np.prod(shape)), slots * nb * L)
-        need = 8 * 1.25 * (sizes[0] + sizes[1])
-        if need > _memory_bytes():
-            raise MemoryError(
-                f"the Taylor-model kernel needs {need / 2**30:.1f} GiB of work memory ({nb} sets x {slots} "
-                f"graph slots x order {order} x models of {L} coefficients), more than this machine's "
-                f"{_memory_bytes() / 2**30:.1f} GiB: fewer sets per batch (chunks=), fewer symbols "
-                f"(params_per_state, model_caps) or a lower order")
         bufs = getattr(self, "_work_buffers", None)
         if bufs is None or bufs[0].size < sizes[0] or bufs[1].size < sizes[1]:
-            bufs = (np.empty(int(sizes[0] * 1.25)), np.empty(int(sizes[1] * 1.25)))
+            grown = (int(sizes[0] * 1.25), int(sizes[1] * 1.25))
+            need, have = 8.0 * sum(grown), _memory_bytes()
+            if need > have:  # (a one-line error naming the sizes, not numpy's allocation failure)
+                raise MemoryError(
+                    f"the Taylor-model kernel needs {need / 2**30:.1f} GiB of work memory ({nb} sets x {slots} "
+                    f"graph slots x order {order} x models of {L} coefficients), more than this machine's "
+                    f"{have / 2**30:.1f} GiB: fewer sets per batch (chunks=), fewer symbols "
+                    f"(params_per_state, model_caps) or a lower order")
+            bufs = (np.empty(grown[0]), np.empty(grown[1]))
             self._work_buffers = bufs
         return bufs[0][:sizes[0]].reshape(shape), bufs[1][:sizes[1]].reshape((slots, nb, L))
 
