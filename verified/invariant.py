@@ -96,7 +96,7 @@ def _half_form(S: Interval, R: Interval) -> Interval:
     (B, m, m): squares on the diagonal (``sqr`` keeps them >= 0 where ``r_i r_i`` would
     not) and each off-diagonal pair once, ``(S_ij + S_ji) r_i r_j``."""
     m = R.shape[1]
-    i, j = np.triu_indices(m, 1)
+    i, j = linalg.upper_pairs(m, 1)
     d = np.arange(m)
     diag = (S[:, d, d] * iv.sqr(R)).sum(axis=-1)
     if i.size == 0:

@@ -16,13 +16,15 @@ All loops run compiled (numba) over the flattened batch.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numba import njit
 
 from . import _kernels as _k
 from .interval import Interval, _as_interval, _flatten, matmul, matvec  # noqa: F401 (re-exported)
 
-__all__ = ["matmul", "matvec", "solve", "inverse_diagonal", "SingularMatrixError"]
+__all__ = ["matmul", "matvec", "solve", "inverse_diagonal", "SingularMatrixError", "upper_pairs"]
 
 
 class SingularMatrixError(np.linalg.LinAlgError, ValueError):
@@ -37,6 +39,17 @@ class SingularMatrixError(np.linalg.LinAlgError, ValueError):
     def __init__(self, message, indices=()):
         super().__init__(message)
         self.indices = list(indices)
+
+
+@functools.lru_cache(maxsize=128)
+def upper_pairs(m: int, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(m, k)`` as read-only int64 arrays, made once per ``(m, k)``: the
+    set and model code asks for the same index pairs at every step."""
+    i, j = np.triu_indices(m, k)
+    i, j = i.astype(np.int64), j.astype(np.int64)
+    i.flags.writeable = False
+    j.flags.writeable = False
+    return i, j
 
 
 # ----------------------------------------------------------------- kernels

@@ -74,7 +74,7 @@ def quadratic_range(S, u: Interval) -> Interval:
     diag = Interval._from_bounds(S.lo[:, :, jj, jj], S.hi[:, :, jj, jj])  # (B, n_i, n_j)
     total = linalg.matvec(diag, sq)
     if n > 1:
-        j, k = np.triu_indices(n, 1)
+        j, k = linalg.upper_pairs(n, 1)
         off = Interval._from_bounds(S.lo[:, :, j, k], S.hi[:, :, j, k]) + \
             Interval._from_bounds(S.lo[:, :, k, j], S.hi[:, :, k, j])  # (B, n_i, pairs)
         prod = Interval._from_bounds(u.lo[:, j], u.hi[:, j]) * Interval._from_bounds(u.lo[:, k], u.hi[:, k])
@@ -113,7 +113,7 @@ def _linear_quadratic_range(C: np.ndarray, S: np.ndarray, u: Interval) -> Interv
     r_hi = np.where(inside, np.maximum(r_hi, top.hi), r_hi)
     total = Interval._from_bounds(r_lo, r_hi).sum(axis=-1)
     if m > 1:
-        j, k = np.triu_indices(m, 1)
+        j, k = linalg.upper_pairs(m, 1)
         off = point(S[:, :, j, k]) + point(S[:, :, k, j])  # (B, n, pairs)
         prod = Interval._from_bounds(u.lo[:, j], u.hi[:, j]) * Interval._from_bounds(u.lo[:, k], u.hi[:, k])
         total = total + linalg.matvec(off, prod)

@@ -73,6 +73,7 @@ from numba import njit
 from . import _kernels as _k
 from .affine_taylor import _U, _UPF, _TINY, _deriv, _pm, _up, _value, _wide_symbol_forms, box_forms
 from .interval import Interval, _as_interval
+from .linalg import upper_pairs
 from .taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
                      T_PARAM, T_SIN, T_SQR, T_SQRT, T_SUB, T_TAN, _Tape)
 
@@ -140,8 +141,7 @@ def _star_pairs(m: int, mq: int, ms: int, ns: int | None = None) -> tuple[np.nda
 
 def _pairs(mq: int) -> tuple[np.ndarray, np.ndarray]:
     """Symbol indices (i, j), i <= j < mq, of the quadratic coefficients, in storage order."""
-    pi, pj = np.triu_indices(mq)
-    return pi.astype(np.int64), pj.astype(np.int64)
+    return upper_pairs(mq)
 
 
 def _triples(m3: int) -> np.ndarray:
@@ -801,15 +801,24 @@ def forms_to_models(F: np.ndarray, mq: int, m3: int = 0, m4: int = 0, ms: int = 
     return out
 
 
+@functools.lru_cache(maxsize=64)
+def _diagonal_mask(mq: int, length: int) -> np.ndarray:
+    """Read-only mask over a model's ``length`` coefficients past the linear ones: True
+    at the quadratic diagonal ``eps_i^2`` (storage order of :func:`_pairs`)."""
+    pi, pj = _pairs(mq)
+    diag = np.zeros(length, dtype=bool)
+    diag[: pi.size] = (pi == pj)
+    diag.flags.writeable = False
+    return diag
+
+
 def models_to_interval(F: np.ndarray, m: int, mq: int) -> tuple[np.ndarray, np.ndarray]:
     """Interval ranges of models ``(..., L)`` (rounded outward); NaN gives ``[-inf, inf]``.
 
     ``eps_i^2`` lies in ``[0, 1]``, so a diagonal coefficient ``q_ii`` moves only one
     bound; every other monomial (cubic, quartic and star ones included, after the
     quadratic ones) lies in ``[-1, 1]``."""
-    pi, pj = _pairs(mq)
-    diag = np.zeros(F.shape[-1] - m - 2, dtype=bool)
-    diag[: pi.size] = (pi == pj)
+    diag = _diagonal_mask(mq, F.shape[-1] - m - 2)
     c = F[..., 0]
     with np.errstate(invalid="ignore", over="ignore"):
         Q = F[..., m + 1: -1]
