@@ -607,7 +607,7 @@ def _quotient_step(Z, F, s, u, v, k, b, PA, PB, PC, rec, T, S):
 
 @njit(cache=True)
 def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA, PB, PC, deg, fresh0, F, REC,
-                  pool0=-1, pool_n=0, pool_tol=0.0, pool_orders=1):
+                  pool0=-1, pool_n=0, pool_tol=0.0, pool_orders=1, product_orders=-1):
     """Taylor models of x_[0..order]; X (n, B, L) and P (p, B, L) are the input models.
 
     ``F`` (slots, order + 1, B, L) and ``REC`` (slots, B, L) are the caller's work
@@ -637,8 +637,16 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
     D2 = np.zeros(L)
     D3 = np.zeros(L)
     used = np.zeros(nb, dtype=np.int64)
+    # orders k >= product_orders multiply with an empty table: _acc_mul bounds every
+    # pair of non-constant monomials into the remainder (see TaylorModelODE.product_orders)
+    full_a, full_b, full_c = PA, PB, PC
+    none_a, none_b, none_c = PA[:0].copy(), PB[:0].copy(), PC[:0].copy()
     for k in range(order):
         fk = float(k)
+        if 0 <= product_orders <= k:
+            PA, PB, PC = none_a, none_b, none_c
+        else:
+            PA, PB, PC = full_a, full_b, full_c
         for s in range(nslots):
             o = op[s]
             u = a0[s]
@@ -835,6 +843,7 @@ def models_to_interval(F: np.ndarray, m: int, mq: int) -> tuple[np.ndarray, np.n
     return np.where(bad, -np.inf, lo), np.where(bad, np.inf, hi)
 
 
+
 def _memory_bytes() -> float:
     """Physical memory of this machine in bytes (inf where the OS does not say)."""
     try:
@@ -865,6 +874,14 @@ class TaylorModelODE:
     #: a set's forms should give every parameter a symbol of its own (the linear part
     #: costs O(m) per operation; the quadratic monomials go to the widest ones)
     all_symbols = True
+    #: the recursion's orders ``k >= product_orders`` (the coefficients ``x_[k+1]`` and
+    #: up) keep no product of two non-constant monomials: ``_acc_mul`` bounds each such
+    #: pair by ``|x_a| |y_b|`` into the remainder, as it does for any pair past the
+    #: model's degree (sound at any value; -1 keeps them at every order). Those
+    #: coefficients enter a step multiplied by ``h^(k+1)``, so their quadratic parts
+    #: hardly matter, while the kept products' gather and scatter are a large share of a
+    #: product's cost (measured in docs/lab/robot_speed.md)
+    product_orders = 6
 
     def __init__(self, graph, quadratic_symbols: int = QUADRATIC_SYMBOLS, cubic_symbols: int = 0,
                  quartic_symbols: int = 0, star_symbols: int = 0):
@@ -901,7 +918,8 @@ class TaylorModelODE:
         m3 = min(mq, self.cubic_symbols)
         return mq, m3, min(m3, self.quartic_symbols), min(mq, self.star_symbols)
 
-    def _run(self, X, P, order, m, mq, m3=0, m4=0, ms=0, ns=None, fresh=False, pool=0, pool_tol=1e-8, pool_orders=1):
+    def _run(self, X, P, order, m, mq, m3=0, m4=0, ms=0, ns=None, fresh=False, pool=0, pool_tol=1e-8, pool_orders=1,
+             product_orders=None):
         """The kernel on input models ``X`` (n, B, L) and parameter models ``P`` (p, B, L),
         ``L = model_length(m, mq, m3, m4, ms, ns)``: (n, order + 1, B, L).
 
@@ -923,7 +941,9 @@ class TaylorModelODE:
         the mass-matrix solve's preconditioned rows) then cancels where the values do,
         instead of adding up as independent radii (docs/lab/code_notes.md). Sound for the
         same reason as ``fresh``: a slot's true value is its polynomial plus ``e delta``
-        for some ``delta`` in ``[-1, 1]``, which every later operation treats as a symbol."""
+        for some ``delta`` in ``[-1, 1]``, which every later operation treats as a symbol.
+
+        ``product_orders``: :attr:`product_orders` for this call (None: the evaluator's)."""
         t = self._tape
         PA, PB, PC = product_table(m, mq, m3, m4, ms, ns)
         L = model_length(m, mq, m3, m4, ms, ns)
@@ -943,7 +963,8 @@ class TaylorModelODE:
         return _model_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs,
                              np.ascontiguousarray(X), np.ascontiguousarray(P), int(order), PA, PB, PC,
                              4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0, F, REC,
-                             pool0, int(pool), float(pool_tol), int(pool_orders))
+                             pool0, int(pool), float(pool_tol), int(pool_orders),
+                             int(self.product_orders if product_orders is None else product_orders))
 
     def __getstate__(self):
         # the kernel's work memory is scratch (tens to hundreds of MB): not pickled

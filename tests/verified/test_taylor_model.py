@@ -74,14 +74,16 @@ def _pointwise_ode():
 
 
 def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_symbols=0, quartic_symbols=0,
-                           star_symbols=0, fresh=False, pool=0, pool_tol=0.0, pool_orders=1, n_points=12, seed=0):
+                           star_symbols=0, fresh=False, pool=0, pool_tol=0.0, pool_orders=1, n_points=12, seed=0,
+                           product_orders=None):
     """The models themselves, not only their ranges: inputs ``c + r eps`` (one symbol per
     state, ``c`` and ``r`` dyadic), and at dyadic points ``eps`` (corners included) the exact
     coefficients (arb) must lie within the model's polynomial at ``eps`` (evaluated in arb)
     plus or minus its remainder. ``fresh``: ``n order`` fresh symbols follow (the
     coefficients' remainders move there, ``TaylorModelODE._run(fresh=True)``), whose
     values are unknown: their terms count as remainder. ``pool``: that many symbols
-    before them for the remainders born inside the graph (``_run(pool=...)``), likewise."""
+    before them for the remainders born inside the graph (``_run(pool=...)``), likewise.
+    ``product_orders``: ``_run``'s (None: the evaluator's default)."""
     from flint import arb
 
     c, r = np.asarray(c, float), np.asarray(r, float)
@@ -94,7 +96,8 @@ def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_sy
     X[:, 0, 0] = c
     X[np.arange(n), 0, 1 + np.arange(n)] = r
     out = ev._run(tm.forms_to_models(X, mq, m3, m4, ms, ns), np.zeros((0, 1, model_length(mt, mq, m3, m4, ms, ns))),
-                  order, mt, mq, m3, m4, ms, ns, fresh=fresh, pool=pool, pool_tol=pool_tol, pool_orders=pool_orders)
+                  order, mt, mq, m3, m4, ms, ns, fresh=fresh, pool=pool, pool_tol=pool_tol, pool_orders=pool_orders,
+                  product_orders=product_orders)
     pool_used = None
     if fresh or pool:
         # the fresh and pool symbols' coefficients join the remainder; the model without them
@@ -379,6 +382,32 @@ def test_models_with_pool_symbols_contain_exact_coefficients_pointwise(c, r, qua
     assert check_models_pointwise(_pointwise_ode(), c, r, 4, quadratic_symbols=quad, cubic_symbols=cubic,
                                   quartic_symbols=quartic, star_symbols=star, fresh=fresh, pool=pool,
                                   pool_orders=orders)
+
+
+@pytest.mark.parametrize("quad, cubic, quartic, star", [(2, 0, 0, 0), (2, 2, 0, 0), (1, 1, 1, 1), (2, 2, 2, 0)])
+@pytest.mark.parametrize("product_orders", [0, 1, 3])
+@pytest.mark.parametrize("fresh", [False, True])
+def test_models_without_products_at_high_orders_contain_exact_coefficients_pointwise(quad, cubic, quartic, star,
+                                                                                     product_orders, fresh):
+    """``TaylorModelODE.product_orders``: the orders from ``product_orders`` on keep no
+    product of two non-constant monomials (each bounded into the remainder), at order 5,
+    so that 2 to 5 of the orders run without them."""
+    check_models_pointwise(_pointwise_ode(), [0.375, -0.25], [0.125, 0.25], 5, quadratic_symbols=quad,
+                           cubic_symbols=cubic, quartic_symbols=quartic, star_symbols=star, fresh=fresh,
+                           product_orders=product_orders)
+
+
+def test_oracle_catches_high_orders_that_drop_products_without_their_bound(monkeypatch):
+    """Products dropped at the orders past ``product_orders`` without their bound in the
+    remainder (a product whose ``dropped`` term is lost) must fail the pointwise check;
+    with every order truncated (0) and with the default."""
+    args = (_pointwise_ode(), [0.375, -0.25], [0.125, 0.25], 5)
+    for k in (0, 3):
+        check_models_pointwise(*args, cubic_symbols=2, product_orders=k)
+    _mutant_kernel(monkeypatch, "_acc_mul", "nl = dropped + ", "nl = 0.0 + ")
+    for k in (0, 3):
+        with pytest.raises(AssertionError, match="outside its model"):
+            check_models_pointwise(*args, cubic_symbols=2, product_orders=k)
 
 
 def test_oracle_catches_pool_symbols_that_lose_the_remainder(monkeypatch):
