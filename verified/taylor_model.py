@@ -881,7 +881,7 @@ class TaylorModelODE:
     #: coefficients enter a step multiplied by ``h^(k+1)``, so their quadratic parts
     #: hardly matter, while the kept products' gather and scatter are a large share of a
     #: product's cost (measured in docs/lab/robot_speed.md)
-    product_orders = 6
+    product_orders = 5
 
     def __init__(self, graph, quadratic_symbols: int = QUADRATIC_SYMBOLS, cubic_symbols: int = 0,
                  quartic_symbols: int = 0, star_symbols: int = 0):
