@@ -68,27 +68,41 @@ class VerifiedODE:
             # fresh symbols for the errors of the solution's own coefficients only: for
             # the variational series they cost more and change nothing (docs/lab/code_notes.md)
             self.taylor = AffineTaylorODE(graph)
-            if arithmetic == "affine":
-                self.variational = AffineTaylorODE(variational_graph(graph), fresh_symbols=0)
-                if self.variational._tape.op.size >= self.DEEP_TAPE:
-                    # fresh symbols for the errors of the slots that create the most error
-                    # in the Jacobian (AffineTaylorODE fresh_slots; one set at a time):
-                    # narrower at the same cost on deep robot graphs (docs/lab/code_notes.md).
-                    # A fixed count, so that an inert extra state (a controller's time)
-                    # changes nothing.
-                    self.variational.fresh_slots = self.FRESH_SLOTS
-            else:
-                # the Jacobian over a set in degree-2 Taylor models (verified.taylor_model):
-                # its spread is what the QR-Lohner error part grows by every step, and
-                # it is tighter than affine (docs/lab/code_notes.md). The solution's own
-                # coefficients stay affine: with fresh symbols
-                # per order they are tighter at high orders than models without.
-                self.variational = TaylorModelODE(variational_graph(graph))
         else:
             self.taylor = TaylorODE(graph)
-            self.variational = TaylorODE(variational_graph(graph))
         self.n = graph.n_inputs
         self._augmented = None
+        self._variational = None
+
+    @property
+    def variational(self):
+        """Evaluator of the variational equations (built on first use: the first-order and
+        mean-value steps need it, the composition does not, and on a robot's graph the
+        variational graph takes a large share of the preparation)."""
+        if self._variational is None:
+            self._variational = self._variational_evaluator()
+        return self._variational
+
+    def _variational_evaluator(self):
+        graph = self.graph
+        if self.arithmetic == "affine":
+            variational = AffineTaylorODE(variational_graph(graph), fresh_symbols=0)
+            if variational._tape.op.size >= self.DEEP_TAPE:
+                # fresh symbols for the errors of the slots that create the most error
+                # in the Jacobian (AffineTaylorODE fresh_slots; one set at a time):
+                # narrower at the same cost on deep robot graphs (docs/lab/code_notes.md).
+                # A fixed count, so that an inert extra state (a controller's time)
+                # changes nothing.
+                variational.fresh_slots = self.FRESH_SLOTS
+            return variational
+        if self.arithmetic == "taylor_model":
+            # the Jacobian over a set in degree-2 Taylor models (verified.taylor_model):
+            # its spread is what the QR-Lohner error part grows by every step, and
+            # it is tighter than affine (docs/lab/code_notes.md). The solution's own
+            # coefficients stay affine: with fresh symbols
+            # per order they are tighter at high orders than models without.
+            return TaylorModelODE(variational_graph(graph))
+        return TaylorODE(variational_graph(graph))
 
     @property
     def second_variational(self) -> TaylorODE:
