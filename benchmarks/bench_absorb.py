@@ -38,7 +38,7 @@ import numpy as np
 import bench_robots as br
 import bench_solver
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from verified.affine_taylor import AffineTaylorODE
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.sets import DoubletonSets
 from verified.taylor import TaylorODE
 from verified.variational import variational_graph

@@ -24,7 +24,7 @@ import numpy as np
 
 from verified.graph import trace
 from verified.hooks import StopAfterWall
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 #: the hand-picked settings of the robots (docs/robots_benchmark.md, bench_robots case 8)
 ROBOT_BEST = dict(method=None, order=8, tol=1e-10, error_basis="auto", set_order=2, params_per_state=12,

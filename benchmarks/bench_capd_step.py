@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.methods import Composition, Lohner
 
 G = 9.81  # the double nearest 9.81 (probs.cpp: interval(9.81) for chain3; 981/100 enclosed for dp)

@@ -34,7 +34,7 @@ from mbs.simulate import simulate
 from models import double_pendulum as dp
 from models import pendulum as pd
 from mbs.app.sampling import end_states, hull_widths, states_at
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 
 def sampled_hull(f, lo, hi, ts, n=401):

@@ -26,11 +26,11 @@ import time
 import numpy as np
 
 from models import double_pendulum as dp
-from verified import linalg
+from verified.arith import linalg
 from verified.contractor import HC4, EnergyShell, contract_linear_row, mean_value_row
 from verified.evaluate import eval_interval
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 
 def shell():

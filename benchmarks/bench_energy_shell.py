@@ -29,7 +29,7 @@ from models import pendulum as pd
 from verified.contractor import EnergyShell
 from verified.energy_shell import EnergyShellHook, max_energy
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import solve
 
 

@@ -18,7 +18,7 @@ import numpy as np
 
 
 from verified.graph import Graph, GraphBuilder, trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 M1 = M2 = L1 = L2 = 1.0
 G = 9.81

@@ -16,8 +16,8 @@ import timeit
 
 import numpy as np
 
-import verified.interval as iv
-from verified.interval import Interval
+import verified.arith.interval as iv
+from verified.arith.interval import Interval
 
 TARGETS = {"mul": 6.0, "div": 6.0, "sin": 10.0}
 

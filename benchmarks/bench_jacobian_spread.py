@@ -37,7 +37,7 @@ import numpy as np
 
 from verified.affine_taylor import AffineTaylorODE
 from verified.hooks import Hook
-from verified.interval import Interval, concatenate, point
+from verified.arith.interval import Interval, concatenate, point
 from verified.lohner import horner
 from verified.taylor import TaylorODE
 from verified.taylor_model import TaylorModelODE

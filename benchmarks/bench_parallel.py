@@ -100,7 +100,7 @@ def worst_ratio(sol, true=TRUE_T2):
 def setup():
     from models import double_pendulum as dp
     from verified.graph import trace
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     from verified.solver import VerifiedODE
     lo, hi = dp.initial_box()
     return VerifiedODE(trace(dp.rhs, 4)), Interval(lo, hi)
@@ -141,7 +141,7 @@ def section_speedup(ode, box, pieces, T, repeat, log):
 
 
 def mixed_boxes(box, n_each):
-    from verified.interval import Interval, concatenate
+    from verified.arith.interval import Interval, concatenate
     lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
     narrow = box.subdivide([n_each, 1, 1, 1]).reshape(-1, 4)
     c, r = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -438,7 +438,7 @@ def unequal_boxes(box, n, x3_max=10.0):
     alone). Neighbouring pieces cost alike (contiguous chunks). Pieces as wide as one of
     1024 break down near the separatrix and beyond (their steps shorten only in the
     last few % of the run, just before)."""
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
     w = (hi[0] - lo[0]) / 65536
     L, H = np.repeat(lo[None], n, 0), np.repeat(hi[None], n, 0)

@@ -107,7 +107,7 @@ from mbs.app.sampling import count_outside, inside_union
 from mbs.app.sampling import sample_initial_points as sample_points
 from verified.graph import trace
 from verified.hooks import Hook
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import Solution, VerifiedODE, solve
 
 ARITHMETICS = ("interval", "affine")

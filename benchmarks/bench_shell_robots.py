@@ -34,7 +34,7 @@ from mbs.app.sampling import (
 )
 from mbs.simulate import simulate
 from models.robots import double_pendulum, panda_arm
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 Q0_PANDA = (0.0, -math.pi / 4, 0.0, -3 * math.pi / 4, 0.0, math.pi / 2, math.pi / 4)
 

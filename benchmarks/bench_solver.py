@@ -27,7 +27,7 @@ import numpy as np
 from models import double_pendulum as dp
 from mbs.app.sampling import Ensemble, hull_widths
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 
 DEFAULTS = dict(order=12, tol=1e-10)  # chosen from the work-precision table (T = 1)

@@ -34,7 +34,7 @@ import numpy as np
 import bench_robots as br
 from verified.affine_taylor import AffineTaylorODE
 from verified.hooks import StopAfterWall
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 from verified.taylor import TaylorODE
 from verified.taylor_model import TaylorModelODE

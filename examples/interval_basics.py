@@ -8,8 +8,8 @@ from fractions import Fraction
 
 import numpy as np
 
-import verified.interval as iv
-from verified.interval import Interval
+import verified.arith.interval as iv
+from verified.arith.interval import Interval
 
 x = Interval(-1.0, 2.0)
 print("x * x      =", x * x, "  (the dependency problem)")

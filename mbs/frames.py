@@ -37,10 +37,10 @@ import weakref
 
 import numpy as np
 
-from verified import linalg
+from verified.arith import linalg
 from verified.affine_taylor import affine_range
 from verified.graph import trace
-from verified.interval import Interval, concatenate
+from verified.arith.interval import Interval, concatenate
 from verified.sets import SetView
 
 from . import spatial as sp3

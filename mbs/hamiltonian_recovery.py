@@ -77,7 +77,7 @@ from sympy.polys.matrices import DomainMatrix
 from sympy.printing.pycode import PythonCodePrinter
 
 from verified.graph import from_sympy
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 from .errors import ModelError
 from .system import System

@@ -6,7 +6,7 @@ The same code runs on
 
 - Python floats / numpy float vectors ``q`` of shape ``(n,)``,
 - batches: ``q`` of shape ``(n, B)`` (each ``q[i]`` is a numpy array of shape ``(B,)``),
-- ``verified.interval.Interval``: lists of interval scalars, or one Interval array of
+- ``verified.arith.interval.Interval``: lists of interval scalars, or one Interval array of
   shape ``(n,)`` / ``(n, B)`` (rows are iterated like numpy arrays),
 - ``verified.graph.Tracer`` scalars: :meth:`NumericModel.rhs_graph` and
   :meth:`NumericModel.energy_graph` turn the algorithms into expression graphs for the
@@ -530,7 +530,7 @@ PIVOT_TOL = 8 * float(np.finfo(float).eps)
 
 
 def _is_interval(x) -> bool:
-    mod = sys.modules.get("verified.interval")
+    mod = sys.modules.get("verified.arith.interval")
     return mod is not None and isinstance(x, mod.Interval)
 
 

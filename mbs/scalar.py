@@ -2,7 +2,7 @@
 
 The numeric algorithms of :mod:`mbs.numeric` are written once over a *generic scalar*:
 Python floats, numpy arrays holding a batch of states (shape ``(B,)``),
-``verified.interval.Interval`` objects and ``verified.graph.Tracer`` nodes.  They only
+``verified.arith.interval.Interval`` objects and ``verified.graph.Tracer`` nodes.  They only
 use ``+ - * /``, ``**`` with integer exponents, and the numpy ufuncs ``np.sin``,
 ``np.cos``, ``np.sqrt``, ``np.square`` (which dispatch through ``__array_ufunc__``).
 

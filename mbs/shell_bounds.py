@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 __all__ = ["inverse_mass_bounds"]
 

@@ -13,7 +13,7 @@ import numpy as np
 import sympy
 
 from verified.graph import from_sympy
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 from . import scalar as S
 from .errors import ModelError

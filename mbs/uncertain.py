@@ -50,7 +50,7 @@ from numbers import Real
 import numpy as np
 
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.preconditioned import congruence_pivots
 
 from .errors import ModelError
@@ -76,7 +76,7 @@ class ParameterError(ModelError, ValueError):
 
 def parse_value(v, where: str, *, lower: float | None = None, strict: bool = False) -> tuple[float, float]:
     """``(lo, hi)`` floats of a parameter value: a real number (a point), ``[lo, hi]`` /
-    ``(lo, hi)``, or a 0-d :class:`verified.interval.Interval`.  ``lower``: the
+    ``(lo, hi)``, or a 0-d :class:`verified.arith.interval.Interval`.  ``lower``: the
     smallest allowed value (``strict``: values must exceed it)."""
     if isinstance(v, Interval):
         if v.shape != ():

@@ -33,7 +33,7 @@ import numpy as np
 
 from mbs import chain_from_dh, chain_from_urdf
 from mbs.scalar import cos, sin, square
-from verified.exact import enclose_fraction, enclose_pi_multiple
+from verified.arith.exact import enclose_fraction, enclose_pi_multiple
 from verified.graph import trace
 
 M1 = M2 = 1.0

@@ -16,7 +16,7 @@ from fractions import Fraction
 import numpy as np
 
 from mbs import chain_from_dh
-from verified.exact import enclose_fraction
+from verified.arith.exact import enclose_fraction
 
 from .double_pendulum import _cos, _sin, _sq
 

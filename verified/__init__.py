@@ -2,8 +2,8 @@
 Taylor coefficients of ODE solutions, and (later) the verified ODE solver and the
 consistency tests. Knows nothing about robots."""
 
-from .graph import Graph, GraphBuilder, Op, Tracer, from_sympy, trace
-from .interval import Interval, IntervalError
-from .taylor import TaylorODE
+from verified.graph import Graph, GraphBuilder, Op, Tracer, from_sympy, trace
+from verified.arith.interval import Interval, IntervalError
+from verified.taylor import TaylorODE
 
 __all__ = ["Interval", "IntervalError", "Graph", "GraphBuilder", "Op", "Tracer", "from_sympy", "trace", "TaylorODE"]

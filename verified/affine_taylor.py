@@ -44,9 +44,9 @@ import math
 import numpy as np
 from numba import njit
 
-from . import _kernels as _k
-from .interval import Interval, _as_interval
-from .taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
+from verified.arith import _kernels as _k
+from verified.arith.interval import Interval, _as_interval
+from verified.taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
                      T_PARAM, T_SIN, T_SQR, T_SQRT, T_SUB, T_TAN, _Tape)
 
 __all__ = ["AffineTaylorODE", "affine_range", "forms_to_interval", "box_forms"]

@@ -45,11 +45,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hooks import Hook, caps_from
-from .interval import Interval, concatenate
-from .methods import Auto, Composition, Lohner, Method
-from .solution import Failure, Solution, Start
-from .time_chain import chain_in_time
+from verified.hooks import Hook, caps_from
+from verified.arith.interval import Interval, concatenate
+from verified.methods import Auto, Composition, Lohner, Method
+from verified.solution import Failure, Solution, Start
+from verified.time_chain import chain_in_time
 
 __all__ = ["solve_auto", "default_rungs", "split_boxes", "split_pieces", "influences", "COMPOSITION_MAX_STATES"]
 
@@ -224,7 +224,7 @@ def switch_start(failure: Failure, method: Method) -> Start:
     failed attempt's own sets where ``method`` advances sets of that kind, else their
     hull boxes as ``method``'s initial sets (a box holds every point of the sets it is
     the hull of; the correlation between the sets' components is lost)."""
-    from .set_kinds import set_kind
+    from verified.set_kinds import set_kind
 
     st = method.settings()
     kind = set_kind(st.get("set_order", 1), st.get("set_step", "mean_value"))
@@ -268,8 +268,8 @@ def solve_auto(solve, ode, x0, t_span, *, method: Auto, params=None, t_eval=None
     execution), the same for every attempt. With ``method.target_ratio``, the ladder is
     repeated on split pieces while its final enclosure is wider than that ratio times
     the sampled spread (:func:`sampled_spread`)."""
-    from .batch import VerifiedODE
-    from .solver_args import check_graph, check_params, initial_boxes
+    from verified.batch import VerifiedODE
+    from verified.solver_args import check_graph, check_params, initial_boxes
 
     wall0 = time.perf_counter()
     graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
@@ -353,7 +353,7 @@ class _StepEnds(Hook):
         self.worst, self.steps = -np.inf, 0
 
     def after_step(self, step, sets, run):
-        from .spec import tube_excess
+        from verified.spec import tube_excess
         e = tube_excess(sets.hull()[:, :self.n], self.lo, self.hi)
         self.worst = max(self.worst, float(np.max(e)) if e.size else -np.inf)
         self.steps += 1
@@ -373,7 +373,7 @@ class _Group:
 
 
 def _group_excess(sol, lo, hi, t0, t1) -> float:
-    from .spec import check_tube
+    from verified.spec import check_tube
     c = check_tube(sol, lo, hi, t0, t1, [f"x{i}" for i in range(lo.size)])
     return c.worst if sol.status == "completed" else np.inf
 
@@ -384,7 +384,7 @@ def _piece_excess(sol, k: int, lo, hi, pieces: Interval):
     the worst excess of its tube boxes over the bounds (k,); None where the rows cannot
     be told apart (merged attempts, chunks, adaptive splitting, pruning). (Soundness
     rests on it: the pieces kept and the pieces split must be told apart exactly.)"""
-    from .spec import tube_excess
+    from verified.spec import tube_excess
     if sol.status != "completed" or len(sol.method_log or ()) != 1 or not sol.tube or sol.chunks is not None:
         return None
     if any(b.shape[0] != k for b in sol.tube) or any(b.shape[0] != k for b in sol.boxes):
@@ -399,7 +399,7 @@ def _piece_excess(sol, k: int, lo, hi, pieces: Interval):
 def _restrict(sol, keep: np.ndarray):
     """``sol`` with the boxes of the pieces ``keep`` (bool (k,)) only (one box per piece
     at every output and step: :func:`_piece_excess`)."""
-    from .batch import _restricted
+    from verified.batch import _restricted
     k = keep.size
     ident = np.arange(k)
     out = _restricted(sol, keep, [ident] * len(sol.boxes), [ident] * len(sol.tube))
@@ -426,7 +426,7 @@ def sampled_violation(graph, boxes: Interval, params, t0: float, t1: float, lo, 
     :data:`SAMPLE_SLACK`; never a proof. None where the integration fails."""
     from scipy.integrate import solve_ivp
 
-    from .spec import tube_excess
+    from verified.spec import tube_excess
 
     rng = np.random.default_rng(seed)
     n = graph.n_inputs
@@ -494,8 +494,8 @@ def _prove_spec(solve, ode, graph, boxes, pv, t_span, method: Auto, kw: dict, so
     union of the groups of pieces (:func:`verified.parallel.merge_solutions`), its spec
     judged on its own tube (:func:`verified.spec.check_tube`). Sampled trajectories that
     leave the bounds (:func:`sampled_violation`) make the spec "false" and stop it."""
-    from .parallel import merge_solutions
-    from .spec import FALSE, check_tube, describe, tube_excess
+    from verified.parallel import merge_solutions
+    from verified.spec import FALSE, check_tube, describe, tube_excess
 
     n = graph.n_inputs
     names = tuple(graph.input_names[:n])
@@ -788,8 +788,8 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
     """One pass of the ladder from ``boxes`` (module docstring): (the Solution, the
     pieces it ended with (k, n), their parameters: ``pv`` as given, or rows (k, p)
     where splitting gave the parts their own)."""
-    from .parallel import merge_solutions
-    from .solver_args import check_settings
+    from verified.parallel import merge_solutions
+    from verified.solver_args import check_settings
 
     n = graph.n_inputs
     t0, t1, outs, _ = check_settings(

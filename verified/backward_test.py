@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .interval import Interval
+from verified.arith.interval import Interval
 
 __all__ = ["backward_test"]
 

@@ -29,22 +29,22 @@ from functools import partial
 
 import numpy as np
 
-from .affine_taylor import AffineTaylorODE
-from .exact import enclose_fraction
-from .graph import Graph
-from .hooks import ProgressHook, RunSetup, check_hooks
-from .interval import Interval, concatenate, hull, stack_hulls
-from .linalg import SingularMatrixError
-from .lohner import LohnerStepper
-from .policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
-from .set_kinds import SetKind, set_kind
-from .quadratic import QuadraticSets
-from .sets import DoubletonSets, SetView, set_view
-from .solution import Failure, PieceResult, Solution, Start, pieces_summary
-from .solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
-from .taylor import TaylorODE
-from .taylor_model import TaylorModelODE
-from .variational import params_as_states, second_variational_graph, variational_graph
+from verified.affine_taylor import AffineTaylorODE
+from verified.arith.exact import enclose_fraction
+from verified.graph import Graph
+from verified.hooks import ProgressHook, RunSetup, check_hooks
+from verified.arith.interval import Interval, concatenate, hull, stack_hulls
+from verified.arith.linalg import SingularMatrixError
+from verified.lohner import LohnerStepper
+from verified.policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
+from verified.set_kinds import SetKind, set_kind
+from verified.quadratic import QuadraticSets
+from verified.sets import DoubletonSets, SetView, set_view
+from verified.solution import Failure, PieceResult, Solution, Start, pieces_summary
+from verified.solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+from verified.taylor import TaylorODE
+from verified.taylor_model import TaylorModelODE
+from verified.variational import params_as_states, second_variational_graph, variational_graph
 
 __all__ = ["solve_batch", "VerifiedODE", "MODEL_CAPS"]
 

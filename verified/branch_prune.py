@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import linalg
-from .interval import Interval, concatenate, point
+from verified.arith import linalg
+from verified.arith.interval import Interval, concatenate, point
 
 __all__ = ["STRATEGIES", "PruneResult", "branch_and_prune", "checks", "inconsistent", "largest_consistent_subtrees",
            "pick", "worth_refining"]

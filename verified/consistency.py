@@ -54,19 +54,19 @@ from dataclasses import replace
 
 import numpy as np
 
-from .backward_test import backward_test
-from .branch_prune import STRATEGIES, branch_and_prune
-from .consistency_graphs import (Constraint, EnergyClaimError, EnergyClaimWarning, lift_graphs, prove_energy_rate,
+from verified.backward_test import backward_test
+from verified.branch_prune import STRATEGIES, branch_and_prune
+from verified.consistency_graphs import (Constraint, EnergyClaimError, EnergyClaimWarning, lift_graphs, prove_energy_rate,
                                  refute_claim)
-from .energy_contraction import EnergyContraction
-from .energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
-from .energy_state import assign, initial_sets, reset_h
-from .graph import Graph
-from .graph_ops import negated
-from .hooks import Hook
-from .interval import Interval, concatenate, hull, point
-from .reduction_area import ConsistencyRecord, ReductionArea, TestRecord
-from .sets import DoubletonSets
+from verified.energy_contraction import EnergyContraction
+from verified.energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
+from verified.energy_state import assign, initial_sets, reset_h
+from verified.graph import Graph
+from verified.graph_ops import negated
+from verified.hooks import Hook
+from verified.arith.interval import Interval, concatenate, hull, point
+from verified.reduction_area import ConsistencyRecord, ReductionArea, TestRecord
+from verified.sets import DoubletonSets
 
 __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES", "EnergyClaimError",
            "EnergyClaimWarning", "prove_energy_rate"]

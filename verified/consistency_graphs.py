@@ -36,9 +36,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .graph import Graph, GraphBuilder
-from .graph_ops import augment_with_rate, difference, embed, rate_along
-from .interval import Interval, concatenate, point
+from verified.graph import Graph, GraphBuilder
+from verified.graph_ops import augment_with_rate, difference, embed, rate_along
+from verified.arith.interval import Interval, concatenate, point
 
 __all__ = ["ClaimProof", "Constraint", "EnergyClaimError", "EnergyClaimWarning", "LiftedGraphs", "PROOF_MAX_NODES",
            "PROOF_MAX_TERMS", "claim_graph", "lift_graphs", "prove_claim", "prove_energy_rate", "refute_claim"]
@@ -97,7 +97,7 @@ def _exact_domain():
     """
     import sympy
 
-    from .evaluate import Domain
+    from verified.evaluate import Domain
 
     class ExactDomain(Domain):
         def __init__(self):
@@ -274,7 +274,7 @@ def _prove_claim(claim: Graph, max_terms: int) -> ClaimProof:
     # (import here: sympy, ~0.4 s, only for this symbolic proof)
     import sympy
 
-    from .evaluate import evaluate
+    from verified.evaluate import evaluate
     try:
         domain = _exact_domain()
         xs = sympy.symbols(f"_x0:{claim.n_inputs}", real=True)

@@ -20,7 +20,7 @@ satisfy. The contractor never needs that a projection be exact: where an inverse
 hard (periodic functions over many periods, tan across a pole) or an op is unknown
 (e.g. ``MID``), the argument is left unchanged, which is always sound.
 
-Rounding: projections use the outward-rounded operations of :mod:`verified.interval`.
+Rounding: projections use the outward-rounded operations of :mod:`verified.arith.interval`.
 Where an inverse function has no rigorous interval version here (``asin``, ``acos``,
 integer roots, ``tan`` of a branch), a float candidate is computed and *verified* by a
 forward interval evaluation at that point before it is used; a candidate that cannot be
@@ -33,13 +33,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import interval as iv
-from . import linalg
-from .evaluate import IntervalDomain, eval_interval, jacobian_interval
-from .exact import pi_multiple_enclosure
-from .graph import Graph, GraphBuilder, Op
-from .graph_ops import embed
-from .interval import Interval
+from verified.arith import interval as iv
+from verified.arith import linalg
+from verified.evaluate import IntervalDomain, eval_interval, jacobian_interval
+from verified.arith.exact import pi_multiple_enclosure
+from verified.graph import Graph, GraphBuilder, Op
+from verified.graph_ops import embed
+from verified.arith.interval import Interval
 
 __all__ = [
     "ContractResult",

@@ -28,13 +28,13 @@ import warnings
 
 import numpy as np
 
-from .consistency_graphs import EnergyClaimWarning
-from .hooks import Hook, caps_from
-from .interval import matvec
-from .quadratic import QuadraticSets
-from .sets import DoubletonSets
-from .solution import Start
-from .time_chain import chain_in_time
+from verified.consistency_graphs import EnergyClaimWarning
+from verified.hooks import Hook, caps_from
+from verified.arith.interval import matvec
+from verified.quadratic import QuadraticSets
+from verified.sets import DoubletonSets
+from verified.solution import Start
+from verified.time_chain import chain_in_time
 
 __all__ = ["solve_with_cadence", "drop_appended", "PauseAt", "FIRST_OFF_TESTS", "PROBE_TESTS"]
 

@@ -45,12 +45,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import linalg
-from .contractor import contract_linear_row, mean_value_row
-from .graph import Graph
-from .interval import Interval
-from .quadratic import QuadraticSets
-from .sets import DoubletonSets
+from verified.arith import linalg
+from verified.contractor import contract_linear_row, mean_value_row
+from verified.graph import Graph
+from verified.arith.interval import Interval
+from verified.quadratic import QuadraticSets
+from verified.sets import DoubletonSets
 
 __all__ = ["EnergyContraction", "ContractionResult", "recentre"]
 

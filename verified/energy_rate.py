@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import warnings
 
-from .graph import Graph
+from verified.graph import Graph
 
 __all__ = ["DEPRECATED", "ENERGY_RATES", "MODEL_RATES", "SYSTEM_RATES", "check_energy_rate", "deprecated"]
 

@@ -31,13 +31,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .contractor import EnergyShell
-from .evaluate import eval_interval
-from .graph import Graph
-from .hooks import Hook, RunSetup
-from .interval import Interval
-from .quadratic import QuadraticSets
-from .sets import DoubletonSets
+from verified.contractor import EnergyShell
+from verified.evaluate import eval_interval
+from verified.graph import Graph
+from verified.hooks import Hook, RunSetup
+from verified.arith.interval import Interval
+from verified.quadratic import QuadraticSets
+from verified.sets import DoubletonSets
 
 __all__ = ["EnergyShellHook", "max_energy"]
 

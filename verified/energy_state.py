@@ -15,9 +15,9 @@ from dataclasses import fields
 
 import numpy as np
 
-from . import linalg
-from .interval import Interval, concatenate, point
-from .sets import DoubletonSets
+from verified.arith import linalg
+from verified.arith.interval import Interval, concatenate, point
+from verified.sets import DoubletonSets
 
 __all__ = ["assign", "initial_sets", "reset_h"]
 

@@ -11,7 +11,7 @@ Domain subclass.
 Domains here:
 
 * :class:`FloatDomain`     -- float64 ndarrays of the batch shape.
-* :class:`IntervalDomain`  -- :class:`verified.interval.Interval` of the batch shape.
+* :class:`IntervalDomain`  -- :class:`verified.arith.interval.Interval` of the batch shape.
 * :class:`DualDomain`      -- forward-mode derivatives over any base domain: a value is
   a pair ``(v, d)`` with ``v`` of the batch shape and ``d`` of batch shape + ``(k,)``
   (``None`` when the node does not depend on the differentiation variables).
@@ -24,12 +24,12 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from . import interval as _interval
-from .forward_rules import RULES, Algebra
-from .opcodes import Op
+from verified.arith import interval as _interval
+from verified.forward_rules import RULES, Algebra
+from verified.opcodes import Op
 
 if TYPE_CHECKING:  # (annotations only: verified.ir imports this module)
-    from .ir import Graph
+    from verified.ir import Graph
 
 __all__ = [
     "Domain",
@@ -217,7 +217,7 @@ def _iv():
 
 
 class IntervalDomain(Domain):
-    """:class:`verified.interval.Interval` values; constants are their enclosures.
+    """:class:`verified.arith.interval.Interval` values; constants are their enclosures.
 
     Every method is outward rounded by the Interval implementation, so each node's
     value encloses the exact value for every point of the input boxes.

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from .opcodes import Op
+from verified.opcodes import Op
 
 __all__ = ["compile_float", "FloatFunction"]
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from typing import Callable, NamedTuple
 
-from .opcodes import Op
+from verified.opcodes import Op
 
 __all__ = ["Rule", "RULES", "Algebra", "VALUE_OPS"]
 

@@ -31,9 +31,9 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from .ir import FORMAT_NAME, FORMAT_VERSION, Graph, GraphBuilder, enclose_approximation, enclose_rational
-from .opcodes import BINARY_OPS, COMMUTATIVE_OPS, LEAF_OPS, UNARY_OPS, Node, Op
-from .tracer import Tracer, trace
+from verified.ir import FORMAT_NAME, FORMAT_VERSION, Graph, GraphBuilder, enclose_approximation, enclose_rational
+from verified.opcodes import BINARY_OPS, COMMUTATIVE_OPS, LEAF_OPS, UNARY_OPS, Node, Op
+from verified.tracer import Tracer, trace
 
 __all__ = [
     "Op",
@@ -71,6 +71,6 @@ def from_sympy(exprs, inputs, params=(), *, cse: bool = True, output_names: Sequ
     :mod:`verified.graph_sympy`.
     """
     # (import here: sympy, ~0.4 s, only for sympy input; verified.graph_sympy does not import this module)
-    from .graph_sympy import from_sympy as _from_sympy
+    from verified.graph_sympy import from_sympy as _from_sympy
 
     return _from_sympy(exprs, inputs, params, cse=cse, output_names=output_names)

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from .forward_rules import RULES, Algebra
-from .graph import Graph, GraphBuilder, Op
+from verified.forward_rules import RULES, Algebra
+from verified.graph import Graph, GraphBuilder, Op
 
 __all__ = ["embed", "forward_mode", "rate_along", "augment_with_rate", "negated", "difference"]
 

@@ -11,7 +11,7 @@
 * ``sin cos tan atan exp log``.
 * Numbers: ``Integer``/``Rational``/``Float`` are exact rationals, enclosed outward
   (exact when a double); rational multiples of ``pi`` are enclosed by
-  :func:`verified.exact.pi_multiple_enclosure`; ``E`` and other ``NumberSymbol`` are
+  :func:`verified.arith.exact.pi_multiple_enclosure`; ``E`` and other ``NumberSymbol`` are
   evaluated at 40 digits and enclosed by stepping outward.
 
 Anything else raises ``NotImplementedError`` (unsupported operation) or ``ValueError``
@@ -24,9 +24,9 @@ from typing import Sequence
 
 import sympy
 
-from .evaluate import to_sympy
-from .exact import enclose_approximation, pi_multiple_enclosure
-from .ir import Graph, GraphBuilder, enclose_rational
+from verified.evaluate import to_sympy
+from verified.arith.exact import enclose_approximation, pi_multiple_enclosure
+from verified.ir import Graph, GraphBuilder, enclose_rational
 
 __all__ = ["from_sympy", "graph_to_sympy", "sympy_constant_enclosure", "sympy_number_node"]
 
@@ -39,7 +39,7 @@ def sympy_constant_enclosure(c) -> tuple[float, float, float]:
     """``(lo, hi, value)`` with ``lo <= c <= hi`` for a real sympy number atom.
 
     Rationals and Floats are exact rationals (a sympy Float is a binary number);
-    rational multiples of pi are enclosed by :func:`verified.exact.pi_multiple_enclosure`
+    rational multiples of pi are enclosed by :func:`verified.arith.exact.pi_multiple_enclosure`
     (the tightest doubles); other NumberSymbols (E, ...) and products go through a
     40-digit evalf.
     """
@@ -50,7 +50,7 @@ def sympy_constant_enclosure(c) -> tuple[float, float, float]:
         return enclose_rational(Fraction(int(p), int(q)))
     if _is_constant_product(c) and c.is_real:
         q = c / sympy.pi
-        if q.is_Rational:  # a rational multiple of pi: exactly, by verified.exact
+        if q.is_Rational:  # a rational multiple of pi: exactly, by verified.arith.exact
             return pi_multiple_enclosure(0, Fraction(int(q.p), int(q.q)))
         approx = sympy.Rational(c.evalf(_DIGITS))
         p, q = approx.as_numer_denom()

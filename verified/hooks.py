@@ -43,8 +43,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Protocol, runtime_checkable
 
 if TYPE_CHECKING:  # annotations only
-    from .graph import Graph
-    from .interval import Interval
+    from verified.graph import Graph
+    from verified.arith.interval import Interval
 
 __all__ = ["RunSetup", "RunControl", "SolverHook", "Hook", "StopAfterWall", "ProgressHook", "check_hooks"]
 

@@ -54,15 +54,15 @@ import itertools
 
 import numpy as np
 
-from . import interval as iv
-from . import linalg
-from .evaluate import eval_float, eval_interval, jacobian_float, jacobian_interval
-from .contractor import mean_value_row
-from .graph import Graph, GraphBuilder
-from .graph_ops import embed, gradient_graph, params_to_inputs
-from .hooks import Hook
-from .interval import Interval, concatenate
-from .sets import DoubletonSets
+from verified.arith import interval as iv
+from verified.arith import linalg
+from verified.evaluate import eval_float, eval_interval, jacobian_float, jacobian_interval
+from verified.contractor import mean_value_row
+from verified.graph import Graph, GraphBuilder
+from verified.graph_ops import embed, gradient_graph, params_to_inputs
+from verified.hooks import Hook
+from verified.arith.interval import Interval, concatenate
+from verified.sets import DoubletonSets
 
 __all__ = ["QuadraticLyapunov", "InvariantBoxes", "InvariantHook"]
 

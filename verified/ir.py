@@ -23,9 +23,9 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from . import evaluate as _evaluate
-from .exact import enclose_approximation, enclose_fraction
-from .opcodes import _ARITY, _BY_NAME, LEAF_OPS, Node, Op
+from verified import evaluate as _evaluate
+from verified.arith.exact import enclose_approximation, enclose_fraction
+from verified.opcodes import _ARITY, _BY_NAME, LEAF_OPS, Node, Op
 
 __all__ = ["Graph", "GraphBuilder", "enclose_rational", "enclose_approximation"]
 

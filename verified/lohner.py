@@ -34,12 +34,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _kernels as _k
-from . import linalg
-from .interval import Interval, concatenate, point
-from .policies import error_basis_policy, orthonormal_basis
-from .sets import DoubletonSets  # (its home is verified.sets; re-exported here for old imports)
-from .stepper import StepResult
+from verified.arith import _kernels as _k
+from verified.arith import linalg
+from verified.arith.interval import Interval, concatenate, point
+from verified.policies import error_basis_policy, orthonormal_basis
+from verified.sets import DoubletonSets  # (its home is verified.sets; re-exported here for old imports)
+from verified.stepper import StepResult
 
 __all__ = ["LohnerStepper", "DoubletonSets", "StepResult", "horner"]
 
@@ -49,7 +49,7 @@ def horner(coeffs: Interval, h) -> Interval:
 
     Each ``acc * h + coeffs[:, i]`` is rounded outward as the interval operators round
     it; for a scalar ``h`` the sums run in one compiled pass
-    (:func:`verified._kernels.horner_loop`), with the same bounds bit for bit."""
+    (:func:`verified.arith._kernels.horner_loop`), with the same bounds bit for bit."""
     if isinstance(h, Interval):
         if h.size != 1:
             return _horner_python(coeffs, h)

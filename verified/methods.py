@@ -28,7 +28,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .solver_args import (ARITHMETICS, ERROR_BASES, MAX_ORDER, check_model_cap, check_params_per_state)
+from verified.solver_args import (ARITHMETICS, ERROR_BASES, MAX_ORDER, check_model_cap, check_params_per_state)
 
 __all__ = ["Method", "Lohner", "SecondOrder", "Composition", "Auto", "METHODS", "as_method", "METHOD_FIELDS"]
 
@@ -210,7 +210,7 @@ class Composition(Method):
         if self.model_caps is not None:
             if not isinstance(self.model_caps, dict):
                 raise ValueError(f"{self.name}: model_caps must be None or a dict, got {self.model_caps!r}")
-            from .batch import MODEL_CAPS  # (the keys the composition stepper knows)
+            from verified.batch import MODEL_CAPS  # (the keys the composition stepper knows)
             for k, v in self.model_caps.items():
                 if k not in MODEL_CAPS:
                     raise ValueError(f"{self.name}: model_caps: unknown key {k!r} (known: {', '.join(MODEL_CAPS)})")
@@ -277,7 +277,7 @@ class Auto(Method):
         if self.target_ratio is not None and not (_positive("auto: target_ratio", self.target_ratio) > 1):
             raise ValueError(f"auto: target_ratio must be None or a number > 1, got {self.target_ratio!r}")
         if self.spec is not None:
-            from .spec import as_spec
+            from verified.spec import as_spec
             try:
                 object.__setattr__(self, "spec", as_spec(self.spec))
             except ValueError as e:

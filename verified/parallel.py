@@ -176,11 +176,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .hooks import Hook, StopAfterWall
-from .interval import Interval, concatenate, hull, stack
-from .batch import VerifiedODE, solve_batch
-from .solution import PieceResult, Solution, Start, pieces_summary
-from .solver_args import _subdivision, check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+from verified.hooks import Hook, StopAfterWall
+from verified.arith.interval import Interval, concatenate, hull, stack
+from verified.batch import VerifiedODE, solve_batch
+from verified.solution import PieceResult, Solution, Start, pieces_summary
+from verified.solver_args import _subdivision, check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "auto_workers", "subprocess_workers_supported", "SchedulerError",
@@ -1705,7 +1705,7 @@ def _merge_records(records):
     if len(records) == 1:
         return records[0]
     # (only with a consistency test: verified.consistency costs ~0.2 s to import)
-    from .consistency import ConsistencyRecord
+    from verified.consistency import ConsistencyRecord
     tests = sorted((t for r in records for t in r.tests), key=lambda t: t.t)
     series = [r for r in records if len(r.ra_t)]
     if not series:

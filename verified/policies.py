@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import linalg
-from .interval import Interval, hull, point
+from verified.arith import linalg
+from verified.arith.interval import Interval, hull, point
 
 __all__ = ["QRBasis", "AutoBasis", "EnergyAlignedBasis", "BlockBasis", "error_basis_policy", "StepControl", "Validated", "WrapControl",
            "SplitPolicy", "MergePolicy", "REMAINDER_SLACK", "LANDING_STRETCH"]

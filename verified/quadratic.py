@@ -50,13 +50,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import linalg
-from .interval import Interval, concatenate, point, sqr
-from .lohner import LohnerStepper, horner
-from .policies import orthonormal_basis, scaled_basis
-from .sets import DoubletonSets, parameter_cuts
-from .stepper import StepResult
-from .variational import pair_index
+from verified.arith import linalg
+from verified.arith.interval import Interval, concatenate, point, sqr
+from verified.lohner import LohnerStepper, horner
+from verified.policies import orthonormal_basis, scaled_basis
+from verified.sets import DoubletonSets, parameter_cuts
+from verified.stepper import StepResult
+from verified.variational import pair_index
 
 __all__ = ["QuadraticSets", "QuadraticStepper", "quadratic_range"]
 

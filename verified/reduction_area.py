@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .interval import Interval, concatenate, hull
+from verified.arith.interval import Interval, concatenate, hull
 
 __all__ = ["ConsistencyRecord", "ReductionArea", "TestRecord"]
 

@@ -23,10 +23,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from .lohner import LohnerStepper
-from .quadratic import QuadraticSets, QuadraticStepper
-from .sets import DoubletonSets
-from .tm_flow import TaylorModelFlowStepper
+from verified.lohner import LohnerStepper
+from verified.quadratic import QuadraticSets, QuadraticStepper
+from verified.sets import DoubletonSets
+from verified.tm_flow import TaylorModelFlowStepper
 
 __all__ = ["SetKind", "SET_KINDS", "set_kind", "set_kind_names"]
 

@@ -17,9 +17,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from . import linalg
-from .interval import Interval, concatenate, point
-from .policies import orthonormal_basis
+from verified.arith import linalg
+from verified.arith.interval import Interval, concatenate, point
+from verified.policies import orthonormal_basis
 
 __all__ = ["SetBatch", "DoubletonSets", "SetView", "set_view"]
 

@@ -41,11 +41,11 @@ import itertools
 
 import numpy as np
 
-from . import interval as iv
-from .contractor import EnergyShell
-from .evaluate import eval_interval, jacobian_interval
-from .interval import Interval
-from .solution import Solution
+from verified.arith import interval as iv
+from verified.contractor import EnergyShell
+from verified.evaluate import eval_interval, jacobian_interval
+from verified.arith.interval import Interval
+from verified.solution import Solution
 
 __all__ = ["continue_in_shell", "min_value", "speed_bound"]
 

@@ -11,7 +11,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from .interval import Interval
+from verified.arith.interval import Interval
 
 __all__ = ["Solution", "Start", "PieceResult", "Failure", "pieces_summary"]
 

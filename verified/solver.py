@@ -40,12 +40,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .auto import solve_auto
-from .batch import MODEL_CAPS, VerifiedODE, solve_batch
-from .interval import Interval
-from .methods import METHOD_FIELDS, METHODS, Auto, as_method, from_settings
-from .parallel import auto_workers, solve_parallel
-from .solution import Solution, Start
+from verified.auto import solve_auto
+from verified.batch import MODEL_CAPS, VerifiedODE, solve_batch
+from verified.arith.interval import Interval
+from verified.methods import METHOD_FIELDS, METHODS, Auto, as_method, from_settings
+from verified.parallel import auto_workers, solve_parallel
+from verified.solution import Solution, Start
 
 # (Solution, Start, VerifiedODE and MODEL_CAPS live in verified.solution and
 # verified.batch; importable from here as before)
@@ -228,9 +228,9 @@ def solve(
 def _with_invariants(ode, invariants, hooks) -> list:
     """``hooks`` with the :class:`verified.conservation.InvariantHook` of ``invariants``
     first (the declarations checked and proven against the ODE here, before any work)."""
-    from .conservation import invariant_hook
-    from .hooks import check_hooks
-    from .solver_args import check_graph
+    from verified.conservation import invariant_hook
+    from verified.hooks import check_hooks
+    from verified.solver_args import check_graph
 
     graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
     hook = invariant_hook(invariants, graph)
@@ -326,8 +326,8 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
     if start is None and getattr(consistency, "can_suspend", None) is not None and (
             params is None or not isinstance(params, Interval) or params.ndim == 1):
         # an energy test that may be suspended while idle (verified.energy_cadence)
-        from .energy_cadence import solve_with_cadence
-        from .solver_args import check_graph
+        from verified.energy_cadence import solve_with_cadence
+        from verified.solver_args import check_graph
 
         n_state = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode).n_inputs
         carried = params.shape[-1] if isinstance(params, Interval) and bool(np.any(params.width() > 0)) else 0

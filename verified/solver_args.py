@@ -14,8 +14,8 @@ import numbers
 
 import numpy as np
 
-from .graph import Graph
-from .interval import Interval, _as_interval, concatenate
+from verified.graph import Graph
+from verified.arith.interval import Interval, _as_interval, concatenate
 
 __all__ = ["check_graph", "check_settings", "initial_boxes", "check_params", "check_arithmetic",
            "check_params_per_state", "check_model_cap", "ERROR_BASES", "ARITHMETICS", "MAX_ORDER", "MAX_STEPS",

@@ -17,8 +17,8 @@ from typing import Protocol
 
 import numpy as np
 
-from .exact import enclose_fraction
-from .interval import Interval
+from verified.arith.exact import enclose_fraction
+from verified.arith.interval import Interval
 
 __all__ = ["StepResult", "Stepper"]
 

@@ -18,7 +18,7 @@ node with the classical recurrences (Moore 1966; Griewank & Walther, ch. 13):
 
 The graph is flattened once into a *tape* of integer arrays, and one compiled (numba)
 interpreter runs any tape, so no model needs compiling of its own. Every arithmetic
-step is an outward-rounded interval operation from :mod:`verified._kernels`.
+step is an outward-rounded interval operation from :mod:`verified.arith._kernels`.
 """
 
 from __future__ import annotations
@@ -28,9 +28,9 @@ import math
 import numpy as np
 from numba import njit
 
-from . import _kernels as _k
-from .graph import Graph, Op
-from .interval import Interval, _as_interval
+from verified.arith import _kernels as _k
+from verified.graph import Graph, Op
+from verified.arith.interval import Interval, _as_interval
 
 __all__ = ["TaylorODE"]
 

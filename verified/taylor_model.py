@@ -70,11 +70,11 @@ import os
 import numpy as np
 from numba import njit
 
-from . import _kernels as _k
-from .affine_taylor import _U, _UPF, _TINY, _deriv, _pm, _up, _value, _wide_symbol_forms, box_forms
-from .interval import Interval, _as_interval
-from .linalg import upper_pairs
-from .taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
+from verified.arith import _kernels as _k
+from verified.affine_taylor import _U, _UPF, _TINY, _deriv, _pm, _up, _value, _wide_symbol_forms, box_forms
+from verified.arith.interval import Interval, _as_interval
+from verified.arith.linalg import upper_pairs
+from verified.taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
                      T_PARAM, T_SIN, T_SQR, T_SQRT, T_SUB, T_TAN, _Tape)
 
 __all__ = ["TaylorModelODE", "model_length", "forms_to_models", "models_to_interval", "product_table",

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .interval import Interval, stack_hulls
-from .solution import Solution
+from verified.arith.interval import Interval, stack_hulls
+from verified.solution import Solution
 
 __all__ = ["chain_in_time", "records_in_time"]
 
@@ -94,7 +94,7 @@ def records_in_time(records):
         return None
     if len(records) == 1:
         return records[0]
-    from .reduction_area import ConsistencyRecord
+    from verified.reduction_area import ConsistencyRecord
 
     def series(name):
         vals = [getattr(r, name) for r in records]

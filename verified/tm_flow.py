@@ -77,15 +77,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from . import linalg
-from .affine_taylor import box_forms
-from .interval import Interval, _k_round_up, point
-from .lohner import LohnerStepper, _inflate
-from .policies import REMAINDER_SLACK
-from .quadratic import QuadraticSets
-from .sets import SetView
-from .stepper import StepResult
-from .taylor_model import (_acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length,
+from verified.arith import linalg
+from verified.affine_taylor import box_forms
+from verified.arith.interval import Interval, _k_round_up, point
+from verified.lohner import LohnerStepper, _inflate
+from verified.policies import REMAINDER_SLACK
+from verified.quadratic import QuadraticSets
+from verified.sets import SetView
+from verified.stepper import StepResult
+from verified.taylor_model import (_acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length,
                            models_to_interval, star_base)
 
 __all__ = ["TaylorModelFlowStepper", "set_models", "ModelCaps", "tube_view", "tube_coefficients", "step_tube"]

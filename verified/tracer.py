@@ -1,7 +1,7 @@
 """Tracing front end: run model code on :class:`Tracer` scalars to record a :class:`Graph`.
 
 This is the "generic scalar" protocol: model code such as ``np.sin(q) * l + m * x``
-runs unchanged on floats, numpy arrays, :class:`verified.interval.Interval` and
+runs unchanged on floats, numpy arrays, :class:`verified.arith.interval.Interval` and
 :class:`Tracer`. A Tracer supports ``+ - * /``, unary ``-``, ``**`` with integer (or
 half-integer) exponents, mixing with Python ``int``/``float``/``Fraction`` and numpy
 scalars, and the numpy ufuncs listed in :data:`SUPPORTED_UFUNCS`. Object arrays of
@@ -10,7 +10,7 @@ Tracers work too (numpy calls the operators / ``.sin()`` ... methods per element
 Python floats in traced code are exact constants (the double itself); ints and
 Fractions are enclosed outward when they are not doubles. Irrational constants can be
 given as sympy numbers (``sympy.pi / 3``, ``sympy.sqrt(2)``: converted like
-:func:`~verified.graph.from_sympy` does) or as a 0-d :class:`~verified.interval.Interval` enclosing
+:func:`~verified.graph.from_sympy` does) or as a 0-d :class:`~verified.arith.interval.Interval` enclosing
 them; both become rigorous constant enclosures. (A float such as ``math.pi`` is taken
 as the exact double, which is *not* pi.)
 
@@ -25,7 +25,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .ir import Graph, GraphBuilder
+from verified.ir import Graph, GraphBuilder
 
 __all__ = ["Tracer", "trace", "SUPPORTED_UFUNCS"]
 
@@ -287,13 +287,13 @@ def _lift(builder: GraphBuilder, value) -> int:
         return builder.const(value)
     if isinstance(value, (float, np.float64, np.float32, np.float16)):
         return builder.const(float(value))
-    interval_mod = sys.modules.get("verified.interval")
+    interval_mod = sys.modules.get("verified.arith.interval")
     if interval_mod is not None and isinstance(value, interval_mod.Interval) and value.ndim == 0:
         # an enclosure of a constant (e.g. of pi) used in generic model code
         lo, hi = float(value.lo), float(value.hi)
         return builder.const_enclosure(lo, hi, lo if lo == hi else 0.5 * lo + 0.5 * hi)
     if type(value).__module__.startswith("sympy"):
-        from .graph_sympy import sympy_number_node  # (import here: sympy only for sympy numbers)
+        from verified.graph_sympy import sympy_number_node  # (import here: sympy only for sympy numbers)
 
         return sympy_number_node(builder, value)
     raise TypeError(f"cannot use {type(value).__name__} {value!r} in a traced expression")

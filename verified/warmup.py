@@ -51,11 +51,11 @@ def compile_kernels(log=None, families=None) -> float:
         raise ValueError(f"unknown kernel families {unknown}; known: {', '.join(FAMILIES)}")
     # (import here: the solver and the kernels (~1.5 s) only in the process that compiles;
     # mbs.app.demo imports this module to start that process)
-    from . import interval as iv, linalg
-    from .affine_taylor import AffineTaylorODE, affine_range, box_forms
-    from .interval import Interval, point
-    from .solver import solve
-    from .tracer import trace
+    from verified.arith import interval as iv, linalg
+    from verified.affine_taylor import AffineTaylorODE, affine_range, box_forms
+    from verified.arith.interval import Interval, point
+    from verified.solver import solve
+    from verified.tracer import trace
 
     t0 = time.perf_counter()
 

@@ -64,7 +64,7 @@ import numpy as np
 
 from verified.graph import trace
 from verified.hooks import StopAfterWall
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 #: Laub-Loomis' coefficient of x2 x7 in x7' (JuliaReach's file: 1.6; Ariadne, Flow*: 1.5)
 LL_C7 = 1.6

@@ -35,7 +35,7 @@ import numpy as np
 
 from models import double_pendulum as dp
 from models.registry import get as get_model
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 from ..modes import MODES, get_mode
 from ..simulate import simulate

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from verified.interval import Interval, hull
+from verified.arith.interval import Interval, hull
 
 from ..modes import MODE_I, MODE_II, MODE_III
 

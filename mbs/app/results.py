@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 __all__ = ["ResultError", "solution_to_dict", "write_result", "read_result", "bound_to_json",
            "bound_from_json", "result_boxes", "frame_to_json", "tightness", "format_tightness"]

@@ -16,7 +16,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 import numpy as np
 
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.parallel import (SchedulerError, connect, dask_available, default_workers, interrupt_runs,
                                local_client)
 from verified.warmup import finish_background, start_in_background

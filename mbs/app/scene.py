@@ -115,8 +115,8 @@ import numpy as np
 import models
 from models.registry import NAMES, SYSTEMS
 from verified.energy_rate import MODEL_RATES
-from verified.exact import ExpressionError, enclose_fraction, enclose_pi_multiple, parse_pi_expression
-from verified.interval import Interval
+from verified.arith.exact import ExpressionError, enclose_fraction, enclose_pi_multiple, parse_pi_expression
+from verified.arith.interval import Interval
 
 from ..dh import chain_from_dh
 from ..urdf import chain_from_urdf

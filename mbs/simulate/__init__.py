@@ -14,7 +14,7 @@ Example::
 
     from mbs.simulate import simulate, compare_modes
     from models import double_pendulum as dp
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     sol = simulate("double_pendulum_paper", Interval(*dp.initial_box()), 1.0, mode="iii")
     sol.hull[-1], sol.consistency.tests, sol.stats["pruned_boxes"]
 

@@ -15,7 +15,7 @@ from verified.contractor import EnergyShell
 from verified.energy_shell import EnergyShellHook, max_energy
 from verified.graph import Graph
 from verified.hooks import StopAfterWall
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.invariant import InvariantHook
 
 from ..lyapunov import pd_hold_lyapunov

@@ -29,7 +29,7 @@ import itertools
 import numpy as np
 
 from verified.affine_taylor import affine_range
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import Solution
 
 from ..errors import ModelError

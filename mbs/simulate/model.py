@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from verified.energy_rate import MODEL_RATES, check_energy_rate
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 from ..chain import Chain
 from ..control import closed_loop

@@ -10,7 +10,7 @@ import inspect
 import numpy as np
 
 import verified.solver
-from verified.interval import Interval, _as_interval
+from verified.arith.interval import Interval, _as_interval
 from verified.methods import METHOD_FIELDS
 
 from ..modes import ALL_MODES

@@ -8,7 +8,7 @@ import itertools
 
 import numpy as np
 
-from verified.interval import Interval, _as_interval
+from verified.arith.interval import Interval, _as_interval
 
 from ..system import System
 from ..uncertain import parse_value

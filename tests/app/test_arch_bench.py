@@ -42,7 +42,7 @@ def test_containment_check_catches_a_wrong_enclosure():
     row = bench.run_row(case, "defaults", {}, 0.5, 60.0, 20)
     sol = row["sol"]
     assert bench.check_inside(case, sol, 20)[0]
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     last = sol.boxes[-1]
     mid, rad = last.mid(), 0.25 * last.rad()
     sol.boxes[-1] = Interval(mid - rad, mid + rad)

@@ -24,7 +24,7 @@ def test_bench_quick(tmp_path):
 
 def test_stress_case_never_raises():
     # a case whose setup is invalid is reported as a crash row, not an exception
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     row = bench.run_case("bad", "pendulum_paper", Interval([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]), 0.1)
     assert row["status"] == "crash" and "states" in row["reason"]
 
@@ -47,7 +47,7 @@ def test_stress_case_with_an_uncertain_parameter_samples_at_its_midpoint():
     """A case with a parameter given as (lo, hi) samples its trajectories at the midpoint
     (the sampling read undefined names and every such row was a silent 'crash')."""
     from models import pendulum as pd
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     lo, hi = pd.initial_box()
     row = bench.run_case("m", "pendulum_paper", Interval(lo, hi), 0.05, samples=4, params={"l": (0.95, 1.05)})
     assert row["status"] == "completed", row["reason"]
@@ -57,7 +57,7 @@ def test_stress_case_with_an_uncertain_parameter_samples_at_its_midpoint():
 def test_a_bug_in_the_bench_is_raised_not_reported_as_a_crash_row(monkeypatch):
     """run_case reports what a case raises as a 'crash' row, but a NameError is a bug of
     the bench itself (one hid a dead branch that way) and must surface."""
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
 
     def broken(*a, **k):
         return undefined_name  # noqa: F821

@@ -5,7 +5,7 @@ import numpy as np
 from models import pendulum
 from mbs.app import figures, sampling
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 H = trace(lambda x, p: [pendulum.hamiltonian(x)], 2, input_names=["q", "qd"], output_names=["H"])
 

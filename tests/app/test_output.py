@@ -69,7 +69,7 @@ def test_compile_note_only_when_the_cache_is_cold():
 
 
 def test_kernel_cache_probe_reads_numba_index_files():
-    state = progress.kernel_cache_warm("verified._kernels")
+    state = progress.kernel_cache_warm("verified.arith._kernels")
     assert state is not None and 0 <= state[0] <= state[1] and state[1] > 10
     assert progress.kernel_cache_warm("verified.no_such_module") is None
 
@@ -186,7 +186,7 @@ def test_fig5_shows_widths_and_excess_per_mode_on_log_scales(tmp_path, monkeypat
     mode's width, and the excess width / spread - 1 (log), one line per mode."""
     from mbs.app.sampling import sample_trajectories
     from mbs.simulate import simulate, system_for
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     x0 = Interval([2.1, 3.1], [2.2, 3.2])
     sols = {m: simulate("pendulum_paper", x0, 0.2, mode=m, output_dt=0.1, progress=False, test_interval=0.1,
                         test_splits=2) for m in ("i", "ii")}

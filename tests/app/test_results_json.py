@@ -8,7 +8,7 @@ import pytest
 
 from mbs.app.results import (ResultError, bound_from_json, bound_to_json, read_result, result_boxes,
                          solution_to_dict, write_result)
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import Solution
 
 SPECIAL = [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072009e-308, 2.2250738585072014e-308,

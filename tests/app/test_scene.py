@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mbs.app.scene import SceneError, enclose_number, load_scene, loads_scene, output_times, scene_dir
-from verified.exact import ExpressionError, enclose_pi_multiple, parse_pi_expression
+from verified.arith.exact import ExpressionError, enclose_pi_multiple, parse_pi_expression
 
 GOOD = """
 name = "t"
@@ -61,14 +61,14 @@ def test_number_enclosures_are_rigorous():
     # exact doubles and integers stay points
     assert enclose_number(2.5) == (2.5, 2.5) and enclose_number(3) == (3.0, 3.0)
     assert enclose_number("1/4") == (0.25, 0.25)
-    # pi expressions: verified.exact.parse_pi_expression, then enclose_pi_multiple (their
+    # pi expressions: verified.arith.exact.parse_pi_expression, then enclose_pi_multiple (their
     # tests, against 60-digit mpmath: tests/verified/test_exact_expressions.py)
     assert enclose_number("-11*pi/20") == enclose_pi_multiple(0, Fraction(-11, 20))
 
 
 @pytest.mark.parametrize("text", ["pi*pi", "1/pi", "1/0", "sin(1)", "2**3", "import os", "x1", "1 +"])
 def test_bad_expressions(text):
-    # the parser's message (verified.exact.ExpressionError) after the scene key
+    # the parser's message (verified.arith.exact.ExpressionError) after the scene key
     with pytest.raises(ExpressionError) as parsed:
         parse_pi_expression(text)
     with pytest.raises(SceneError) as e:

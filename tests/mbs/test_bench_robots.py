@@ -13,7 +13,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_robots  # noqa: E402
 from oracles.mutants import narrows_output_boxes  # noqa: E402
 import mbs.simulate  # noqa: E402
-from verified.interval import Interval  # noqa: E402
+from verified.arith.interval import Interval  # noqa: E402
 
 
 def _quick(only):

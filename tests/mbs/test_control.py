@@ -11,7 +11,7 @@ from mbs.control import (PD, ClosedLoop, ComputedTorque, ControlError, Disturban
                          closed_loop, parse_control)
 from mbs.simulate import simulate
 from models.registry import get
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 
 def quintic(q0, q1, T, t):

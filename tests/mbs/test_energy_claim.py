@@ -18,7 +18,7 @@ from mbs.system import System
 from oracles.sampling import misses, sample_initial_points, trajectories
 from verified.consistency import EnergyClaimError, EnergyClaimWarning
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 C = 0.5  # the damping of x'' = -x - C x' x^2
 

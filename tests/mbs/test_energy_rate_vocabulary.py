@@ -12,7 +12,7 @@ from mbs.system import System
 from verified.consistency import EnergyTest
 from verified.energy_rate import DEPRECATED, ENERGY_RATES, MODEL_RATES, SYSTEM_RATES
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 from models import pendulum as pd
 

@@ -12,7 +12,7 @@ from mbs.control import PD, ComputedTorque
 from mbs.frames import default_frame, evaluate_frame, frame_enclosure, frame_graph
 from mbs.simulate import simulate
 from models.registry import get
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 from oracles.closed_loop import Q0, box, closed_loop_trajectory, corners, ct_oracle, pin_model
 from oracles.sampling import trajectories

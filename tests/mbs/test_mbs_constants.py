@@ -5,7 +5,7 @@ import sympy as sp
 
 from mbs.sympy_eval import GenericFunction
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 
 def test_irrational_constants_are_enclosed_when_traced_or_evaluated_on_intervals():

@@ -219,7 +219,7 @@ def test_recovered_double_pendulum_simulates_with_energy_test():
     from oracles.sampling import in_union, sample_initial_points, trajectories
 
     from mbs.simulate import simulate
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
 
     xs, f, _ = dp.sympy_model()
     system = recover_hamiltonian(f, xs[:2], xs[2:]).system(name="dp_recovered")

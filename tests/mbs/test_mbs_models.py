@@ -61,7 +61,7 @@ def test_eq22_as_sympy_and_generic():
 
 def test_eq22_traces_and_factored_determinant_avoids_zero():
     from verified.graph import trace, from_sympy
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     g = trace(dp.rhs, 4)
     xs, f, _ = dp.sympy_model()
     g2 = from_sympy(f, xs)

@@ -25,7 +25,7 @@ def test_batch_equals_loop(ur5):
 
 
 def test_intervals_enclose_floats(ur5):
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     num = ur5.numeric()
     rng = np.random.default_rng(1)
     q, qd = rng.normal(size=6), rng.normal(size=6)
@@ -96,7 +96,7 @@ def test_rnea_inverts_acceleration():
 
 def test_interval_batch_arrays(ur5):
     """x as one Interval array of shape (2n, B): each row is a batch of intervals."""
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     num = ur5.numeric()
     x = np.random.default_rng(8).normal(size=(12, 4))
     X = Interval(x - 1e-9, x + 1e-9)
@@ -107,7 +107,7 @@ def test_interval_batch_arrays(ur5):
 
 
 def test_ldl_solve_intervals_are_sound():
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     rng = np.random.default_rng(12)
     A = rng.normal(size=(5, 5))
     M = A @ A.T + 5 * np.eye(5)

@@ -15,7 +15,7 @@ from mbs import ModelError, SingularMassMatrixError, chain_from_dh, chain_from_u
 from mbs.numeric import ldl_solve
 from mbs.scalar import div
 from mbs.simulate import simulate
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 Q = np.array([0.1, 0.2])
 BOX = Interval(np.array([0.1, 0.2, 0.0, 0.0]), np.array([0.11, 0.21, 0.0, 0.0]))

@@ -132,7 +132,7 @@ def test_coriolis_equals_christoffel_form():
 @pytest.mark.parametrize("make", [lambda: planar.planar_chain(2, damping=0.05),
                                   pytest.param(robots.ur5, marks=pytest.mark.slow, id="ur5")])
 def test_graphs_match_numeric(make):
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     chain = make()
     s, num = chain.symbolic(), chain.numeric()
     g = s.rhs_graph()
@@ -158,7 +158,7 @@ def test_graphs_match_numeric(make):
 
 
 def test_compile_generic_rationals_exact_on_intervals():
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     from mbs.sympy_eval import compile_generic
     x, y = sympy.symbols("x y")
     f = compile_generic([x / 3 + y**2 / 2, sympy.cos(x) * sympy.Rational(1, 10)], [x, y])

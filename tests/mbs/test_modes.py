@@ -44,7 +44,7 @@ def test_paper_models_are_registry_system_factories():
 
 def test_simulate_takes_a_mode_and_records_its_name():
     from mbs.simulate import simulate
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
     box = Interval([2.1, 3.1], [2.2, 3.2])
     a = simulate("pendulum_paper", box, 0.1, mode=MODE_II, progress=False)
     b = simulate("pendulum_paper", box, 0.1, mode="ii", progress=False)

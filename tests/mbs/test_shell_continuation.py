@@ -21,7 +21,7 @@ from mbs.app.sampling import (
 from mbs.simulate import simulate
 from models import double_pendulum as dp_paper
 from models.robots import double_pendulum, panda_arm
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 
 def _dp_box():

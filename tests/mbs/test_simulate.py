@@ -5,7 +5,7 @@ import pytest
 from oracles.sampling import misses, sample_initial_points, trajectories
 from mbs.errors import ModelError
 from mbs.simulate import compare_modes, output_times, simulate, system_for, width_deviations
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 from models import double_pendulum as dp
 from models import pendulum as pd

@@ -9,7 +9,7 @@ import pytest
 from mbs.app.scene import SceneError, loads_scene
 from mbs.simulate import simulate
 from models import pendulum as pd
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 from oracles.sampling import misses, sample_initial_points, trajectories
 

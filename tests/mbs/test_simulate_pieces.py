@@ -13,7 +13,7 @@ from mbs.app.cli import main
 from mbs.app.results import read_result
 from mbs.app.runner import status_line
 from mbs.simulate import simulate, system_for
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 T = 0.3
 CENTRES = np.array([[0.3, -0.4, 0, 0], [0.2, -0.3, 0, 0], [0.5, 0.1, 0, 0], [0.3, 0.0, 0, 0]], float)

@@ -14,7 +14,7 @@ from mbs.simulate import simulate, system_for
 from mbs.uncertain import ChainParameters, ParameterError
 from models import double_pendulum as dp
 from models.registry import get
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 
 # --------------------------------------------------------------------------- oracle

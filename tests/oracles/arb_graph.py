@@ -11,7 +11,7 @@ import sympy as sp
 from hypothesis import strategies as st
 
 from verified import evaluate as ev
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 arb = flint.arb
 # the reference must be far more precise than the floats it judges; this module used

@@ -13,7 +13,7 @@ from flint import arb, arb_series
 from oracles.arb_graph import ArbDomain, box_samples
 from verified import evaluate as ev
 from verified.affine_taylor import AffineTaylorODE
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 INF = math.inf
 

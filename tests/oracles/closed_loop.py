@@ -5,7 +5,7 @@ import numpy as np
 import pinocchio as pin
 
 from oracles.sampling import dop853, pinocchio_with, plant_acceleration
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 Q0 = np.array([0.5, -0.3])
 E = 1e-3

@@ -2,7 +2,7 @@
 bites (each test monkeypatches one in and asserts its oracle sees the damage)."""
 import numpy as np
 
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 
 def keeps_lower_quarter(contract_linear_row):

@@ -13,7 +13,7 @@ from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/c
 from verified import sets as vsets
 from verified.affine_taylor import forms_to_interval
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import solve
 
 from models import double_pendulum as dp

@@ -34,7 +34,7 @@ from oracles.taylor_cases import (ARM_Q0, CASES, _arm, _dp_graph, _program_ode, 
                                   case_graph, random_forms)
 from verified.affine_taylor import AffineTaylorODE
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.taylor import TaylorODE
 
 INF = math.inf

@@ -11,7 +11,7 @@ import pytest
 
 import verified.auto as auto_mod
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import solve
 
 

@@ -10,7 +10,7 @@ import pytest
 from mbs.app.sampling import dop853, radau
 from verified.conservation import Conserved, InvariantHook, InvariantWarning, NonIncreasing
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import solve
 
 A, B, C = 0.4, 1e2, 1e3   # Robertson, the mildest ARCH-COMP setting

@@ -11,7 +11,7 @@ from oracles.sampling import misses, sample_initial_points, trajectories
 from verified.consistency import Constraint, EnergyTest
 from verified.graph import from_sympy, trace
 from verified.graph_ops import augment_with_rate, negated, rate_along
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import solve
 
 from models import double_pendulum as dp

@@ -16,7 +16,7 @@ import oracles.arb_oracle  # noqa: F401  (sets flint.ctx.prec = 256)
 from verified import contractor
 from verified.contractor import EnergyShell, HC4, contract_linear_row, hc4, mean_value_row
 from verified.graph import GraphBuilder, trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 SETTINGS = settings(max_examples=60, deadline=None, database=None,
                     suppress_health_check=[HealthCheck.too_slow])

@@ -15,7 +15,7 @@ import verified.energy_cadence as cadence
 from models import pendulum as pd
 from verified.consistency import EnergyTest
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.methods import Composition, Lohner
 from verified.solution import Start
 from verified.solver import solve

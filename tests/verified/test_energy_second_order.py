@@ -21,7 +21,7 @@ from verified.consistency import EnergyTest
 from verified.consistency_graphs import lift_graphs
 from verified.energy_state import initial_sets
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.quadratic import QuadraticSets
 from verified.solver import solve
 

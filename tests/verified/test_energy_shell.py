@@ -12,7 +12,7 @@ from oracles.sampling import misses, sample_initial_points, trajectories
 from verified.contractor import EnergyShell
 from verified.energy_shell import EnergyShellHook, max_energy
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import solve
 
 from models import pendulum as pd

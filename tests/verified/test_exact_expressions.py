@@ -1,4 +1,4 @@
-"""verified.exact.parse_pi_expression: exact ``a + b pi`` of the expression strings that
+"""verified.arith.exact.parse_pi_expression: exact ``a + b pi`` of the expression strings that
 scene files use (moved here from tests/app/test_scene.py with the parser, which was
 mbs.app.scene._eval_expr; the scene's enclose_number wraps it)."""
 import math
@@ -6,7 +6,7 @@ from fractions import Fraction
 
 import pytest
 
-from verified.exact import ExpressionError, enclose_pi_multiple, parse_pi_expression
+from verified.arith.exact import ExpressionError, enclose_pi_multiple, parse_pi_expression
 
 
 def test_decimal_literals_are_exact():

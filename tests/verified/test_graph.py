@@ -558,7 +558,7 @@ def test_repr_is_readable():
 
 
 def test_tracer_accepts_rigorous_irrational_constants(arb):
-    from verified.interval import Interval
+    from verified.arith.interval import Interval
 
     g = trace(lambda x, p: [x[0] * sp.pi, sp.pi / 3 + x[0], x[0] * sp.sqrt(2), x[0] * Interval(1.0, 1.5)], 1)
     Y = g.eval_interval(np.array([1.0]))
@@ -640,11 +640,11 @@ def test_gradient_graph_and_params_to_inputs():
                                   (Fraction(-1455086307567065297120939771110919450613573509313569719835088604471755577864741,
                                             2**260), Fraction(1))])
 def test_pi_multiples_are_enclosed_by_verified_exact(arb, a, b):
-    """Issue 15: multiples of pi have one home, verified.exact; the one-ulp enclosure
+    """Issue 15: multiples of pi have one home, verified.arith.exact; the one-ulp enclosure
     (constant nodes, the contractor's pi) and the two-ulp one (scenes, models) both
     contain a + b pi, also when a + b pi cancels beyond the first working precision."""
     from verified.contractor import _PI
-    from verified.exact import enclose_pi_multiple, pi_multiple_enclosure
+    from verified.arith.exact import enclose_pi_multiple, pi_multiple_enclosure
     exact = arb(a.numerator) / a.denominator + arb(b.numerator) / b.denominator * arb.pi()
     lo, hi, value = pi_multiple_enclosure(a, b)
     _assert_encloses(arb, lo, hi, exact)

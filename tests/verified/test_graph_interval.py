@@ -24,7 +24,7 @@ from oracles.arb_graph import (_program, assert_encloses_float, box_samples, che
 from oracles.graph_models import all_ops, double_pendulum_rhs, generic_model, pendulum_energy
 from verified import evaluate as ev
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 
 GRAPHS = {
     "double_pendulum": (trace(lambda x, p: double_pendulum_rhs(x), 4), None),

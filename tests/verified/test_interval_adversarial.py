@@ -18,10 +18,10 @@ import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
-import verified._kernels as _k
-import verified.interval as iv
+import verified.arith._kernels as _k
+import verified.arith.interval as iv
 from oracles.arb_oracle import A, _clip_unit, check_enclosure, image_periodic
-from verified.interval import Interval, IntervalError
+from verified.arith.interval import Interval, IntervalError
 
 TRANS_ULPS = 24
 SETTINGS = settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])

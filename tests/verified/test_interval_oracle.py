@@ -12,8 +12,8 @@ import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
-import verified.interval as iv
-from verified.interval import Interval
+import verified.arith.interval as iv
+from verified.arith.interval import Interval
 from oracles.arb_oracle import A, check_enclosure, image_binary, image_periodic
 
 BASIC_ULPS = 4  # + - * / sqrt results may be this many ulps outside the exact image

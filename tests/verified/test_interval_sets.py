@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-import verified.interval as iv
-from verified.interval import Interval
+import verified.arith.interval as iv
+from verified.arith.interval import Interval
 
 floats = st.floats(-1e12, 1e12, allow_nan=False)
 

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from verified import invariant as inv
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.sets import DoubletonSets
 
 

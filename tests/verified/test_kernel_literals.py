@@ -11,7 +11,8 @@ check costs nothing and needs no cold cache.
 import ast
 import inspect
 
-from verified import _kernels, affine_taylor, linalg, taylor, taylor_model, tm_flow
+from verified import affine_taylor, taylor, taylor_model, tm_flow
+from verified.arith import _kernels, linalg
 
 MODULES = [_kernels, taylor, taylor_model, affine_taylor, tm_flow, linalg]
 
@@ -32,7 +33,7 @@ def _literal(arg):
 
 def literal_calls(modules=MODULES):
     """(module, caller, callee, argument) for every literal int or bool handed from one
-    jitted function to another (``_k.f`` resolves to :mod:`verified._kernels`)."""
+    jitted function to another (``_k.f`` resolves to :mod:`verified.arith._kernels`)."""
     trees = {m.__name__: ast.parse(inspect.getsource(m)) for m in modules}
     jitted = {name: set(_jitted(t)) for name, t in trees.items()}
     found = []
@@ -45,7 +46,7 @@ def literal_calls(modules=MODULES):
                 if isinstance(f, ast.Name) and f.id in jitted[mod]:
                     callee = f.id
                 elif (isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id == "_k"
-                      and f.attr in jitted["verified._kernels"]):
+                      and f.attr in jitted["verified.arith._kernels"]):
                     callee = "_k." + f.attr
                 else:
                     continue

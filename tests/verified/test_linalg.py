@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from verified.interval import Interval
-from verified.linalg import SingularMatrixError, matmul, matvec, solve
+from verified.arith.interval import Interval
+from verified.arith.linalg import SingularMatrixError, matmul, matvec, solve
 
 
 def random_interval_matrix(rng, shape, radius):
@@ -124,7 +124,7 @@ def test_shape_errors_are_clear():
 
 
 def test_inverse_diagonal_encloses_every_member():
-    from verified.linalg import inverse_diagonal
+    from verified.arith.linalg import inverse_diagonal
     rng = np.random.default_rng(2)
     G = rng.normal(size=(4, 3, 3))
     mid = G @ G.transpose(0, 2, 1) + 3 * np.eye(3)

@@ -6,7 +6,7 @@ with such a step and failed with an IndexError)."""
 import numpy as np
 
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.parallel import merge_solutions
 from verified.solver import solve
 

@@ -13,7 +13,7 @@ from mbs.app.sampling import dop853
 
 import verified.auto as auto_mod
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.methods import METHODS, Auto, Composition, Lohner, SecondOrder, as_method
 from verified.solver import solve
 

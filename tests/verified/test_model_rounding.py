@@ -27,7 +27,7 @@ from oracles.graph_models import all_ops
 from oracles.taylor_cases import _arm
 from verified.affine_taylor import AffineTaylorODE
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.taylor_model import TaylorModelODE
 
 pytestmark = pytest.mark.slow  # (the kernel module compiles in the slow step, as test_taylor_model)

@@ -17,7 +17,7 @@ from models import double_pendulum as dp
 from verified import parallel
 from verified.graph import trace
 from verified.hooks import StopAfterWall
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 
 from oracles.hooks import SlowSteps
@@ -273,7 +273,7 @@ UNGUARDED = """
 import numpy as np
 print("TOP LEVEL RAN", flush=True)
 from verified.solver import solve
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.graph import trace
 from models import double_pendulum as dp
 lo, hi = dp.initial_box()
@@ -639,7 +639,7 @@ R_EVAL = [0.1, 0.25, RT]
 
 @pytest.fixture(scope="module")
 def mixed(box):
-    from verified.interval import concatenate
+    from verified.arith.interval import concatenate
     lo, hi = np.asarray(box.lo, float), np.asarray(box.hi, float)
     c, r = 0.5 * (lo + hi), 0.5 * (hi - lo)
     wlo, whi = lo.copy(), hi.copy()

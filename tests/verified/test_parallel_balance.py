@@ -11,7 +11,7 @@ from models import double_pendulum as dp
 from verified import parallel
 from verified.graph import trace
 from verified.hooks import Hook
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 
 from oracles.sampling import misses, sample_initial_points, trajectories

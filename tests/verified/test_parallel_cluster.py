@@ -23,7 +23,7 @@ from models import double_pendulum as dp
 from oracles.hooks import SlowSteps
 from verified import parallel
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 
 distributed = pytest.importorskip("distributed")

@@ -17,7 +17,7 @@ from mbs.app.sampling import dop853
 from verified import batch
 from verified.graph import trace
 from verified.hooks import Hook
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.quadratic import QuadraticSets
 from verified.sets import DoubletonSets
 from verified.solution import PieceResult, pieces_summary

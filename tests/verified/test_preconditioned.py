@@ -21,7 +21,7 @@ from verified.affine_taylor import AffineTaylorODE
 from verified.evaluate import IntervalDomain
 from verified.graph import Graph, GraphBuilder, Op, trace
 from verified.graph_ops import forward_mode
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.taylor import TaylorODE
 
 # --------------------------------------------------------------------------- the op

@@ -17,7 +17,7 @@ from oracles.sampling import misses, sample_initial_points, trajectories
 from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
 from verified import quadratic
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 from verified.variational import pair_index, second_variational_graph
 

@@ -3,7 +3,7 @@ import numpy as np
 
 import verified.consistency as consistency
 import verified.reduction_area as reduction_area
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.reduction_area import ReductionArea
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.quadratic import QuadraticSets
 from verified.sets import DoubletonSets
 

@@ -14,7 +14,7 @@ from models import pendulum as pd
 from verified.contractor import EnergyShell
 from verified.energy_shell import max_energy
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.shell_boxes import continue_in_shell, min_value
 from verified.solver import solve
 

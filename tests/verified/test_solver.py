@@ -8,7 +8,7 @@ import pytest
 
 from oracles.sampling import misses, sample_initial_points, trajectories
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 
 
@@ -101,7 +101,7 @@ def test_oracle_bites_when_the_error_term_is_dropped(monkeypatch):
     """Dropping the accumulated error vector r (keeping only the linear image
     c + C r0) is unsound for a nonlinear ODE; the sampling oracle must notice."""
     from verified import lohner
-    from verified.interval import point
+    from verified.arith.interval import point
 
     from models import pendulum as pd
 

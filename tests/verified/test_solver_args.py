@@ -12,7 +12,7 @@ import pytest
 
 import verified.batch as batch_mod  # (the one-batch driver: where solve prepares and steps)
 from verified.graph import trace
-from verified.interval import Interval, empty
+from verified.arith.interval import Interval, empty
 from verified.solver import solve
 
 NAN, INF = float("nan"), float("inf")

@@ -15,7 +15,7 @@ from verified import lohner, sets as sets_mod
 from verified.consistency import EnergyTest
 from verified.graph import trace
 from verified.hooks import Hook, RunSetup, SolverHook, StopAfterWall, check_hooks
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.policies import LANDING_STRETCH, AutoBasis, QRBasis, StepControl, WrapControl, error_basis_policy
 from verified.sets import DoubletonSets, SetBatch
 from verified.methods import METHOD_FIELDS
@@ -195,7 +195,7 @@ def test_a_set_update_that_cannot_be_inverted_is_a_breakdown(ode, box, reference
     """A SingularMatrixError inside a step (a set so wide that its basis or recentring
     cannot be inverted: seen on the UR5 with second-order sets) ends the run as a
     break-down holding exactly the steps verified before it, not as an exception."""
-    from verified.linalg import SingularMatrixError
+    from verified.arith.linalg import SingularMatrixError
 
     calls = {"n": 0}
     real = lohner.LohnerStepper.step

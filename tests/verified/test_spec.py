@@ -13,7 +13,7 @@ import pytest
 import verified.spec as spec_mod
 from mbs.app.sampling import dop853
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.methods import Auto
 from verified.solver import solve
 from verified.spec import Bounds

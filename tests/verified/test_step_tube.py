@@ -7,7 +7,7 @@ import numpy as np
 from mbs.app.sampling import dop853
 from verified import tm_flow
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.solver import solve
 
 

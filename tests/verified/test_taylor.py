@@ -9,7 +9,7 @@ import pytest
 import sympy as sp
 
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.taylor import TaylorODE
 
 

@@ -26,7 +26,7 @@ from oracles.graph_models import all_ops
 from oracles.taylor_cases import ARM_Q0, CASES, _arm, _dp_graph, _program_ode, _radius, case_graph, random_forms
 from verified.affine_taylor import AffineTaylorODE
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.taylor_model import TaylorModelODE, model_length, models_to_interval
 
 # The whole module runs in the slow CI step: the kernel's first compile costs ~17 s cold, which

@@ -16,7 +16,7 @@ from oracles.sampling import misses, sample_initial_points, trajectories
 from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
 from verified import tm_flow
 from verified.graph import trace
-from verified.interval import Interval
+from verified.arith.interval import Interval
 from verified.quadratic import QuadraticSets
 from verified.solver import VerifiedODE, solve
 from verified.taylor_model import TaylorModelODE, _pairs, _star_pairs, star_base

@@ -4,7 +4,7 @@ This module is the bottom layer of ``verified`` (the layering follows
 IntervalArithmetic.jl: rounding -> scalar operations -> arrays -> linear algebra).
 Every scalar operation takes interval endpoints as plain floats and returns a
 ``(lo, hi)`` tuple; the array loops apply one of them to flat float64 arrays.
-Nothing here validates user input: :mod:`verified.interval` does that.
+Nothing here validates user input: :mod:`verified.arith.interval` does that.
 
 Conventions
 -----------

@@ -5,7 +5,7 @@ broadcasts like numpy, so one operation processes thousands of boxes at once. A 
 is an ``Interval`` whose last axis indexes the state components: shape ``(..., n)``.
 
 Every operation returns an enclosure of the exact image of its operands (see
-:mod:`verified._kernels` for the rounding model). Floats and float arrays, in the
+:mod:`verified.arith._kernels` for the rounding model). Floats and float arrays, in the
 constructor or mixed into an operation, are taken as exact point values; ints beyond
 2**53, ``fractions.Fraction`` and ``decimal.Decimal`` values are enclosed, never
 rounded (``Interval(Fraction(1, 3))`` and ``Interval(1.0) * Fraction(1, 3)`` contain
@@ -43,8 +43,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from . import _kernels as _k
-from .exact import enclose_fraction
+from verified.arith import _kernels as _k
+from verified.arith.exact import enclose_fraction
 
 __all__ = [
     "Interval",
@@ -784,7 +784,7 @@ _UFUNCS = {
 
 
 # --------------------------------------------------------------------------- matrix products
-# (here, not in verified.linalg: the @ operator needs them, and linalg builds on Interval)
+# (here, not in verified.arith.linalg: the @ operator needs them, and linalg builds on Interval)
 def _flatten(x, batch_shape, core_shape):
     full = batch_shape + core_shape
     # (broadcast only where the shape differs: a broadcast view is read-only, and copied)

@@ -1,7 +1,7 @@
 """Interval linear algebra for small dense systems, batched over leading axes.
 
 * :func:`matmul`, :func:`matvec` -- interval matrix-matrix and matrix-vector products
-  (defined in :mod:`verified.interval`, which the ``@`` operator of an Interval
+  (defined in :mod:`verified.arith.interval`, which the ``@`` operator of an Interval
   calls, so that the two modules do not import each other; re-exported here).
 * :func:`solve` -- a verified enclosure of the solution set of ``A x = b`` for
   interval ``A`` (for example a mass matrix ``M(q)`` over a box of ``q``) and
@@ -21,8 +21,8 @@ import functools
 import numpy as np
 from numba import njit
 
-from . import _kernels as _k
-from .interval import Interval, _as_interval, _flatten, matmul, matvec  # noqa: F401 (re-exported)
+from verified.arith import _kernels as _k
+from verified.arith.interval import Interval, _as_interval, _flatten, matmul, matvec  # noqa: F401 (re-exported)
 
 __all__ = ["matmul", "matvec", "solve", "inverse_diagonal", "SingularMatrixError", "upper_pairs"]
 

@@ -5,7 +5,7 @@ number ``a + b pi`` (``a``, ``b`` rational, ``b != 0``) is irrational and lies s
 between the doubles either side of its nearest one. Every module that turns an exact
 number into floats calls these functions instead of repeating the rule:
 
-- :mod:`verified.interval` (``Fraction``, ``Decimal`` and big-int operands),
+- :mod:`verified.arith.interval` (``Fraction``, ``Decimal`` and big-int operands),
 - :mod:`verified.ir` (constant nodes, :func:`verified.graph.enclose_rational`),
 - :mod:`verified.graph_sympy` (sympy numbers: multiples of pi by :func:`pi_multiple_enclosure`,
   other constants such as ``E`` by :func:`enclose_approximation` of a 40-digit evalf),
