@@ -28,7 +28,7 @@ import numpy as np
 from models import double_pendulum as dp
 from verified.arith import linalg
 from verified.contractor import HC4, EnergyShell, contract_linear_row, mean_value_row
-from verified.evaluate import eval_interval
+from verified.graph.evaluate import eval_interval
 from verified.graph import trace
 from verified.arith.interval import Interval
 
@@ -138,7 +138,7 @@ def energy_difference_graph(H):
     x0; over the joint set (x, x0) = (c, c0) + [[C, Q], [I, 0]] (r0, r) it plays the
     role of H(x) - h with h the H_V state carried in the set (correlated with r0)."""
     from verified.graph import GraphBuilder
-    from verified.graph_ops import embed
+    from verified.graph.ops import embed
     n = H.n_inputs
     b = GraphBuilder(2 * n)
     xs = [b.input(i) for i in range(2 * n)]

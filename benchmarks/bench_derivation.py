@@ -50,7 +50,7 @@ def measure(name: str) -> dict:
     import mbs  # noqa: F401  (imports outside the timing)
     import sympy  # noqa: F401
     import verified.graph  # noqa: F401
-    import verified.graph_sympy  # noqa: F401
+    import verified.graph.sympy_convert  # noqa: F401
     import yourdfpy  # noqa: F401  (imports trimesh/scipy: ~0.9 s, not part of the derivation)
     t0 = time.perf_counter()
     chain = make_chain(name)

@@ -63,8 +63,8 @@ def enabled(flag: bool = True, directory=None):
 
 #: modules whose source defines what a cached artefact contains
 CODE_MODULES = ("mbs.scalar", "mbs.spatial", "mbs.chain", "mbs.symbolic", "mbs.numeric",
-                "mbs.sympy_eval", "verified.graph", "verified.graph_sympy", "verified.tracer",
-                "verified.preconditioned")
+                "mbs.sympy_eval", "verified.graph", "verified.graph.sympy_convert", "verified.graph.tracer",
+                "verified.graph.preconditioned")
 
 
 @lru_cache(maxsize=1)

@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from verified.evaluate import eval_float, jacobian_float
+from verified.graph.evaluate import eval_float, jacobian_float
 from verified.graph import GraphBuilder
-from verified.graph_ops import embed, gradient_graph
+from verified.graph.ops import embed, gradient_graph
 from verified.invariant import QuadraticLyapunov
 
 from . import spatial as sp3

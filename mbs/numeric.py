@@ -26,7 +26,7 @@ Algorithms (Featherstone, "Rigid Body Dynamics Algorithms"; Pinocchio's names):
   no pivoting, so it traces into a fixed graph): a pivot that is not (proven) positive --
   M singular, e.g. masses on a joint axis -- raises :class:`~mbs.errors.SingularMassMatrixError`
   naming the joints (floats, constants, intervals); never a silent 0.  The solve itself
-  is :func:`verified.preconditioned.solve` (a frozen congruence ``K M K^T`` of M) by
+  is :func:`verified.graph.preconditioned.solve` (a frozen congruence ``K M K^T`` of M) by
   default, which keeps interval-type evaluations of qdd tight; ``linear_solve = "ldl"``
   selects plain LDL^T substitution instead.
 
@@ -40,7 +40,7 @@ import sys
 import numpy as np
 
 from verified.graph import trace
-from verified.preconditioned import congruence_pivots, solve as preconditioned_solve
+from verified.graph.preconditioned import congruence_pivots, solve as preconditioned_solve
 
 from .errors import ModelError, SingularMassMatrixError
 from .scalar import add, sub, mul, div, dot, square, total, is_sympy, is_zero, is_const
@@ -129,7 +129,7 @@ def _plain_out(vals, *inputs):
 
 
 #: how :meth:`NumericModel.acceleration` solves M qdd = rhs: "preconditioned"
-#: (midpoint-inverse preconditioning, :mod:`verified.preconditioned`) or "ldl"
+#: (midpoint-inverse preconditioning, :mod:`verified.graph.preconditioned`) or "ldl"
 LINEAR_SOLVES = ("preconditioned", "ldl")
 
 
@@ -354,12 +354,12 @@ class NumericModel:
         return _plain_out(qdd, q, qd, tt)
 
     def float_acceleration(self):
-        """A :class:`verified.float_code.FloatFunction` of ``x = (q, qd, tau)`` (3n) ->
+        """A :class:`verified.graph.float_code.FloatFunction` of ``x = (q, qd, tau)`` (3n) ->
         ``(qdd, D, diag M)`` (3n): :meth:`acceleration`'s float operations (LDL^T
         substitution, the pivots ``D`` of M unchecked, M's diagonal for the pivot
         threshold), traced once into a graph and written as Python code."""
         if getattr(self, "_float_fn", None) is None:
-            from verified.float_code import compile_float
+            from verified.graph.float_code import compile_float
             n = self.n
 
             def fn(x, p):
@@ -403,7 +403,7 @@ class NumericModel:
         positive definite (used by :mod:`mbs.simulate` on the boxes of a verified run).
         With ``linear_solve="preconditioned"`` they are the LDL^T pivots of the
         congruence K M K^T, K = L^-1 of mid(M) frozen
-        (:func:`verified.preconditioned.congruence_pivots`: same inertia, tight over
+        (:func:`verified.graph.preconditioned.congruence_pivots`: same inertia, tight over
         boxes), else the LDL^T pivots of M.  Raises
         :class:`~mbs.errors.SingularMassMatrixError` when a pivot of M is the constant 0
         (M singular for every q)."""
@@ -606,7 +606,7 @@ def ldl_factor(M, check=True):
     return U, D
 
 
-# Kept apart from verified.preconditioned._ldl_substitute: 0 / D[k] terms stay (mbs.scalar.div), so every pivot enters x.
+# Kept apart from verified.graph.preconditioned._ldl_substitute: 0 / D[k] terms stay (mbs.scalar.div), so every pivot enters x.
 def ldl_substitute(U, D, b):
     """Solve with the factors of :func:`ldl_factor`: x = M^{-1} b.  Every pivot enters
     the result (``x[i] = s / D[i]`` is kept even for a constant 0 numerator ``s`` when
@@ -633,7 +633,7 @@ def ldl_substitute(U, D, b):
 
 def solve_mass_matrix(M, U, D, rhs, method="preconditioned"):
     """qdd = M^{-1} rhs given M's checked LDL^T factors (U, D): by
-    :func:`verified.preconditioned.solve` (``method="preconditioned"``) or by LDL^T
+    :func:`verified.graph.preconditioned.solve` (``method="preconditioned"``) or by LDL^T
     substitution (``"ldl"``).  Floats and sympy expressions always take the
     substitution: preconditioning only changes enclosures (intervals, traced graphs),
     and it would bury a symbolic qdd under a symbolic inverse."""

@@ -51,7 +51,7 @@ import numpy as np
 
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.preconditioned import congruence_pivots
+from verified.graph.preconditioned import congruence_pivots
 
 from .errors import ModelError
 from .inertia import RigidInertia, as_inertia_matrix

@@ -75,9 +75,9 @@ from verified.consistency_graphs import claim_graph, prove_claim
 from verified.contractor import HC4, contract_linear_row, mean_value_row
 from verified.energy_contraction import recentre
 from verified.energy_shell import reset_to_contracted
-from verified.evaluate import eval_interval
+from verified.graph.evaluate import eval_interval
 from verified.graph import Graph, GraphBuilder
-from verified.graph_ops import embed, rate_along
+from verified.graph.ops import embed, rate_along
 from verified.hooks import Hook, RunSetup
 from verified.arith.interval import Interval, concatenate, point
 from verified.quadratic import QuadraticSets, quadratic_range
@@ -148,7 +148,7 @@ class _Declared:
                                  f"parameters to one value, got {g.n_inputs} inputs, {g.n_params} parameters, "
                                  f"{g.n_outputs} outputs")
             return g
-        from verified.tracer import trace
+        from verified.graph.tracer import trace
 
         fn = self.expr
 

@@ -62,7 +62,7 @@ from verified.energy_contraction import EnergyContraction
 from verified.energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
 from verified.energy_state import assign, initial_sets, reset_h
 from verified.graph import Graph
-from verified.graph_ops import negated
+from verified.graph.ops import negated
 from verified.hooks import Hook
 from verified.arith.interval import Interval, concatenate, hull, point
 from verified.reduction_area import ConsistencyRecord, ReductionArea, TestRecord

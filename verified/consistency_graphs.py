@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from verified.graph import Graph, GraphBuilder
-from verified.graph_ops import augment_with_rate, difference, embed, rate_along
+from verified.graph.ops import augment_with_rate, difference, embed, rate_along
 from verified.arith.interval import Interval, concatenate, point
 
 __all__ = ["ClaimProof", "Constraint", "EnergyClaimError", "EnergyClaimWarning", "LiftedGraphs", "PROOF_MAX_NODES",
@@ -78,7 +78,7 @@ class _GiveUp(Exception):
 
 
 def _exact_domain():
-    """A :class:`verified.evaluate.Domain` that evaluates a graph exactly into sympy
+    """A :class:`verified.graph.evaluate.Domain` that evaluates a graph exactly into sympy
     expressions that are rational functions of symbols (no sin, cos, ...), with the
     relations those symbols satisfy:
 
@@ -97,7 +97,7 @@ def _exact_domain():
     """
     import sympy
 
-    from verified.evaluate import Domain
+    from verified.graph.evaluate import Domain
 
     class ExactDomain(Domain):
         def __init__(self):
@@ -274,7 +274,7 @@ def _prove_claim(claim: Graph, max_terms: int) -> ClaimProof:
     # (import here: sympy, ~0.4 s, only for this symbolic proof)
     import sympy
 
-    from verified.evaluate import evaluate
+    from verified.graph.evaluate import evaluate
     try:
         domain = _exact_domain()
         xs = sympy.symbols(f"_x0:{claim.n_inputs}", real=True)

@@ -35,10 +35,10 @@ import numpy as np
 
 from verified.arith import interval as iv
 from verified.arith import linalg
-from verified.evaluate import IntervalDomain, eval_interval, jacobian_interval
+from verified.graph.evaluate import IntervalDomain, eval_interval, jacobian_interval
 from verified.arith.exact import pi_multiple_enclosure
 from verified.graph import Graph, GraphBuilder, Op
-from verified.graph_ops import embed
+from verified.graph.ops import embed
 from verified.arith.interval import Interval
 
 __all__ = [
@@ -324,7 +324,7 @@ class HC4:
     outputs ``j`` and some ``p`` in ``params``.
 
     One pass: (1) forward, every node's interval value over the box (the same
-    outward-rounded operations as :class:`~verified.evaluate.IntervalDomain`); (2) each
+    outward-rounded operations as :class:`~verified.graph.evaluate.IntervalDomain`); (2) each
     constrained output's value is met with ``[lo_j, hi_j]``; (3) backward, nodes in
     reverse topological order project their (narrowed) value onto their arguments
     (inverse operations, outward rounded) and meet. Reverse order means every user of a

@@ -32,7 +32,7 @@ from typing import NamedTuple
 import numpy as np
 
 from verified.contractor import EnergyShell
-from verified.evaluate import eval_interval
+from verified.graph.evaluate import eval_interval
 from verified.graph import Graph
 from verified.hooks import Hook, RunSetup
 from verified.arith.interval import Interval

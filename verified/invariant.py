@@ -56,10 +56,10 @@ import numpy as np
 
 from verified.arith import interval as iv
 from verified.arith import linalg
-from verified.evaluate import eval_float, eval_interval, jacobian_float, jacobian_interval
+from verified.graph.evaluate import eval_float, eval_interval, jacobian_float, jacobian_interval
 from verified.contractor import mean_value_row
 from verified.graph import Graph, GraphBuilder
-from verified.graph_ops import embed, gradient_graph, params_to_inputs
+from verified.graph.ops import embed, gradient_graph, params_to_inputs
 from verified.hooks import Hook
 from verified.arith.interval import Interval, concatenate
 from verified.sets import DoubletonSets

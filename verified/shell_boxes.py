@@ -43,7 +43,7 @@ import numpy as np
 
 from verified.arith import interval as iv
 from verified.contractor import EnergyShell
-from verified.evaluate import eval_interval, jacobian_interval
+from verified.graph.evaluate import eval_interval, jacobian_interval
 from verified.arith.interval import Interval
 from verified.solution import Solution
 

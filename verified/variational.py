@@ -15,7 +15,7 @@ symbolically so constants and parameters cost nothing.
 from __future__ import annotations
 
 from verified.graph import Graph, GraphBuilder
-from verified.graph_ops import embed, forward_mode
+from verified.graph.ops import embed, forward_mode
 
 __all__ = ["variational_graph", "second_variational_graph", "pair_index", "params_as_states"]
 

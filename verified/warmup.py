@@ -55,7 +55,7 @@ def compile_kernels(log=None, families=None) -> float:
     from verified.affine_taylor import AffineTaylorODE, affine_range, box_forms
     from verified.arith.interval import Interval, point
     from verified.solver import solve
-    from verified.tracer import trace
+    from verified.graph.tracer import trace
 
     t0 = time.perf_counter()
 

@@ -1,4 +1,4 @@
-"""Float evaluation by compiled straight-line code (verified.float_code) and the numeric
+"""Float evaluation by compiled straight-line code (verified.graph.float_code) and the numeric
 model's qdd through it (NumericModel.acceleration at one float point, issue 45).
 
 Oracles: the graph's own numpy evaluation (eval_float) and the numeric model's recursion,
@@ -7,13 +7,13 @@ bit, up to the C library's last bit in sin/exp/...); Pinocchio's aba for the phy
 import numpy as np
 import pytest
 
-import verified.float_code as fc
+import verified.graph.float_code as fc
 from mbs import robots
 from mbs.dh import chain_from_dh
 from mbs.errors import SingularMassMatrixError
 from mbs.numeric import FLOAT_CODE_AFTER, NumericModel
 from verified.graph import trace
-from verified.opcodes import Op
+from verified.graph.opcodes import Op
 
 
 def _all_ops(x, p):

@@ -10,7 +10,7 @@ import numpy as np
 import sympy as sp
 from hypothesis import strategies as st
 
-from verified import evaluate as ev
+from verified.graph import evaluate as ev
 from verified.arith.interval import Interval
 
 arb = flint.arb

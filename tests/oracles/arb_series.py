@@ -11,7 +11,7 @@ import numpy as np
 from flint import arb, arb_series
 
 from oracles.arb_graph import ArbDomain, box_samples
-from verified import evaluate as ev
+from verified.graph import evaluate as ev
 from verified.affine_taylor import AffineTaylorODE
 from verified.arith.interval import Interval
 

@@ -5,7 +5,7 @@ Oracles (none shares code with the affine kernel or with verified.taylor):
 * python-flint ``arb_series`` at 256 bits: the Taylor coefficients of the solution
   through a *point* of the box by Picard iteration, ``x <- x0 + integral(f(x))`` on
   truncated power series (each pass fixes one more coefficient), with ``f`` the graph
-  evaluated by ``verified.evaluate`` in an arb-series domain -- no recurrence of ours
+  evaluated by ``verified.graph.evaluate`` in an arb-series domain -- no recurrence of ours
   is involved (``tests/oracles/arb_series.py``). Containment is decided by certain arb
   comparisons, no allowance; constants are taken at their double value, a point of
   their enclosure.

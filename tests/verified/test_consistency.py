@@ -10,7 +10,7 @@ import sympy
 from oracles.sampling import misses, sample_initial_points, trajectories
 from verified.consistency import Constraint, EnergyTest
 from verified.graph import from_sympy, trace
-from verified.graph_ops import augment_with_rate, negated, rate_along
+from verified.graph.ops import augment_with_rate, negated, rate_along
 from verified.arith.interval import Interval
 from verified.solver import solve
 

@@ -14,7 +14,7 @@ from oracles.sampling import misses, sample_initial_points, trajectories
 from verified import energy_contraction as ec
 from verified.consistency import EnergyClaimError, EnergyTest, prove_energy_rate
 from verified.graph import trace
-from verified.graph_ops import rate_along
+from verified.graph.ops import rate_along
 from verified.arith.interval import Interval
 from verified.sets import DoubletonSets
 from verified.solver import solve

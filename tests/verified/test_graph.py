@@ -578,7 +578,7 @@ def test_tracer_broadcasts_over_float_arrays():
 
 def test_custom_domain_walks_each_node_once():
     """Evaluators are pluggable: a Domain subclass that renders expressions as strings."""
-    from verified.evaluate import Domain
+    from verified.graph.evaluate import Domain
 
     calls = []
 
@@ -621,9 +621,9 @@ def test_select_fingerprint_and_pickle():
 
 
 def test_gradient_graph_and_params_to_inputs():
-    from verified.evaluate import eval_float
+    from verified.graph.evaluate import eval_float
     from verified.graph import trace
-    from verified.graph_ops import gradient_graph, params_to_inputs
+    from verified.graph.ops import gradient_graph, params_to_inputs
     g = trace(lambda x, p: [x[0] * x[0] * x[1] + x[1].sin() * p[0]], 2, 1)
     x, p = np.array([[0.3, -1.2]]), np.array([[2.0]])
     d = eval_float(gradient_graph(g), x, p)[0]

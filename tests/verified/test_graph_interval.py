@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from oracles.arb_graph import (_program, assert_encloses_float, box_samples, check_graph_enclosure, random_boxes,
                                run_program)
 from oracles.graph_models import all_ops, double_pendulum_rhs, generic_model, pendulum_energy
-from verified import evaluate as ev
+from verified.graph import evaluate as ev
 from verified.graph import trace
 from verified.arith.interval import Interval
 

@@ -80,7 +80,7 @@ def test_no_cycles_of_module_level_imports():
 
 def test_graph_modules_import_downward():
     mods = _modules()
-    order = ["verified.opcodes", "verified.evaluate", "verified.ir", "verified.tracer", "verified.graph_sympy",
+    order = ["verified.graph.opcodes", "verified.graph.evaluate", "verified.graph.ir", "verified.graph.tracer", "verified.graph.sympy_convert",
              "verified.graph"]
     for i, m in enumerate(order):
         assert not (_module_level_imports(mods, m) & set(order[i + 1:])), m

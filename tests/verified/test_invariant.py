@@ -87,7 +87,7 @@ def test_second_order_upper_bound_holds_and_a_dropped_hessian_is_caught():
         vals = (X ** 2).sum(axis=1) + np.sin(X[:, 0] * X[:, 1])
         assert vals.max() <= ub
         # the mutant: first order at the centre only
-        from verified.evaluate import eval_interval
+        from verified.graph.evaluate import eval_interval
         C = Interval(S.c)
         first = (eval_interval(g, C)[:, 0] + (inv.linalg.matmul(eval_interval(grad, C).reshape(1, 1, 3), A)
                                              .reshape(1, -1) * R).sum(axis=-1)).hi[0]

@@ -1,4 +1,4 @@
-"""The graph op ``mid`` and the preconditioned linear solve (verified.preconditioned).
+"""The graph op ``mid`` and the preconditioned linear solve (verified.graph.preconditioned).
 
 Oracles: exact rational arithmetic (fractions) for linear systems; python-flint arb
 series (tests/oracles/arb_series.arb_taylor, which evaluates ``mid`` as the identity:
@@ -16,11 +16,11 @@ from hypothesis import strategies as st
 
 from oracles.arb_series import check_affine_taylor
 from oracles.taylor_cases import ARM_Q0, assert_pin_inside  # the arm_pin fixture: tests/verified/conftest.py
-from verified import preconditioned
+from verified.graph import preconditioned
 from verified.affine_taylor import AffineTaylorODE
-from verified.evaluate import IntervalDomain
+from verified.graph.evaluate import IntervalDomain
 from verified.graph import Graph, GraphBuilder, Op, trace
-from verified.graph_ops import forward_mode
+from verified.graph.ops import forward_mode
 from verified.arith.interval import Interval
 from verified.taylor import TaylorODE
 

@@ -6,8 +6,8 @@ between the doubles either side of its nearest one. Every module that turns an e
 number into floats calls these functions instead of repeating the rule:
 
 - :mod:`verified.arith.interval` (``Fraction``, ``Decimal`` and big-int operands),
-- :mod:`verified.ir` (constant nodes, :func:`verified.graph.enclose_rational`),
-- :mod:`verified.graph_sympy` (sympy numbers: multiples of pi by :func:`pi_multiple_enclosure`,
+- :mod:`verified.graph.ir` (constant nodes, :func:`verified.graph.enclose_rational`),
+- :mod:`verified.graph.sympy_convert` (sympy numbers: multiples of pi by :func:`pi_multiple_enclosure`,
   other constants such as ``E`` by :func:`enclose_approximation` of a 40-digit evalf),
 - :mod:`verified.contractor` (pi for the periodic projections),
 - :mod:`verified.stepper` and :mod:`verified.solver` (the exact step times and the gap

@@ -1,6 +1,6 @@
 """A graph as straight-line Python code, for fast float evaluation at one point.
 
-:meth:`verified.ir.Graph.eval_float` walks the graph node by node with numpy arrays: a
+:meth:`verified.graph.ir.Graph.eval_float` walks the graph node by node with numpy arrays: a
 numpy call per node whatever the batch size, which is right for many points at once and
 slow for one (times: ``benchmarks/bench_float_model.py``, docs/lab/auto.md).
 :func:`compile_float` writes the graph once as a Python function of plain floats, one
@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from verified.opcodes import Op
+from verified.graph.opcodes import Op
 
 __all__ = ["compile_float", "FloatFunction"]
 

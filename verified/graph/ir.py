@@ -6,8 +6,8 @@ Layering (each module imports only the ones before it, so there is no import cyc
 
     opcodes  ->  evaluate  ->  ir  ->  tracer, graph_sympy  ->  graph (re-exports)
 
-Opcodes and :class:`Node` live in :mod:`verified.opcodes`; the evaluators that
-:meth:`Graph.eval_float` and friends call live in :mod:`verified.evaluate`.
+Opcodes and :class:`Node` live in :mod:`verified.graph.opcodes`; the evaluators that
+:meth:`Graph.eval_float` and friends call live in :mod:`verified.graph.evaluate`.
 
 Constants are rigorous: a constant node stores ``(lo, hi, value)`` floats with
 ``lo <= exact <= hi`` (outward rounded enclosure of the exact value) and ``value`` the
@@ -23,9 +23,9 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from verified import evaluate as _evaluate
+from verified.graph import evaluate as _evaluate
 from verified.arith.exact import enclose_approximation, enclose_fraction
-from verified.opcodes import _ARITY, _BY_NAME, LEAF_OPS, Node, Op
+from verified.graph.opcodes import _ARITY, _BY_NAME, LEAF_OPS, Node, Op
 
 __all__ = ["Graph", "GraphBuilder", "enclose_rational", "enclose_approximation"]
 
@@ -90,7 +90,7 @@ class Graph:
 
     Evaluate with :meth:`eval_float`, :meth:`eval_interval`, :meth:`jacobian_float`,
     :meth:`jacobian_interval` (all batched over leading axes), or with any
-    :class:`verified.evaluate.Domain` through :func:`verified.evaluate.evaluate`.
+    :class:`verified.graph.evaluate.Domain` through :func:`verified.graph.evaluate.evaluate`.
     """
 
     def __init__(
@@ -184,7 +184,7 @@ class Graph:
             counts[name] = counts.get(name, 0) + 1
         return counts
 
-    # -- evaluation (implementations in verified.evaluate)
+    # -- evaluation (implementations in verified.graph.evaluate)
 
     def eval_float(self, x, p=None) -> np.ndarray:
         """Float evaluation. ``x``: (..., n), ``p``: (..., p) or (p,) -> ndarray (..., m)."""
@@ -199,8 +199,8 @@ class Graph:
         return _evaluate.jacobian_float(self, x, p, wrt=wrt)
 
     def evaluate(self, domain, inputs: Sequence, params: Sequence = ()) -> list:
-        """Outputs in any :class:`verified.evaluate.Domain`, given one domain value per
-        input and per parameter (see :func:`verified.evaluate.evaluate`)."""
+        """Outputs in any :class:`verified.graph.evaluate.Domain`, given one domain value per
+        input and per parameter (see :func:`verified.graph.evaluate.evaluate`)."""
         return _evaluate.evaluate(self, domain, inputs, params)
 
     def jacobian_interval(self, x, p=None, *, wrt: str = "x"):
@@ -270,7 +270,7 @@ class Graph:
 
     def to_sympy(self, inputs=None, params=None) -> list:
         """Debugging aid: list of ``m`` sympy expressions (constants as their float value);
-        see :func:`verified.evaluate.to_sympy`."""
+        see :func:`verified.graph.evaluate.to_sympy`."""
         return _evaluate.to_sympy(self, inputs, params)
 
     # -- dunder
@@ -600,7 +600,7 @@ class GraphBuilder:
         :meth:`solve`). Every evaluator then encloses the true function, and forward
         derivatives (which treat ``C`` as constant) are exact too, because the
         identity holds for every fixed ``C``
-        (:func:`verified.preconditioned.solve` builds such a solve)."""
+        (:func:`verified.graph.preconditioned.solve` builds such a solve)."""
         a = self._check_id(a)
         node = self._nodes[a]
         if node.op == Op.MID:

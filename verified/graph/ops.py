@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from verified.forward_rules import RULES, Algebra
+from verified.graph.forward_rules import RULES, Algebra
 from verified.graph import Graph, GraphBuilder, Op
 
 __all__ = ["embed", "forward_mode", "rate_along", "augment_with_rate", "negated", "difference"]
@@ -50,7 +50,7 @@ def embed(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: Sequence
 
 
 class _BuilderAlgebra(Algebra):
-    """The algebra of :mod:`verified.forward_rules` on node ids of a builder: values and
+    """The algebra of :mod:`verified.graph.forward_rules` on node ids of a builder: values and
     derivatives (one direction each) are nodes, ``None`` a structural zero."""
 
     def __init__(self, b: GraphBuilder):
@@ -74,7 +74,7 @@ def forward_mode(b: GraphBuilder, graph: Graph, inputs: Sequence[int], params: S
     ``seeds[i][k]`` is the node id of the derivative of input ``i`` in direction ``k``
     (``None`` = structurally zero). Returns ``(values, derivatives)``: the output node
     ids and, per output, a list of ``k`` node ids or ``None`` (zero). The rules are
-    :data:`verified.forward_rules.RULES` (shared with :class:`verified.evaluate.DualDomain`).
+    :data:`verified.graph.forward_rules.RULES` (shared with :class:`verified.graph.evaluate.DualDomain`).
     """
     n_dir = len(seeds[0]) if seeds else 0
     A = _BuilderAlgebra(b)

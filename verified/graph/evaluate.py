@@ -25,11 +25,11 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from verified.arith import interval as _interval
-from verified.forward_rules import RULES, Algebra
-from verified.opcodes import Op
+from verified.graph.forward_rules import RULES, Algebra
+from verified.graph.opcodes import Op
 
-if TYPE_CHECKING:  # (annotations only: verified.ir imports this module)
-    from verified.ir import Graph
+if TYPE_CHECKING:  # (annotations only: verified.graph.ir imports this module)
+    from verified.graph.ir import Graph
 
 __all__ = [
     "Domain",
@@ -294,8 +294,8 @@ class DualDomain(Domain):
     Values are pairs ``(v, d)``: ``v`` a base value of the batch shape, ``d`` a base
     value of batch shape + ``(k,)`` holding the partial derivatives with respect to the
     ``k`` seeded variables, or ``None`` for zero (constants, unseeded leaves). The
-    derivative rules are :data:`verified.forward_rules.RULES` (shared with
-    :func:`verified.graph_ops.forward_mode`); they use only base-domain operations, so in an interval base domain
+    derivative rules are :data:`verified.graph.forward_rules.RULES` (shared with
+    :func:`verified.graph.ops.forward_mode`); they use only base-domain operations, so in an interval base domain
     they enclose the derivative over the box (the chain rule evaluated in interval
     arithmetic).
     """
@@ -317,7 +317,7 @@ class DualDomain(Domain):
         return self._algebra.d_scale(factor, d)
 
     def _apply(self, op, a, b=None, k=None):
-        """Dual value of ``op`` by :data:`verified.forward_rules.RULES`; the factor only
+        """Dual value of ``op`` by :data:`verified.graph.forward_rules.RULES`; the factor only
         when the derivative is nonzero."""
         rule, A = RULES[op], self._algebra
         u, du = a
@@ -378,7 +378,7 @@ class DualDomain(Domain):
 
 
 class _DualAlgebra(Algebra):
-    """The algebra of :mod:`verified.forward_rules` over a base domain: values are base
+    """The algebra of :mod:`verified.graph.forward_rules` over a base domain: values are base
     values of the batch shape, derivatives base values with a trailing axis of
     directions (None: zero); value operations are the base domain's."""
 

@@ -37,7 +37,7 @@ from typing import Sequence
 
 import numpy as np
 
-from verified.evaluate import IntervalDomain
+from verified.graph.evaluate import IntervalDomain
 from verified.arith.interval import Interval
 
 __all__ = ["frozen_point", "solve", "congruence_pivots"]
@@ -51,7 +51,7 @@ def _is_zero(x) -> bool:
 def frozen_point(x):
     """The graph op ``mid`` on any scalar type the models trace through.
 
-    Tracers (``verified.tracer``) record a ``mid`` node; :class:`~verified.arith.interval.Interval`
+    Tracers (``verified.graph.tracer``) record a ``mid`` node; :class:`~verified.arith.interval.Interval`
     values become the point at their midpoint (unbounded stays unbounded); floats,
     ints, Fractions and sympy expressions are their own point."""
     method = getattr(x, "mid", None)

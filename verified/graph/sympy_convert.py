@@ -24,9 +24,9 @@ from typing import Sequence
 
 import sympy
 
-from verified.evaluate import to_sympy
+from verified.graph.evaluate import to_sympy
 from verified.arith.exact import enclose_approximation, pi_multiple_enclosure
-from verified.ir import Graph, GraphBuilder, enclose_rational
+from verified.graph.ir import Graph, GraphBuilder, enclose_rational
 
 __all__ = ["from_sympy", "graph_to_sympy", "sympy_constant_enclosure", "sympy_number_node"]
 
@@ -250,5 +250,5 @@ def from_sympy(exprs, inputs, params=(), *, cse: bool = True, output_names: Sequ
 
 
 # sympy expressions of a graph's outputs: an evaluator like the others (one home, in
-# verified.evaluate, so that Graph.to_sympy needs no import of this module)
+# verified.graph.evaluate, so that Graph.to_sympy needs no import of this module)
 graph_to_sympy = to_sympy

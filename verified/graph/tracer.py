@@ -25,7 +25,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from verified.ir import Graph, GraphBuilder
+from verified.graph.ir import Graph, GraphBuilder
 
 __all__ = ["Tracer", "trace", "SUPPORTED_UFUNCS"]
 
@@ -293,7 +293,7 @@ def _lift(builder: GraphBuilder, value) -> int:
         lo, hi = float(value.lo), float(value.hi)
         return builder.const_enclosure(lo, hi, lo if lo == hi else 0.5 * lo + 0.5 * hi)
     if type(value).__module__.startswith("sympy"):
-        from verified.graph_sympy import sympy_number_node  # (import here: sympy only for sympy numbers)
+        from verified.graph.sympy_convert import sympy_number_node  # (import here: sympy only for sympy numbers)
 
         return sympy_number_node(builder, value)
     raise TypeError(f"cannot use {type(value).__name__} {value!r} in a traced expression")

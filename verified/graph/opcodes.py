@@ -1,7 +1,7 @@
 """Opcodes of the expression graph (:class:`Op`) and its node type (:class:`Node`).
 
 The bottom of the graph modules: imports nothing of the project, so evaluators
-(:mod:`verified.evaluate`) dispatch on opcodes without importing the graph.
+(:mod:`verified.graph.evaluate`) dispatch on opcodes without importing the graph.
 """
 from __future__ import annotations
 

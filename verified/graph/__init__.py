@@ -19,8 +19,8 @@ Graphs are built by :class:`GraphBuilder` (hash-consing: equal subexpressions be
 one node; arguments of the commutative ``add``/``mul`` are put in a canonical order;
 trivial simplifications only where exact for every finite argument). Two front ends
 produce graphs: :func:`from_sympy` (sympy expressions) and :func:`trace` (run a Python
-function on :class:`~verified.tracer.Tracer` scalars). Evaluators live in
-:mod:`verified.evaluate`.
+function on :class:`~verified.graph.tracer.Tracer` scalars). Evaluators live in
+:mod:`verified.graph.evaluate`.
 
 This module is the public front: it re-exports the IR and the front ends. The code
 lives in modules that import only the ones before them (no import cycle)::
@@ -31,9 +31,9 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from verified.ir import FORMAT_NAME, FORMAT_VERSION, Graph, GraphBuilder, enclose_approximation, enclose_rational
-from verified.opcodes import BINARY_OPS, COMMUTATIVE_OPS, LEAF_OPS, UNARY_OPS, Node, Op
-from verified.tracer import Tracer, trace
+from verified.graph.ir import FORMAT_NAME, FORMAT_VERSION, Graph, GraphBuilder, enclose_approximation, enclose_rational
+from verified.graph.opcodes import BINARY_OPS, COMMUTATIVE_OPS, LEAF_OPS, UNARY_OPS, Node, Op
+from verified.graph.tracer import Tracer, trace
 
 __all__ = [
     "Op",
@@ -68,9 +68,9 @@ def from_sympy(exprs, inputs, params=(), *, cse: bool = True, output_names: Sequ
     40 digits, enclosed outward). Raises ``ValueError`` for symbols that are neither
     inputs nor params, ``NotImplementedError`` for anything else (Abs, sign, Piecewise,
     ``x**(1/3)``, ...), naming the offending subexpression. Details in
-    :mod:`verified.graph_sympy`.
+    :mod:`verified.graph.sympy_convert`.
     """
-    # (import here: sympy, ~0.4 s, only for sympy input; verified.graph_sympy does not import this module)
-    from verified.graph_sympy import from_sympy as _from_sympy
+    # (import here: sympy, ~0.4 s, only for sympy input; verified.graph.sympy_convert does not import this module)
+    from verified.graph.sympy_convert import from_sympy as _from_sympy
 
     return _from_sympy(exprs, inputs, params, cse=cse, output_names=output_names)

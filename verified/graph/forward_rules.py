@@ -1,8 +1,8 @@
 """Forward-mode derivative rules, written once for every graph operation.
 
-Two places differentiate a graph forward: :func:`verified.graph_ops.forward_mode`
-builds the derivative as another graph (node ids in a :class:`~verified.ir.GraphBuilder`),
-and :class:`verified.evaluate.DualDomain` evaluates dual numbers over a base domain
+Two places differentiate a graph forward: :func:`verified.graph.ops.forward_mode`
+builds the derivative as another graph (node ids in a :class:`~verified.graph.ir.GraphBuilder`),
+and :class:`verified.graph.evaluate.DualDomain` evaluates dual numbers over a base domain
 (floats, intervals). Both use the table :data:`RULES` here, over a small algebra:
 
 value operations (of the values of nodes)
@@ -23,9 +23,9 @@ A rule is ``(value, factor, deriv)``:
   arguments' derivatives ``p``, ``q`` in that direction, the arguments ``u``, ``w``,
   the value ``v`` and the factor ``f``.
 
-:func:`verified.graph_ops.forward_mode` calls ``deriv`` once per direction (one node
+:func:`verified.graph.ops.forward_mode` calls ``deriv`` once per direction (one node
 per direction and nonzero entry) and computes the factor for every node, as before;
-:class:`~verified.evaluate.DualDomain` calls it once on whole derivative arrays (last
+:class:`~verified.graph.evaluate.DualDomain` calls it once on whole derivative arrays (last
 axis the directions) and skips the factor when the node's derivative is zero. The
 rules use only the algebra's operations, so in an interval base domain the derivative
 is the chain rule evaluated in (outward rounded) interval arithmetic: an enclosure.
@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from typing import Callable, NamedTuple
 
-from verified.opcodes import Op
+from verified.graph.opcodes import Op
 
 __all__ = ["Rule", "RULES", "Algebra", "VALUE_OPS"]
 
