@@ -5,13 +5,13 @@ Run:  python benchmarks/bench_affine_kernel.py [--baseline PATH] [--quick] [--on
 For each graph and batch size B it times, in one process (the machine is shared: the
 ratios are what counts),
 
-* ``TaylorODE(g).coefficients(X, K)``          (interval kernel, verified/taylor.py)
+* ``TaylorODE(g).coefficients(X, K)``          (interval kernel, verified/series/taylor.py)
 * ``AffineTaylorODE(g).coefficients(X, K)``    (affine, n fresh symbols per order)
 * ``AffineTaylorODE(variational_graph(g), fresh_symbols=0).series(forms, K - 1)``
   (the variational use of verified/lohner.py, forms over a set's 2n parameters)
 
 and prints CPU microseconds per box-step and the ratio affine / interval. With
-``--baseline PATH`` (a copy of an older ``verified/affine_taylor.py`` whose relative
+``--baseline PATH`` (a copy of an older ``verified/series/affine_taylor.py`` whose relative
 imports were made absolute) the old affine kernel is timed in the same run too, and
 its results are compared with today's: ``same`` means bit-identical enclosures,
 otherwise the largest relative width change (today / old - 1) is shown.
@@ -32,12 +32,12 @@ import time
 
 import numpy as np
 
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.sets import DoubletonSets
-from verified.taylor import TaylorODE
-from verified.variational import variational_graph
+from verified.series.taylor import TaylorODE
+from verified.series.variational import variational_graph
 
 Q0_ARM3 = (0.5, -0.3, 0.2)
 Q0_UR5 = (0.0, -1.0, 1.0, -0.5, 0.5, 0.0)

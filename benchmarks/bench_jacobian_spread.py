@@ -35,13 +35,13 @@ from pathlib import Path
 import numpy as np
 
 
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.hooks import Hook
 from verified.arith.interval import Interval, concatenate, point
 from verified.lohner import horner
-from verified.taylor import TaylorODE
-from verified.taylor_model import TaylorModelODE
-from verified.variational import variational_graph
+from verified.series.taylor import TaylorODE
+from verified.series.taylor_model import TaylorModelODE
+from verified.series.variational import variational_graph
 
 
 class CaptureAt(Hook):

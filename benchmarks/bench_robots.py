@@ -731,8 +731,8 @@ class Bench:
     # 7 -------------------------------------------------------------------------
     def qdd(self):
         from models.planar import planar_chain
-        from verified.affine_taylor import AffineTaylorODE
-        from verified.taylor import TaylorODE
+        from verified.series.affine_taylor import AffineTaylorODE
+        from verified.series.taylor import TaylorODE
         chain = planar_chain(3)
         lo, hi = chain_box(Q0_ARM3, 0.01)
         box = Interval(lo[None], hi[None])

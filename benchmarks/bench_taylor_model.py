@@ -32,13 +32,13 @@ import numpy as np
 
 
 import bench_robots as br
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.hooks import StopAfterWall
 from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
-from verified.taylor import TaylorODE
-from verified.taylor_model import TaylorModelODE
-from verified.variational import variational_graph
+from verified.series.taylor import TaylorODE
+from verified.series.taylor_model import TaylorModelODE
+from verified.series.variational import variational_graph
 
 
 def _chain(name):

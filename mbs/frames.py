@@ -12,7 +12,7 @@ results intersected (each encloses the true range, so the intersection does too)
 
 - ``mean-value``: ``FK(c) + J_FK(box) (x - c)``, ``c`` the box centre, ``J_FK``
   the interval Jacobian over the box (first-order: the width is ``|J| w``);
-- ``affine``: :func:`verified.affine_taylor.affine_range` (one noise symbol per wide
+- ``affine``: :func:`verified.series.affine_taylor.affine_range` (one noise symbol per wide
   input; keeps the dependence of every intermediate of the kinematic chain);
 - ``interval``: plain interval evaluation (only matters for wide boxes).
 
@@ -38,7 +38,7 @@ import weakref
 import numpy as np
 
 from verified.arith import linalg
-from verified.affine_taylor import affine_range
+from verified.series.affine_taylor import affine_range
 from verified.graph import trace
 from verified.arith.interval import Interval, concatenate
 from verified.sets import SetView

@@ -29,9 +29,9 @@ __all__ = ["Progress", "interactive", "kernel_cache_warm", "cold_families", "com
 #: how long they take to compile from a cold cache on a 2-core machine [s], rounded
 #: from runs (docs/lab/code_notes.md)
 KERNEL_FAMILIES = {
-    "interval": (("verified.arith._kernels", "verified.taylor", "verified.arith.linalg"), 30),
-    "Taylor-model": (("verified.taylor_model", "verified.tm_flow"), 45),
-    "affine": (("verified.affine_taylor",), 30),
+    "interval": (("verified.arith._kernels", "verified.series.taylor", "verified.arith.linalg"), 30),
+    "Taylor-model": (("verified.series.taylor_model", "verified.tm_flow"), 45),
+    "affine": (("verified.series.affine_taylor",), 30),
 }
 
 
@@ -62,7 +62,8 @@ def kernel_cache_warm(module: str):
     try:
         mod = sys.modules.get(module)
         if mod is None:  # (the kernel modules of KERNEL_FAMILIES; by name they are not imported here)
-            from verified import affine_taylor, taylor, taylor_model, tm_flow  # noqa: F401
+            from verified import tm_flow  # noqa: F401
+            from verified.series import affine_taylor, taylor, taylor_model  # noqa: F401
             from verified.arith import _kernels, linalg  # noqa: F401
             mod = sys.modules.get(module)
         if mod is None:

@@ -4,6 +4,6 @@ consistency tests. Knows nothing about robots."""
 
 from verified.graph import Graph, GraphBuilder, Op, Tracer, from_sympy, trace
 from verified.arith.interval import Interval, IntervalError
-from verified.taylor import TaylorODE
+from verified.series.taylor import TaylorODE
 
 __all__ = ["Interval", "IntervalError", "Graph", "GraphBuilder", "Op", "Tracer", "from_sympy", "trace", "TaylorODE"]

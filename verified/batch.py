@@ -29,7 +29,7 @@ from functools import partial
 
 import numpy as np
 
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.arith.exact import enclose_fraction
 from verified.graph import Graph
 from verified.hooks import ProgressHook, RunSetup, check_hooks
@@ -42,9 +42,9 @@ from verified.quadratic import QuadraticSets
 from verified.sets import DoubletonSets, SetView, set_view
 from verified.solution import Failure, PieceResult, Solution, Start, pieces_summary
 from verified.solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
-from verified.taylor import TaylorODE
-from verified.taylor_model import TaylorModelODE
-from verified.variational import params_as_states, second_variational_graph, variational_graph
+from verified.series.taylor import TaylorODE
+from verified.series.taylor_model import TaylorModelODE
+from verified.series.variational import params_as_states, second_variational_graph, variational_graph
 
 __all__ = ["solve_batch", "VerifiedODE", "MODEL_CAPS"]
 
@@ -96,7 +96,7 @@ class VerifiedODE:
                 variational.fresh_slots = self.FRESH_SLOTS
             return variational
         if self.arithmetic == "taylor_model":
-            # the Jacobian over a set in degree-2 Taylor models (verified.taylor_model):
+            # the Jacobian over a set in degree-2 Taylor models (verified.series.taylor_model):
             # its spread is what the QR-Lohner error part grows by every step, and
             # it is tighter than affine (docs/lab/code_notes.md). The solution's own
             # coefficients stay affine: with fresh symbols
@@ -115,7 +115,7 @@ class VerifiedODE:
     def second_variational_along(self, directions: int):
         """Evaluator over a set's own forms (affine, or Taylor models with
         ``arithmetic="taylor_model"``) of the second variational equations along
-        ``directions`` columns (:func:`verified.variational.second_variational_graph`),
+        ``directions`` columns (:func:`verified.series.variational.second_variational_graph`),
         built on first use for each count."""
         cache = self.__dict__.setdefault("_second_along", {})
         if directions not in cache:

@@ -9,7 +9,7 @@ with ``c`` a float centre, ``C`` a float matrix acting on the fixed initial radi
 errors, ``Q`` re-orthogonalized every step (Lohner's QR method) and ``r`` an interval
 vector. A step of size ``h``:
 
-1. ``X`` = interval hull of the set; Taylor coefficients ``x_[i](X)`` (:mod:`verified.taylor`).
+1. ``X`` = interval hull of the set; Taylor coefficients ``x_[i](X)`` (:mod:`verified.series.taylor`).
 2. A-priori enclosure ``E`` of all solutions from ``X`` over ``[0, h]`` by the high-order
    enclosure test of Nedialkov, Jackson & Pryce (2001): if
    ``sum_{i<K} [0,h]^i x_[i](X) + [0,h]^K x_[K](E~) ⊆ E~`` then the solutions exist on
@@ -17,7 +17,7 @@ vector. A step of size ``h``:
 3. ``y = Φ(c) + h^K x_[K](E)``: the Taylor polynomial at the centre plus the Lagrange
    remainder (valid for every solution from ``X``).
 4. ``J`` = enclosure of ``DΦ`` over ``X`` from the Taylor coefficients of the variational
-   equations (:mod:`verified.variational`); by the mean value theorem
+   equations (:mod:`verified.series.variational`); by the mean value theorem
    ``φ(h, x) ∈ y + J (x - c)`` for all ``x`` in the set.
 5. New set: ``c' = mid(y)``, ``C' = mid(J C)``,
    ``r' = (Q'^-1 J Q) r + Q'^-1 ((J C - C') r0 + y - c')`` with ``Q'`` from the QR

@@ -40,7 +40,7 @@ with its second-order mean value form ``DP(c) + H(set)[x - c]``. When the error 
 (:meth:`QuadraticSets.absorb_error`: exact, nothing is widened), up to ``max_params``.
 
 ``DP`` and ``H`` come from the Taylor coefficients of the second variational
-equations (:func:`verified.variational.second_variational_graph`) at the centres (thin
+equations (:func:`verified.series.variational.second_variational_graph`) at the centres (thin
 enclosures) and over ``U``.
 """
 
@@ -56,7 +56,7 @@ from verified.lohner import LohnerStepper, horner
 from verified.policies import orthonormal_basis, scaled_basis
 from verified.sets import DoubletonSets, parameter_cuts
 from verified.stepper import StepResult
-from verified.variational import pair_index
+from verified.series.variational import pair_index
 
 __all__ = ["QuadraticSets", "QuadraticStepper", "quadratic_range"]
 
@@ -414,7 +414,7 @@ class QuadraticSets:
 
 class QuadraticStepper(LohnerStepper):
     """Verified steps of :class:`QuadraticSets` (module docstring). ``second`` is a
-    Taylor evaluator (``verified.taylor.TaylorODE``) of the second variational graph;
+    Taylor evaluator (``verified.series.taylor.TaylorODE``) of the second variational graph;
     the rest is as :class:`~verified.lohner.LohnerStepper` (whose a-priori enclosure,
     step-size suggestion and error-basis policy it uses unchanged)."""
 

@@ -16,7 +16,7 @@ it: the set is written as a degree-2 Taylor model over its own symbols,
 ``delta`` the error vector ``r = mid r + rad r delta``, every symbol in ``[-1, 1]``
 (the floats' rounding in a remainder). The Taylor coefficients ``x_[k]``, ``k < K``,
 of the solutions from that model are computed in Taylor-model arithmetic of degree 3
-(:mod:`verified.taylor_model`: the graph's Taylor recursion, quadratic terms exact,
+(:mod:`verified.series.taylor_model`: the graph's Taylor recursion, quadratic terms exact,
 cubic ones exact in the ``CUBIC_CAP`` widest parameters, the higher orders and rounding
 in a rigorous remainder per operation; degree 2 on request, or degree 4 with quartic
 terms exact in the ``QUARTIC_CAP`` widest), and
@@ -40,12 +40,12 @@ Two things keep those bounds from feeding on themselves over a long run:
 
 * *Fresh symbols per coefficient* (``fresh_symbols``, on by default): once ``x_[k]_i``
   is computed, its remainder becomes the coefficient of a symbol of its own
-  (:meth:`verified.taylor_model.TaylorModelODE._run`), so the later orders of the
+  (:meth:`verified.series.taylor_model.TaylorModelODE._run`), so the later orders of the
   recursion carry it linearly, with its cancellations, instead of multiplying a
   radius through every operation of the graph. The step bounds those symbols' terms with the
   rest of the error. Without them the high orders' remainders grow with every order and
   the step-size cut holds the steps short (docs/lab/code_notes.md).
-* *Star monomials* (``star_cap``, :mod:`verified.taylor_model`): the widest symbols'
+* *Star monomials* (``star_cap``, :mod:`verified.series.taylor_model`): the widest symbols'
   products with every other symbol of the set are kept, not bounded. A set that
   absorbs its error gathers dozens of narrow parameters past the quadratic cap; their
   cross terms with the wide ones, bounded per operation, fed the error they came from
@@ -55,7 +55,7 @@ Two things keep those bounds from feeding on themselves over a long run:
   128; ``solve(model_caps={"pool": ...})``): at the first ``POOL_ORDERS`` = 3 orders of
   the recursion, the first slots of the model graph whose remainder is more than
   ``POOL_TOL`` of their magnitude get a symbol of their own for it
-  (:meth:`verified.taylor_model.TaylorModelODE._run`), so what one product bounds is
+  (:meth:`verified.series.taylor_model.TaylorModelODE._run`), so what one product bounds is
   carried linearly through the rest of the graph (the tube's coefficients, order 0). On a robot the
   remainder of ``qdd`` is born in the bias products, spread over every joint's torque
   and recombined by the mass-matrix solve, where the values cancel and independent
@@ -78,15 +78,16 @@ import numpy as np
 from numba import njit
 
 from verified.arith import linalg
-from verified.affine_taylor import box_forms
+from verified.series.affine_taylor import box_forms
 from verified.arith.interval import Interval, _k_round_up, point
 from verified.lohner import LohnerStepper, _inflate
 from verified.policies import REMAINDER_SLACK
 from verified.quadratic import QuadraticSets
 from verified.sets import SetView
 from verified.stepper import StepResult
-from verified.taylor_model import (_acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length,
-                           models_to_interval, star_base)
+from verified.series.taylor_model import (
+    _acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length, models_to_interval, star_base
+)
 
 __all__ = ["TaylorModelFlowStepper", "set_models", "ModelCaps", "tube_view", "tube_coefficients", "step_tube"]
 
@@ -110,7 +111,7 @@ SMALL_SYSTEM_CAPS = (32, 16)
 SMALL_SYSTEM = 9
 
 #: default number of the widest symbols whose products with every symbol past the
-#: quadratic cap are kept as star monomials (verified.taylor_model); a product costs
+#: quadratic cap are kept as star monomials (verified.series.taylor_model); a product costs
 #: O(cap * symbols) more. See TaylorModelFlowStepper.
 STAR_CAP = 6
 
@@ -124,7 +125,7 @@ TUBE_CUBIC_CAP = 2
 
 
 class ModelCaps(NamedTuple):
-    """The monomials of the models over a set's symbols (:func:`verified.taylor_model.model_length`
+    """The monomials of the models over a set's symbols (:func:`verified.series.taylor_model.model_length`
     takes them in this order: ``model_length(M, *caps)``): the first ``mq`` symbols
     with quadratic monomials, the first ``m3`` cubic, the first ``m4`` quartic, and the
     first ``ms`` with star monomials reaching the ``ns`` symbols after the quadratic
@@ -282,7 +283,7 @@ def tube_coefficients(models, tube: np.ndarray, M: int, mq: int, order: int, par
     """Enclosures (B, order + 1, n) of the Taylor coefficients ``x_[0..order]`` over a
     tube given as models ``tube`` (n, B, L) over ``M`` symbols (``mq`` of them with
     quadratic monomials), in Taylor models of their own made for a tube
-    (:class:`verified.taylor_model.TaylorModelODE` ``models``; ``params`` an Interval
+    (:class:`verified.series.taylor_model.TaylorModelODE` ``models``; ``params`` an Interval
     (B, p) or None).
 
     A tube is not a set: the step's motion (the first time symbol) is its widest
@@ -291,13 +292,13 @@ def tube_coefficients(models, tube: np.ndarray, M: int, mq: int, order: int, par
     symbol of its own, the symbols are sorted by width (the widest ``quadratic_cap``
     get quadratic monomials, the widest ``cubic_cap`` cubic ones: the motion's curvature
     is carried, not bounded per operation) and the recursion runs with fresh symbols
-    per coefficient (:meth:`~verified.taylor_model.TaylorModelODE.series`). A remainder
+    per coefficient (:meth:`~verified.series.taylor_model.TaylorModelODE.series`). A remainder
     on a symbol of its own is carried linearly through the graph, with its
     cancellations, where a model's remainder is multiplied by every operation. Sound:
     the tube's points are ``p(e) + r`` with ``r`` in the per-state remainder box, each
     ``r_i = rad_i delta_i`` for some ``delta_i`` in ``[-1, 1]``; the symbols' order and
     caps change only which products are kept. ``pool``: symbols for the remainders born
-    inside the graph at order 0 (:meth:`~verified.taylor_model.TaylorModelODE._run`).
+    inside the graph at order 0 (:meth:`~verified.series.taylor_model.TaylorModelODE._run`).
 
     Against fresh symbols per order in affine arithmetic: ``x_[K]`` over the tube much
     narrower at about the same cost, hence longer steps (docs/lab/code_notes.md)."""
@@ -442,7 +443,7 @@ class TaylorModelFlowStepper(LohnerStepper):
 
     ``taylor``: the evaluator of Taylor coefficients over boxes (step size and a-priori
     enclosure, as every stepper); ``models``: a
-    :class:`verified.taylor_model.TaylorModelODE` of the same graph; ``degree`` (2, 3 or
+    :class:`verified.series.taylor_model.TaylorModelODE` of the same graph; ``degree`` (2, 3 or
     4) that of the arithmetic, with ``cubic_cap`` symbols carrying cubic monomials
     (``quadratic_cap`` / ``cubic_cap`` None: ``SMALL_SYSTEM_CAPS`` for at most
     ``SMALL_SYSTEM`` states, else ``QUADRATIC_CAP`` / ``CUBIC_CAP``; larger caps cost

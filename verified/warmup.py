@@ -36,7 +36,7 @@ def _rhs(x, p):
 
 #: what compile_kernels can warm: the kernel families (as :data:`mbs.progress.KERNEL_FAMILIES`
 #: names them), and ``"affine_range"``, the affine graph range alone (a robot's frame
-#: enclosures: :func:`verified.affine_taylor.affine_range`), the first step of ``"affine"``
+#: enclosures: :func:`verified.series.affine_taylor.affine_range`), the first step of ``"affine"``
 FAMILIES = ("interval", "affine", "Taylor-model", "affine_range")
 
 
@@ -52,7 +52,7 @@ def compile_kernels(log=None, families=None) -> float:
     # (import here: the solver and the kernels (~1.5 s) only in the process that compiles;
     # mbs.app.demo imports this module to start that process)
     from verified.arith import interval as iv, linalg
-    from verified.affine_taylor import AffineTaylorODE, affine_range, box_forms
+    from verified.series.affine_taylor import AffineTaylorODE, affine_range, box_forms
     from verified.arith.interval import Interval, point
     from verified.solver import solve
     from verified.graph.tracer import trace

@@ -28,7 +28,7 @@ import itertools
 
 import numpy as np
 
-from verified.affine_taylor import affine_range
+from verified.series.affine_taylor import affine_range
 from verified.arith.interval import Interval
 from verified.solver import Solution
 

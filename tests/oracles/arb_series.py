@@ -12,7 +12,7 @@ from flint import arb, arb_series
 
 from oracles.arb_graph import ArbDomain, box_samples
 from verified.graph import evaluate as ev
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.arith.interval import Interval
 
 INF = math.inf

@@ -11,7 +11,7 @@ import pytest
 from oracles.sampling import misses, sample_initial_points, trajectories
 from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
 from verified import sets as vsets
-from verified.affine_taylor import forms_to_interval
+from verified.series.affine_taylor import forms_to_interval
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import solve

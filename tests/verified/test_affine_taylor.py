@@ -1,6 +1,6 @@
-"""Soundness of the affine-arithmetic Taylor coefficients (verified.affine_taylor).
+"""Soundness of the affine-arithmetic Taylor coefficients (verified.series.affine_taylor).
 
-Oracles (none shares code with the affine kernel or with verified.taylor):
+Oracles (none shares code with the affine kernel or with verified.series.taylor):
 
 * python-flint ``arb_series`` at 256 bits: the Taylor coefficients of the solution
   through a *point* of the box by Picard iteration, ``x <- x0 + integral(f(x))`` on
@@ -24,7 +24,7 @@ from flint import arb
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import verified.affine_taylor as at
+import verified.series.affine_taylor as at
 from oracles.arb_graph import _program, arb_eval, assert_encloses_arb, box_samples, random_boxes, run_program
 from oracles.arb_series import (affine_coefficients, arb_precision, arb_taylor, assert_inside, check_affine_taylor,
                                 check_series_contains)
@@ -32,10 +32,10 @@ from oracles.graph_models import all_ops
 from oracles.sampling import in_union, misses, sample_initial_points, trajectories
 from oracles.taylor_cases import (ARM_Q0, CASES, _arm, _dp_graph, _program_ode, _radius, assert_pin_inside,
                                   case_graph, random_forms)
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.taylor import TaylorODE
+from verified.series.taylor import TaylorODE
 
 INF = math.inf
 FRESH = [None, 0]  # the solver uses both: fresh symbols for x, none for the variational series
@@ -543,7 +543,7 @@ def test_solver_affine_double_pendulum_contains_dop853_trajectories():
 # --------------------------------------------------------------------------- affine_range
 def _check_affine_range(graph, lo, hi, rng, P=None, range_fn=None):
     """affine_range over boxes [lo, hi] (B, n) contains arb values at sampled points."""
-    from verified.affine_taylor import affine_range
+    from verified.series.affine_taylor import affine_range
 
     Y = (range_fn or affine_range)(graph, Interval(lo, hi), P)
     pts = box_samples(lo, hi, 6, rng)
@@ -568,7 +568,7 @@ def test_affine_range_contains_exact_values_on_random_programs(program, seed):
 
 
 def test_affine_range_of_a_non_square_graph_and_the_oracle_bites(monkeypatch):
-    import verified.affine_taylor as at
+    import verified.series.affine_taylor as at
 
     g = trace(lambda x, p: [np.sin(x[0]) * np.cos(x[1]) - x[0] * x[1], np.exp(x[0] - x[1])], 2)  # 2 -> 2
     g3 = trace(lambda x, p: [x[0] * x[1] - np.sin(x[2])], 3)  # 3 -> 1
@@ -590,7 +590,7 @@ def test_mass_matrix_proof_uses_affine_pivots_for_a_five_link_arm():
     0.39] and [-inf, inf]); simulate() cut an affine run, verified to 0.04 s, back to
     t = 0. The affine pivots are proven positive and contain the sampled pivots."""
     from mbs.simulate import pivots_proven
-    from verified.affine_taylor import affine_range
+    from verified.series.affine_taylor import affine_range
 
     from models.planar import planar_chain
 
@@ -611,7 +611,7 @@ def test_mass_matrix_proof_uses_affine_pivots_for_a_five_link_arm():
 
 
 # --------------------------------------------------------------------------- batched kernel = reference
-# verified.affine_taylor runs a batched kernel (boxes in SIMD lanes, loops cut at the last
+# verified.series.affine_taylor runs a batched kernel (boxes in SIMD lanes, loops cut at the last
 # symbol a form can carry); _affine_kernel_reference is the plain per-box statement of the
 # same rules. They must give the same numbers, so every soundness test above, run on the
 # batched kernel, speaks for the rules as written. The one allowed difference: where an
@@ -620,7 +620,7 @@ def test_mass_matrix_proof_uses_affine_pivots_for_a_five_link_arm():
 
 
 def _both_kernels(graph, X, P, order, m0, n_fresh, lanes):
-    from verified.taylor import _Tape
+    from verified.series.taylor import _Tape
 
     t = _Tape(graph)
     args = (t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X, P, order, m0, n_fresh)
@@ -697,7 +697,7 @@ def test_batched_kernel_equals_reference_on_robot_graphs():
     on a set's own forms) and the 3-link arm, order 12 / 11 as in solve()."""
     from models import double_pendulum as dp
     from verified.sets import DoubletonSets
-    from verified.variational import variational_graph
+    from verified.series.variational import variational_graph
 
     g = trace(dp.rhs, 4)
     lo, hi = dp.initial_box()
@@ -770,7 +770,7 @@ def _check_public_calls(g):
     np.testing.assert_array_equal(R.lo, lo_r)
     np.testing.assert_array_equal(R.hi, hi_r)
     from verified.sets import DoubletonSets
-    from verified.variational import variational_graph
+    from verified.series.variational import variational_graph
 
     vg = variational_graph(g)
     forms = DoubletonSets.from_boxes(x).affine_forms(extra=16)
@@ -850,7 +850,7 @@ def test_batched_kernel_equals_reference_with_fresh_slots(n_fresh):
     """The batched kernel with fresh symbols for chosen slots (sel) gives the reference
     kernel's forms, value for value: 3-link arm, 3 sets of random forms, 12 random
     slots, order 4, with and without fresh symbols for the coefficients."""
-    from verified.taylor import T_AUX, T_CONST, T_INPUT, T_PARAM, _Tape
+    from verified.series.taylor import T_AUX, T_CONST, T_INPUT, T_PARAM, _Tape
 
     _, g = _arm()
     t = _Tape(g)

@@ -3,7 +3,7 @@ error (an experiment once asked numpy for a 37.6 GiB buffer)."""
 
 import pytest
 
-import verified.taylor_model as tm_mod
+import verified.series.taylor_model as tm_mod
 from verified.graph import trace
 
 

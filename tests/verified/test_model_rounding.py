@@ -1,6 +1,6 @@
 """The Taylor-model kernel's coefficient loops against exact rationals, and the kernels' work memory.
 
-``verified.taylor_model._acc_mul``, ``_acc_add``, ``_scale_into`` and ``_div_int_into``
+``verified.series.taylor_model._acc_mul``, ``_acc_add``, ``_scale_into`` and ``_div_int_into``
 bound the rounding of their float coefficient updates from sums of magnitudes (vectorized,
 ``_abs_sum``), not term by term. Oracle: the same operation in ``fractions.Fraction`` (exact);
 the computed model must contain it, i.e. the sum of ``|computed - exact|`` over its
@@ -22,13 +22,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import verified.taylor_model as tm
+import verified.series.taylor_model as tm
 from oracles.graph_models import all_ops
 from oracles.taylor_cases import _arm
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.taylor_model import TaylorModelODE
+from verified.series.taylor_model import TaylorModelODE
 
 pytestmark = pytest.mark.slow  # (the kernel module compiles in the slow step, as test_taylor_model)
 
@@ -189,7 +189,7 @@ def test_garbage_in_reused_work_memory_changes_nothing(make):
 
 
 # --------------------------------------------------------------------------- the affine kernel's product
-# verified.affine_taylor._acc_mul (whose bits the batched kernel reproduces, test_affine_taylor)
+# verified.series.affine_taylor._acc_mul (whose bits the batched kernel reproduces, test_affine_taylor)
 # bounds its rounding from partial sums of magnitudes too. With y a constant form the product
 # is linear, so rounding is all its error radius has to cover.
 
@@ -197,7 +197,7 @@ def test_garbage_in_reused_work_memory_changes_nothing(make):
 @given(cx=finite, lin=st.lists(finite, min_size=7, max_size=7), cy=finite,
        w=st.sampled_from([1.0, 2.0, -1.0, 3.0, 0.5]), jitter=st.floats(-1.0, 1.0), cancel=st.booleans())
 def test_affine_product_contains_the_exact_product(cx, lin, cy, w, jitter, cancel):
-    from verified import affine_taylor as at
+    from verified.series import affine_taylor as at
 
     m = len(lin)
     x = np.array([cx] + lin + [0.0])

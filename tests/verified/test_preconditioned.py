@@ -17,12 +17,12 @@ from hypothesis import strategies as st
 from oracles.arb_series import check_affine_taylor
 from oracles.taylor_cases import ARM_Q0, assert_pin_inside  # the arm_pin fixture: tests/verified/conftest.py
 from verified.graph import preconditioned
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.graph.evaluate import IntervalDomain
 from verified.graph import Graph, GraphBuilder, Op, trace
 from verified.graph.ops import forward_mode
 from verified.arith.interval import Interval
-from verified.taylor import TaylorODE
+from verified.series.taylor import TaylorODE
 
 # --------------------------------------------------------------------------- the op
 
@@ -329,7 +329,7 @@ def test_seven_link_mass_matrix_proven_with_congruence_pivots():
     the proof failed at t = 0 for n >= 5)."""
     from mbs.numeric import NumericModel
     from models.planar import planar_chain
-    from verified.affine_taylor import affine_range
+    from verified.series.affine_taylor import affine_range
     chain = planar_chain(7)
     q0 = np.linspace(0.5, -0.3, 7)
     box = Interval(q0 - 1e-3, q0 + 1e-3)[None]

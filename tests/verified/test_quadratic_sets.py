@@ -19,7 +19,7 @@ from verified import quadratic
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
-from verified.variational import pair_index, second_variational_graph
+from verified.series.variational import pair_index, second_variational_graph
 
 from models import double_pendulum as dp
 from models import pendulum as pd

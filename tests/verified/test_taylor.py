@@ -1,4 +1,4 @@
-"""Interval Taylor coefficients of ODE solutions (verified.taylor) against exact series."""
+"""Interval Taylor coefficients of ODE solutions (verified.series.taylor) against exact series."""
 
 import math
 from fractions import Fraction
@@ -10,7 +10,7 @@ import sympy as sp
 
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.taylor import TaylorODE
+from verified.series.taylor import TaylorODE
 
 
 def contains_exact(iv_lo, iv_hi, exact):

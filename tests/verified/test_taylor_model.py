@@ -1,4 +1,4 @@
-"""Taylor models of degree 2, 3 and 4 (verified.taylor_model) against exact arithmetic.
+"""Taylor models of degree 2, 3 and 4 (verified.series.taylor_model) against exact arithmetic.
 
 Oracle: the exact Taylor coefficients of the solution through points of the box (or of
 the caller's forms), computed by python-flint ``arb_series`` at 256 bits with no
@@ -18,16 +18,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import verified.taylor_model as tm
+import verified.series.taylor_model as tm
 from oracles.arb_graph import _program, box_samples, random_boxes
 from oracles.arb_series import arb_precision, arb_taylor, check_affine_taylor, check_series_contains
 from oracles.graph_models import all_ops
 # the arm_pin fixture: tests/verified/conftest.py
 from oracles.taylor_cases import ARM_Q0, CASES, _arm, _dp_graph, _program_ode, _radius, case_graph, random_forms
-from verified.affine_taylor import AffineTaylorODE
+from verified.series.affine_taylor import AffineTaylorODE
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.taylor_model import TaylorModelODE, model_length, models_to_interval
+from verified.series.taylor_model import TaylorModelODE, model_length, models_to_interval
 
 # The whole module runs in the slow CI step: the kernel's first compile costs ~17 s cold, which
 # the default run (3-minute budget) cannot carry; the tests themselves take ~6 s warm.
@@ -172,7 +172,7 @@ def test_three_link_arm_jacobian_tight_and_contains_exact(arm_pin):
     """The reason for the models: d qdd / dq of the 3-link arm over q0 +- 0.01 (qd = 0).
     Measured: sampled spread x 1.08-1.10 against 2.0-3.4 in affine arithmetic; required
     here: < 1.25 and < 0.6 x affine in every entry, exact values at the corners inside."""
-    from verified.variational import variational_graph
+    from verified.series.variational import variational_graph
 
     chain, g = _arm()
     vg = variational_graph(g)

@@ -19,7 +19,7 @@ from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.quadratic import QuadraticSets
 from verified.solver import VerifiedODE, solve
-from verified.taylor_model import TaylorModelODE, _pairs, _star_pairs, star_base
+from verified.series.taylor_model import TaylorModelODE, _pairs, _star_pairs, star_base
 
 from models import pendulum as pd
 
@@ -354,7 +354,7 @@ def test_tube_coefficients_are_tighter_than_affine_over_a_tube():
     x_[K] narrower than affine arithmetic over the same forms (the reason the a-priori
     test uses them: Panda +- 1e-3, 140x at order 8)."""
     from models import double_pendulum as dp
-    from verified.affine_taylor import AffineTaylorODE
+    from verified.series.affine_taylor import AffineTaylorODE
     g = trace(dp.rhs, 4)
     rng = np.random.default_rng(3)
     lo, hi = dp.initial_box()

@@ -1,6 +1,6 @@
 """Taylor coefficients of ODE solutions as Taylor models of degree 2 to 4 in a set's symbols.
 
-Affine arithmetic (:mod:`verified.affine_taylor`) carries the first-order dependence
+Affine arithmetic (:mod:`verified.series.affine_taylor`) carries the first-order dependence
 of every intermediate on the set's noise symbols exactly and bounds every product's
 quadratic part by its full range. In a robot's model graph those quadratic parts
 cancel (entries of ``K M K^T`` near 0 at the centre, differences of large torques),
@@ -37,7 +37,7 @@ symbols past the quadratic ones instead of all). A star monomial
 is off-diagonal (``eps_i eps_j`` in ``[-1, 1]``) and of degree 2: products that would
 raise it are bounded.
 
-Rules (all bounds rounded upward by :func:`verified.affine_taylor._up`, every float
+Rules (all bounds rounded upward by :func:`verified.series.affine_taylor._up`, every float
 coefficient's rounding error added to ``e``):
 
 * ``x + y``, ``x - y``, ``x / k``, ``d x``: coefficient by coefficient.
@@ -56,7 +56,7 @@ coefficient's rounding error added to ``e``):
   last over the range ``X`` of ``x``; ``e`` gains their radii times ``1, W, W^2 (, W^3,
   W^4)`` (``W >= |d|``). Where that error alone exceeds the plain image
   ``f(X)``, the image replaces the model (as in the affine kernel).
-* Higher orders in time: the recurrences of :mod:`verified.taylor`, built from these.
+* Higher orders in time: the recurrences of :mod:`verified.series.taylor`, built from these.
 
 A NaN anywhere gives ``[-inf, inf]``; a domain violation or overflow an infinite ``e``.
 """
@@ -71,11 +71,13 @@ import numpy as np
 from numba import njit
 
 from verified.arith import _kernels as _k
-from verified.affine_taylor import _U, _UPF, _TINY, _deriv, _pm, _up, _value, _wide_symbol_forms, box_forms
+from verified.series.affine_taylor import _U, _UPF, _TINY, _deriv, _pm, _up, _value, _wide_symbol_forms, box_forms
 from verified.arith.interval import Interval, _as_interval
 from verified.arith.linalg import upper_pairs
-from verified.taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
-                     T_PARAM, T_SIN, T_SQR, T_SQRT, T_SUB, T_TAN, _Tape)
+from verified.series.taylor import (
+    T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG, T_PARAM, T_SIN, T_SQR,
+    T_SQRT, T_SUB, T_TAN, _Tape
+)
 
 __all__ = ["TaylorModelODE", "model_length", "forms_to_models", "models_to_interval", "product_table",
            "QUADRATIC_SYMBOLS", "star_count", "star_base", "star_span"]
@@ -375,7 +377,7 @@ def _frozen_point_into(Z, x):
 
 @njit(cache=True)
 def _deriv2(kind, lo, hi):
-    """Interval enclosure of f'' over [lo, hi] (kinds as :func:`verified.affine_taylor._deriv`)."""
+    """Interval enclosure of f'' over [lo, hi] (kinds as :func:`verified.series.affine_taylor._deriv`)."""
     if kind == 0:  # sqrt: -1 / (4 x sqrt(x))
         sl, sh = _k.sqrt(lo, hi)
         pl, ph = _k.mul(lo, hi, sl, sh)
@@ -616,7 +618,7 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
     page faults, a large share of the kernel's time on robots; docs/lab/code_notes.md.)
 
     Returns (n, order + 1, B, L). The loop is the one of
-    :func:`verified.affine_taylor._affine_kernel_reference`, with model operations.
+    :func:`verified.series.affine_taylor._affine_kernel_reference`, with model operations.
     ``fresh0 >= 0``: the remainder of ``x_[k]_i`` (k >= 1) moves into the linear
     coefficient of symbol ``fresh0 + (k - 1) n + i`` (zero in the inputs; see
     :meth:`TaylorModelODE._run`)."""
@@ -853,7 +855,7 @@ def _memory_bytes() -> float:
 
 
 class TaylorModelODE:
-    """Taylor-coefficient enclosures like :class:`verified.affine_taylor.AffineTaylorODE`,
+    """Taylor-coefficient enclosures like :class:`verified.series.affine_taylor.AffineTaylorODE`,
     computed in Taylor models of degree 2, 3 or 4 over the symbols of the inputs.
 
     ``quadratic_symbols``: at most this many symbols (the first ones: a set's own

@@ -3,7 +3,7 @@
 For ``x' = f(x, p)`` the sensitivity ``V = dx(t)/dx(t0)`` satisfies ``V' = Df(x) V``,
 ``V(t0) = I``. The Taylor coefficients of ``V`` are the derivatives of the Taylor
 coefficients of ``x`` with respect to the initial value, so running the ordinary
-Taylor interpreter (:mod:`verified.taylor`) on the graph built here encloses the
+Taylor interpreter (:mod:`verified.series.taylor`) on the graph built here encloses the
 Jacobian of the Taylor map over a box -- what the Lohner step needs.
 
 The graph has inputs ``(x_1..x_n, V_11, V_12, .., V_nn)`` (V row-major) and outputs

@@ -29,7 +29,7 @@ Rules (``R_x = sum |a_i|``, all error sums rounded upward, see :func:`_up`):
   interval enclosure over the range ``X`` of ``x``. Sound for any ``d``. Where the
   form's error part alone exceeds the plain image ``f(X)`` (wide ranges), the image
   replaces the form.
-* Higher orders use the same recurrences as :mod:`verified.taylor` built from these
+* Higher orders use the same recurrences as :mod:`verified.series.taylor` built from these
   operations (division by a series through the reciprocal of its order-0 form).
 
 An overflow or a domain violation (log of a form whose range reaches 0) makes ``e``
@@ -46,8 +46,10 @@ from numba import njit
 
 from verified.arith import _kernels as _k
 from verified.arith.interval import Interval, _as_interval
-from verified.taylor import (T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG,
-                     T_PARAM, T_SIN, T_SQR, T_SQRT, T_SUB, T_TAN, _Tape)
+from verified.series.taylor import (
+    T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG, T_PARAM, T_SIN, T_SQR,
+    T_SQRT, T_SUB, T_TAN, _Tape
+)
 
 __all__ = ["AffineTaylorODE", "affine_range", "forms_to_interval", "box_forms"]
 
@@ -1329,7 +1331,7 @@ def affine_range(graph, x, params=None) -> Interval:
 
 
 class AffineTaylorODE:
-    """Taylor-coefficient enclosures like :class:`verified.taylor.TaylorODE`, computed in
+    """Taylor-coefficient enclosures like :class:`verified.series.taylor.TaylorODE`, computed in
     affine arithmetic over one noise symbol per wide input (and wide parameter).
 
     Same call and result shapes as ``TaylorODE.coefficients``; tighter over boxes of
