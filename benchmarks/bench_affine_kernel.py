@@ -8,7 +8,7 @@ ratios are what counts),
 * ``TaylorODE(g).coefficients(X, K)``          (interval kernel, verified/series/taylor.py)
 * ``AffineTaylorODE(g).coefficients(X, K)``    (affine, n fresh symbols per order)
 * ``AffineTaylorODE(variational_graph(g), fresh_symbols=0).series(forms, K - 1)``
-  (the variational use of verified/lohner.py, forms over a set's 2n parameters)
+  (the variational use of verified/steppers/lohner.py, forms over a set's 2n parameters)
 
 and prints CPU microseconds per box-step and the ratio affine / interval. With
 ``--baseline PATH`` (a copy of an older ``verified/series/affine_taylor.py`` whose relative

@@ -4,7 +4,7 @@ each arithmetic encloses it, against its sampled spread (issues 14 and 17).
 Run:  python benchmarks/bench_jacobian_spread.py                 # both cases (~2 min)
       python benchmarks/bench_jacobian_spread.py --case ur5_pd   # one of ur5_pd, arm3
 
-A QR-Lohner step (:mod:`verified.lohner`) encloses the Jacobian ``J`` of its Taylor map
+A QR-Lohner step (:mod:`verified.steppers.lohner`) encloses the Jacobian ``J`` of its Taylor map
 over the set; ``(J - mid J)`` times the set's linear part is the error the step injects,
 and the wrapping control (``verified.policies.WrapControl``) shortens the steps until
 that error is ``wrap_target`` (3 %) of the set's width. An enclosure of ``J`` wider than
@@ -38,7 +38,7 @@ import numpy as np
 from verified.series.affine_taylor import AffineTaylorODE
 from verified.hooks import Hook
 from verified.arith.interval import Interval, concatenate, point
-from verified.lohner import horner
+from verified.steppers.lohner import horner
 from verified.series.taylor import TaylorODE
 from verified.series.taylor_model import TaylorModelODE
 from verified.series.variational import variational_graph

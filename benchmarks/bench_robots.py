@@ -34,7 +34,7 @@ Cases (issue 17's targets table):
 8. ``composition``: second-order sets (``set_order=2``, Taylor-model arithmetic,
    ``error_basis="auto"``, order 8, tol 1e-10, 12 parameters per state) advanced by
    the mean-value step (``set_step="mean_value"``) and by composition in Taylor models
-   (``set_step="composition"``, :mod:`verified.tm_flow`) in Taylor models of degree 2,
+   (``set_step="composition"``, :mod:`verified.steppers.tm_flow`) in Taylor models of degree 2,
    3 and 4 (``model_degree``) side by side, through ``solve``
    on the numeric rhs graph: the 3-link arm (eps 0.01, 1e-3), the UR5 and the Panda
    (eps 1e-3), chains n = 4..7 and the double pendulum from one box; the wall cap is

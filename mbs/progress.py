@@ -30,7 +30,7 @@ __all__ = ["Progress", "interactive", "kernel_cache_warm", "cold_families", "com
 #: from runs (docs/lab/code_notes.md)
 KERNEL_FAMILIES = {
     "interval": (("verified.arith._kernels", "verified.series.taylor", "verified.arith.linalg"), 30),
-    "Taylor-model": (("verified.series.taylor_model", "verified.tm_flow"), 45),
+    "Taylor-model": (("verified.series.taylor_model", "verified.steppers.tm_flow"), 45),
     "affine": (("verified.series.affine_taylor",), 30),
 }
 
@@ -62,7 +62,7 @@ def kernel_cache_warm(module: str):
     try:
         mod = sys.modules.get(module)
         if mod is None:  # (the kernel modules of KERNEL_FAMILIES; by name they are not imported here)
-            from verified import tm_flow  # noqa: F401
+            from verified.steppers import tm_flow  # noqa: F401
             from verified.series import affine_taylor, taylor, taylor_model  # noqa: F401
             from verified.arith import _kernels, linalg  # noqa: F401
             mod = sys.modules.get(module)

@@ -224,7 +224,7 @@ def switch_start(failure: Failure, method: Method) -> Start:
     failed attempt's own sets where ``method`` advances sets of that kind, else their
     hull boxes as ``method``'s initial sets (a box holds every point of the sets it is
     the hull of; the correlation between the sets' components is lost)."""
-    from verified.set_kinds import set_kind
+    from verified.steppers.set_kinds import set_kind
 
     st = method.settings()
     kind = set_kind(st.get("set_order", 1), st.get("set_step", "mean_value"))

@@ -4,13 +4,13 @@
 process (``workers=1``, or the default on a small batch), and what
 :mod:`verified.parallel` runs for each chunk: the initial boxes (or the sets of a
 :class:`~verified.solution.Start`) advance together with one common step size through
-the batched QR-Lohner step of :mod:`verified.lohner`.
+the batched QR-Lohner step of :mod:`verified.steppers.lohner`.
 
 The driver loop: per step it takes the hull of the sets, asks the step control
 (:mod:`verified.policies`) for a step size the stepper (a
-:class:`verified.stepper.Stepper` of the run's set kind, :mod:`verified.set_kinds`) can
+:class:`verified.steppers.protocol.Stepper` of the run's set kind, :mod:`verified.steppers.set_kinds`) can
 validate, advances the sets (:mod:`verified.sets`) to a
-:class:`~verified.stepper.StepResult`, records it, and calls the hooks
+:class:`~verified.steppers.protocol.StepResult`, records it, and calls the hooks
 (:mod:`verified.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow. See ``docs/architecture.md``.
 
@@ -35,9 +35,9 @@ from verified.graph import Graph
 from verified.hooks import ProgressHook, RunSetup, check_hooks
 from verified.arith.interval import Interval, concatenate, hull, stack_hulls
 from verified.arith.linalg import SingularMatrixError
-from verified.lohner import LohnerStepper
+from verified.steppers.lohner import LohnerStepper
 from verified.policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
-from verified.set_kinds import SetKind, set_kind
+from verified.steppers.set_kinds import SetKind, set_kind
 from verified.quadratic import QuadraticSets
 from verified.sets import DoubletonSets, SetView, set_view
 from verified.solution import Failure, PieceResult, Solution, Start, pieces_summary
@@ -364,7 +364,7 @@ def _setup(ode, x0, t0, h_max, params, subdivision, arithmetic, sets_type=Double
     """The checked problem: ``(RunSetup, VerifiedODE, param_boxes, boxes)``. Uncertain
     parameters become constant states after the ODE's (``param_boxes`` (p,): their
     hull over the initial boxes, else None); ``boxes`` (B, N) the initial boxes, the
-    initial sets ``sets_type.from_boxes`` (:mod:`verified.set_kinds`)."""
+    initial sets ``sets_type.from_boxes`` (:mod:`verified.steppers.set_kinds`)."""
     graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
     n = graph.n_inputs
     boxes = initial_boxes(x0, n, subdivision)
@@ -873,12 +873,12 @@ def _restricted(sol: Solution, alive: np.ndarray, out_pieces: list, tube_pieces:
 
 def _stepper(kind: SetKind, prob: VerifiedODE, order, params, error_basis, absorb=False,
              params_per_state=None, model_degree=None, model_caps=None) -> LohnerStepper:
-    """The stepper of the run's set kind (:mod:`verified.set_kinds`) for ``prob``."""
+    """The stepper of the run's set kind (:mod:`verified.steppers.set_kinds`) for ``prob``."""
     max_params = None if params_per_state is None else params_per_state * prob.n
     return kind.stepper(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps)
 
 
 #: the keys of ``solve(model_caps=...)``: the symbols with quadratic, cubic, quartic and
 #: star monomials in the composition's Taylor models, and the pool of symbols for the
-#: remainders born inside the graph (verified.tm_flow.TaylorModelFlowStepper)
+#: remainders born inside the graph (verified.steppers.tm_flow.TaylorModelFlowStepper)
 MODEL_CAPS = ("quadratic", "cubic", "quartic", "star", "pool")

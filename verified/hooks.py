@@ -11,7 +11,7 @@ then ``hooks``):
     graph with states appended after the solver's (the energy test appends
     ``h' = dH/dt``), initial sets extended to match, a smaller ``h_max``.
 ``after_step(step, sets, run) -> SetBatch | None``
-    after every accepted step, with the :class:`~verified.stepper.StepResult` and the
+    after every accepted step, with the :class:`~verified.steppers.protocol.StepResult` and the
     current sets at ``step.t`` (what earlier hooks left). Return None to keep the sets,
     or new sets that enclose every true state the given ones enclose (pruning parts
     that provably hold none, contracting, refining). ``run`` (:class:`RunControl`)

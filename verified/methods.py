@@ -8,9 +8,9 @@ with one message. A short string names each (``solve(..., method="composition")`
 
 | name | class | sets | step |
 |---|---|---|---|
-| ``"lohner"`` | :class:`Lohner` | first order: QR-Lohner doubletons ``c + C r0 + Q r`` (:mod:`verified.sets`) | Taylor series + first variational equations (:mod:`verified.lohner`) |
+| ``"lohner"`` | :class:`Lohner` | first order: QR-Lohner doubletons ``c + C r0 + Q r`` (:mod:`verified.sets`) | Taylor series + first variational equations (:mod:`verified.steppers.lohner`) |
 | ``"second_order"`` | :class:`SecondOrder` | second order: ``c + C u + q(u) + Q r`` (:mod:`verified.quadratic`) | + second variational equations at the centre (mean value) |
-| ``"composition"`` | :class:`Composition` | second order | the Taylor map composed with the set in Taylor models (:mod:`verified.tm_flow`) |
+| ``"composition"`` | :class:`Composition` | second order | the Taylor map composed with the set in Taylor models (:mod:`verified.steppers.tm_flow`) |
 | ``"auto"`` | :class:`Auto` | any | a ladder of the above, continued from the verified sets (:mod:`verified.auto`) |
 
 A method turns into the driver's settings with :meth:`Method.settings` (the keyword
@@ -110,7 +110,7 @@ class Method:
 @dataclass(frozen=True)
 class Lohner(Method):
     """First-order sets ``c + C r0 + Q r`` advanced by the QR-Lohner step (the classic
-    method of CAPD and VNODE-LP; :mod:`verified.lohner`). Cheapest per step; the set's
+    method of CAPD and VNODE-LP; :mod:`verified.steppers.lohner`). Cheapest per step; the set's
     curvature is wrapped every step, so wide boxes need pieces.
 
     error_basis : "qr" (Lohner's QR basis for the error part) or "auto" (per set and
@@ -181,13 +181,13 @@ class SecondOrder(Method):
 class Composition(Method):
     """Second-order sets advanced by composing the step's Taylor map with the set written
     as a Taylor model over its own parameters (as COSY-VI, Flow* and TaylorModels.jl
-    do; :mod:`verified.tm_flow`): no variational equations, higher-order effects bounded
+    do; :mod:`verified.steppers.tm_flow`): no variational equations, higher-order effects bounded
     where they arise. The strongest method on nonlinear systems and robots.
 
     model_degree : 2, 3 or 4: the degree of the Taylor-model arithmetic
     model_caps : None or a dict: how many of a set's widest symbols get quadratic,
         cubic, quartic and star monomials, and the pool of remainder symbols
-        (``verified.tm_flow``; keys ``quadratic``, ``cubic``, ``quartic``, ``star``, ``pool``)
+        (``verified.steppers.tm_flow``; keys ``quadratic``, ``cubic``, ``quartic``, ``star``, ``pool``)
     error_basis, arithmetic : as for :class:`Lohner` (defaults "auto" and "taylor_model")
     params_per_state : parameters per state a set may carry (None: 4)
     """

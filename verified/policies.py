@@ -303,7 +303,7 @@ class WrapControl:
     h_limit: float = math.inf
 
     def update(self, step) -> None:
-        """Adapt ``h_limit`` after the accepted :class:`~verified.stepper.StepResult` ``step``."""
+        """Adapt ``h_limit`` after the accepted :class:`~verified.steppers.protocol.StepResult` ``step``."""
         n = self.steer
         # the linear size has a floor of WRAP_FLOOR times the state's magnitude: a point set
         # (width 0: a deterministic run) has no wrapping to control, and the rounding in its

@@ -18,7 +18,7 @@ a Taylor model of order 2 in the initial conditions (Makino & Berz; COSY-VI,
 TaylorModels.jl carry higher orders).
 
 One step of size ``h`` (``P`` the order-``K`` Taylor polynomial map of the flow, ``R``
-the Lagrange remainder over the a-priori enclosure, as in :mod:`verified.lohner`):
+the Lagrange remainder over the a-priori enclosure, as in :mod:`verified.steppers.lohner`):
 with ``v = C u + q(u)`` and ``w = Q r``,
 
     phi(h, c + v + w) in P(c + v) + J w + R                     (mean value in w, J over the set)
@@ -52,10 +52,10 @@ import numpy as np
 
 from verified.arith import linalg
 from verified.arith.interval import Interval, concatenate, point, sqr
-from verified.lohner import LohnerStepper, horner
+from verified.steppers.lohner import LohnerStepper, horner
 from verified.policies import orthonormal_basis, scaled_basis
 from verified.sets import DoubletonSets, parameter_cuts
-from verified.stepper import StepResult
+from verified.steppers.protocol import StepResult
 from verified.series.variational import pair_index
 
 __all__ = ["QuadraticSets", "QuadraticStepper", "quadratic_range"]
@@ -415,7 +415,7 @@ class QuadraticSets:
 class QuadraticStepper(LohnerStepper):
     """Verified steps of :class:`QuadraticSets` (module docstring). ``second`` is a
     Taylor evaluator (``verified.series.taylor.TaylorODE``) of the second variational graph;
-    the rest is as :class:`~verified.lohner.LohnerStepper` (whose a-priori enclosure,
+    the rest is as :class:`~verified.steppers.lohner.LohnerStepper` (whose a-priori enclosure,
     step-size suggestion and error-basis policy it uses unchanged)."""
 
     def __init__(self, taylor, variational, second, order: int, params=None, error_basis="qr", second_over_set=None,

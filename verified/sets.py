@@ -4,10 +4,10 @@ A *set batch* holds ``B`` sets of the same kind and dimension ``n``; the solver'
 driver (:func:`verified.solver.solve`), its policies (:mod:`verified.policies`) and
 its hooks (:mod:`verified.hooks`) use only the operations of :class:`SetBatch`, so a
 new representation (Taylor models, say) plugs in by implementing them and a stepper
-that advances it (see :class:`verified.stepper.Stepper`).
+that advances it (see :class:`verified.steppers.protocol.Stepper`).
 
 :class:`DoubletonSets` is the QR-Lohner doubleton ``c + C r0 + Q r`` (CAPD's
-``Rect2``) advanced by :class:`verified.lohner.LohnerStepper`.
+``Rect2``) advanced by :class:`verified.steppers.lohner.LohnerStepper`.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ The ODE is an autonomous expression :class:`~verified.graph.Graph` ``x' = f(x, p
 ``x0`` a box (or a batch of boxes, or a list of them); ``params`` exact floats or
 intervals (uncertain parameters, constant in time). The initial boxes may be split
 into a uniform grid (``subdivision``). All boxes advance together with one common step
-size through the batched QR-Lohner step of :mod:`verified.lohner`.
+size through the batched QR-Lohner step of :mod:`verified.steppers.lohner`.
 
 A break-down is a result, not an exception: everything up to the last verified time is
 returned with ``status = "breakdown"`` and the reason; so is a stop asked for by a hook
@@ -22,9 +22,9 @@ to the chunked execution (:mod:`verified.parallel`: ``workers``, ``client``, ``c
 ``rechunk``) or runs it as one batch in this process (:func:`verified.batch.solve_batch`,
 the driver loop: per step it takes the hull of the sets, asks the step control
 (:mod:`verified.policies`) for a step size the stepper (a
-:class:`verified.stepper.Stepper` of the run's set kind, :mod:`verified.set_kinds`) can
+:class:`verified.steppers.protocol.Stepper` of the run's set kind, :mod:`verified.steppers.set_kinds`) can
 validate, advances the sets (:mod:`verified.sets`) to a
-:class:`~verified.stepper.StepResult`, records it, and calls the hooks
+:class:`~verified.steppers.protocol.StepResult`, records it, and calls the hooks
 (:mod:`verified.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow). See ``docs/architecture.md``.
 
@@ -134,7 +134,7 @@ def solve(
         (``EnergyTest.suspend_after``, :mod:`verified.energy_cadence`).
     hooks : sequence of hook objects (:mod:`verified.hooks`)
         Called before the run, after every accepted step (with the step's
-        :class:`~verified.stepper.StepResult` and the sets; a hook may replace the sets
+        :class:`~verified.steppers.protocol.StepResult` and the sets; a hook may replace the sets
         by sets enclosing the same true states, roll the step back, or stop the run) and
         on the Solution, in this order after ``progress`` and ``consistency``. For
         example :class:`verified.hooks.StopAfterWall` caps the wall-clock time.

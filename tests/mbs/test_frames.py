@@ -239,9 +239,9 @@ def test_frames_over_the_tube_views_hold_the_trajectories_and_are_tighter(fallin
 
 def test_a_tube_view_with_a_short_linear_part_is_caught(monkeypatch):
     """Mutant: the composition step's tube views with their linear part 10 % short
-    (verified.tm_flow.tube_view). The tip over the tube, the set form intersected with
+    (verified.steppers.tm_flow.tube_view). The tip over the tube, the set form intersected with
     the box forms as always, then misses sampled trajectories."""
-    import verified.tm_flow as tm_flow
+    import verified.steppers.tm_flow as tm_flow
     from verified.sets import SetView
     real = tm_flow.tube_view
 

@@ -190,7 +190,7 @@ def test_oracle_bites_when_merged_parameters_are_dropped(monkeypatch):
     """A broken merge that removes the merged parameters without the n covering ones loses
     part of the set: sampled trajectories must leave it (double pendulum, quarter box,
     with the cap lowered so that it merges)."""
-    import verified.lohner as vl
+    import verified.steppers.lohner as vl
 
     def broken(self, count, keep_first, steer=None):
         nb, n = self.c.shape

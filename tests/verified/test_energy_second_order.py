@@ -207,7 +207,7 @@ def test_a_pruning_test_that_drops_consistent_parts_is_caught(monkeypatch):
     (``REMAINDER_SHARE = 0``, as when this was measured): with it the run takes four
     steps and no sampled trajectory passes the dropped part."""
     from verified import branch_prune as bp
-    from verified.tm_flow import TaylorModelFlowStepper
+    from verified.steppers.tm_flow import TaylorModelFlowStepper
     monkeypatch.setattr(TaylorModelFlowStepper, "REMAINDER_GROWTH", 1.2)
     monkeypatch.setattr(TaylorModelFlowStepper, "REMAINDER_SHARE", 0.0)
     real = bp.inconsistent
@@ -279,7 +279,7 @@ def test_symbols_are_ordered_by_the_steering_states():
     """set_models(..., steer=k) orders parameters and errors by their width in the
     first k states: a parameter (and an error) wide only in an appended state (h, in
     J) comes after the ones the states need, so the quadratic monomials go to those."""
-    from verified.tm_flow import set_models
+    from verified.steppers.tm_flow import set_models
     nb, n, m = 1, 3, 3
     C = np.zeros((nb, n, m))
     C[0, 2, 0] = 50.0  # parameter 0: only in h

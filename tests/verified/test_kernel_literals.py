@@ -11,7 +11,7 @@ check costs nothing and needs no cold cache.
 import ast
 import inspect
 
-from verified import tm_flow
+from verified.steppers import tm_flow
 from verified.series import affine_taylor, taylor, taylor_model
 from verified.arith import _kernels, linalg
 

@@ -244,7 +244,7 @@ def quick_stall(monkeypatch):
     and the composition's growth cut runs unguarded (``REMAINDER_SHARE = 0``, as before the
     guard), so that x' = -p x with p in [0.5, 0.7] still stalls it: these tests are about
     what auto does with a stall, and this system is the cheapest one that makes one."""
-    from verified.tm_flow import TaylorModelFlowStepper
+    from verified.steppers.tm_flow import TaylorModelFlowStepper
     monkeypatch.setattr(auto_mod, "STALL_MIN_STEPS", 100)
     monkeypatch.setattr(TaylorModelFlowStepper, "REMAINDER_SHARE", 0.0)
 

@@ -100,7 +100,7 @@ def test_double_pendulum_sampled_trajectories_inside():
 def test_oracle_bites_when_the_error_term_is_dropped(monkeypatch):
     """Dropping the accumulated error vector r (keeping only the linear image
     c + C r0) is unsound for a nonlinear ODE; the sampling oracle must notice."""
-    from verified import lohner
+    from verified.steppers import lohner
     from verified.arith.interval import point
 
     from models import pendulum as pd
@@ -121,7 +121,7 @@ def test_oracle_bites_when_the_error_term_is_dropped(monkeypatch):
 
 
 def test_oracle_bites_when_the_remainder_is_dropped(monkeypatch):
-    from verified import lohner
+    from verified.steppers import lohner
 
     from models import pendulum as pd
 
@@ -169,7 +169,7 @@ def test_input_validation():
 def test_split_halves_cover_the_parent_set():
     """Points of a doubleton set (sampled in its a, b coordinates) lie in one of the
     halves produced by split(), for splits along r0 and along the error box r."""
-    from verified.lohner import DoubletonSets
+    from verified.steppers.lohner import DoubletonSets
 
     rng = np.random.default_rng(5)
     n, nb = 3, 6
@@ -195,7 +195,7 @@ def test_split_halves_cover_the_parent_set():
 def test_subdivide_along_covers_the_set_exactly_in_parameter_space(pieces):
     """Every parameter value (a, b) of a set lies in one of the parts cut along any
     direction, mapped through the parts' own centres (the rounding is enclosed)."""
-    from verified.lohner import DoubletonSets
+    from verified.steppers.lohner import DoubletonSets
 
     rng = np.random.default_rng(pieces)
     n, nb = 3, 2 * 3
@@ -234,7 +234,7 @@ def test_adaptive_splitting_is_sound_on_the_double_pendulum():
 
 
 def test_merged_sets_cover_both_parents():
-    from verified.lohner import DoubletonSets
+    from verified.steppers.lohner import DoubletonSets
 
     rng = np.random.default_rng(7)
     # a set and a small one near its centre merge; two disjoint sets do not

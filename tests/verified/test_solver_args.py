@@ -222,7 +222,7 @@ def test_good_arguments_still_accepted():
 
 def test_model_caps_reach_the_composition_stepper(monkeypatch):
     """solve(model_caps=...) sets the stepper's monomial caps; keys left out keep the defaults."""
-    from verified import tm_flow
+    from verified.steppers import tm_flow
     seen = {}
     real = tm_flow.TaylorModelFlowStepper.__init__
 

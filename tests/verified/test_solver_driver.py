@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from oracles.sampling import misses, sample_initial_points, trajectories
-from verified import lohner, sets as sets_mod
+from verified import sets as sets_mod
+from verified.steppers import lohner
 from verified.consistency import EnergyTest
 from verified.graph import trace
 from verified.hooks import Hook, RunSetup, SolverHook, StopAfterWall, check_hooks
@@ -20,7 +21,7 @@ from verified.policies import LANDING_STRETCH, AutoBasis, QRBasis, StepControl, 
 from verified.sets import DoubletonSets, SetBatch
 from verified.methods import METHOD_FIELDS
 from verified.solver import VerifiedODE, solve as _solve
-from verified.stepper import StepResult
+from verified.steppers.protocol import StepResult
 
 from models import pendulum as pd
 
@@ -93,10 +94,10 @@ def test_sets_live_in_their_module_and_old_imports_keep_working():
 
 @pytest.mark.parametrize("order,step", [(1, "mean_value"), (2, "mean_value"), (2, "composition")])
 def test_the_set_kind_comes_from_the_registry(ode, box, monkeypatch, order, step):
-    """solve() takes the sets type and the stepper from verified.set_kinds.SET_KINDS
+    """solve() takes the sets type and the stepper from verified.steppers.set_kinds.SET_KINDS
     (issue 15: a new representation is an entry there, not a branch in the solver): an
     entry replaced by a recording one is what runs, and gives the same numbers."""
-    from verified import set_kinds
+    from verified.steppers import set_kinds
     plain = solve(ode, box, (0.0, 0.2), t_eval=[0.2], set_order=order, set_step=step)
     real = set_kinds.SET_KINDS[(order, step)]
     made = []
@@ -117,7 +118,7 @@ def test_the_set_kind_comes_from_the_registry(ode, box, monkeypatch, order, step
 
 
 def test_an_unknown_set_kind_is_a_one_line_error():
-    from verified.set_kinds import set_kind
+    from verified.steppers.set_kinds import set_kind
     with pytest.raises(ValueError, match="no set kind for set_order=1, set_step='composition' .known: "):
         set_kind(1, "composition")
 

@@ -1,11 +1,11 @@
-"""The composition step's tube (:func:`verified.tm_flow.step_tube`): a box per step,
+"""The composition step's tube (:func:`verified.steppers.tm_flow.step_tube`): a box per step,
 inside the a-priori enclosure, that holds every solution from the sets over the whole
 step, checked against dense DOP853 trajectories at times inside every step."""
 
 import numpy as np
 
 from mbs.app.sampling import dop853
-from verified import tm_flow
+from verified.steppers import tm_flow
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import solve

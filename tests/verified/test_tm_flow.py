@@ -1,4 +1,4 @@
-"""Second-order sets advanced by composition in Taylor models (verified.tm_flow,
+"""Second-order sets advanced by composition in Taylor models (verified.steppers.tm_flow,
 solve(..., set_order=2, set_step="composition")).
 
 Oracles: the closed-form solution of x' = x^2; scipy DOP853 trajectories
@@ -14,7 +14,7 @@ import pytest
 
 from oracles.sampling import misses, sample_initial_points, trajectories
 from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
-from verified import tm_flow
+from verified.steppers import tm_flow
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.quadratic import QuadraticSets
@@ -333,7 +333,7 @@ def _tube_check(order=6, seed=3, _forms=tm_flow.models_to_forms):
 
 
 def test_tube_coefficients_contain_exact_coefficients_and_the_oracle_bites(monkeypatch):
-    """The a-priori test's x_[0..K] over a tube (verified.tm_flow.tube_coefficients, each
+    """The a-priori test's x_[0..K] over a tube (verified.steppers.tm_flow.tube_coefficients, each
     state's remainder on a symbol of its own) hold the exact coefficients at points of
     the tube; dropping the remainder on its way to those symbols must be caught."""
     _tube_check()

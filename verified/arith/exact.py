@@ -10,7 +10,7 @@ number into floats calls these functions instead of repeating the rule:
 - :mod:`verified.graph.sympy_convert` (sympy numbers: multiples of pi by :func:`pi_multiple_enclosure`,
   other constants such as ``E`` by :func:`enclose_approximation` of a 40-digit evalf),
 - :mod:`verified.contractor` (pi for the periodic projections),
-- :mod:`verified.stepper` and :mod:`verified.solver` (the exact step times and the gap
+- :mod:`verified.steppers.protocol` and :mod:`verified.solver` (the exact step times and the gap
   to the next output time),
 - :mod:`mbs.app.scene` (numbers and ``pi`` expressions in scene files, read by
   :func:`parse_pi_expression`),

@@ -1387,7 +1387,7 @@ class AffineTaylorODE:
     def series(self, X, order, params=None):
         """Interval enclosures of ``x_[0..order]`` from given input forms ``X``
         (n, B, m0 + 2) over ``m0`` symbols of the caller's choosing (for example a
-        set's own parameters, :meth:`verified.lohner.DoubletonSets.affine_forms`).
+        set's own parameters, :meth:`verified.steppers.lohner.DoubletonSets.affine_forms`).
         Parameters are taken as intervals without symbols. Returns (B, order + 1, n).
         """
         n, nb, m2 = X.shape

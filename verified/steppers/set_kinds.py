@@ -2,15 +2,15 @@
 
 ``solve(..., set_order=, set_step=)`` names a kind; this table says which
 :class:`~verified.sets.SetBatch` type the initial boxes become and which
-:class:`~verified.stepper.Stepper` advances it (as CAPD pairs a ``dynset`` with its
+:class:`~verified.steppers.protocol.Stepper` advances it (as CAPD pairs a ``dynset`` with its
 ``TimeMap``). A new representation is one more entry here (its sets type and a stepper
 factory): neither the driver loop nor the run set-up change.
 
 | ``(set_order, set_step)`` | sets | stepper |
 |---|---|---|
-| ``(1, "mean_value")`` | :class:`~verified.sets.DoubletonSets` (``c + C r0 + Q r``, CAPD's Rect2) | :class:`~verified.lohner.LohnerStepper` (QR-Lohner) |
+| ``(1, "mean_value")`` | :class:`~verified.sets.DoubletonSets` (``c + C r0 + Q r``, CAPD's Rect2) | :class:`~verified.steppers.lohner.LohnerStepper` (QR-Lohner) |
 | ``(2, "mean_value")`` | :class:`~verified.quadratic.QuadraticSets` (``c + C u + q(u) + Q r``) | :class:`~verified.quadratic.QuadraticStepper` (second variational equations at the centre) |
-| ``(2, "composition")`` | :class:`~verified.quadratic.QuadraticSets` | :class:`~verified.tm_flow.TaylorModelFlowStepper` (the step composed with the set in Taylor models) |
+| ``(2, "composition")`` | :class:`~verified.quadratic.QuadraticSets` | :class:`~verified.steppers.tm_flow.TaylorModelFlowStepper` (the step composed with the set in Taylor models) |
 
 A stepper factory takes the problem (:class:`verified.solver.VerifiedODE`: its
 evaluators), the Taylor order, the parameter box (or None), the error basis, the cap on
@@ -23,10 +23,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from verified.lohner import LohnerStepper
+from verified.steppers.lohner import LohnerStepper
 from verified.quadratic import QuadraticSets, QuadraticStepper
 from verified.sets import DoubletonSets
-from verified.tm_flow import TaylorModelFlowStepper
+from verified.steppers.tm_flow import TaylorModelFlowStepper
 
 __all__ = ["SetKind", "SET_KINDS", "set_kind", "set_kind_names"]
 

@@ -3,7 +3,7 @@ stepper (:class:`Stepper`).
 
 The driver (:func:`verified.solver.solve`) owns time and bookkeeping; a stepper owns
 the arithmetic of one step for one set representation (:mod:`verified.sets`).
-:class:`verified.lohner.LohnerStepper` is the stepper for
+:class:`verified.steppers.lohner.LohnerStepper` is the stepper for
 :class:`~verified.sets.DoubletonSets`; a Taylor-model stepper would implement the same
 four methods for its own sets.
 """
@@ -47,7 +47,7 @@ class StepResult:
         Every solution from ``previous`` stays in it over ``[t_start, t]``: the
         validated a-priori enclosure (every solution from ``hull`` stays in it), or a
         narrower box inside it that the stepper proved (the composition step:
-        :func:`verified.tm_flow.step_tube`).
+        :func:`verified.steppers.tm_flow.step_tube`).
     nonlinear_width : ndarray (B, N)
         Width of the error the step's linearization injected into each set (the
         spread of the Jacobian over the set times the set's linear part), in state
@@ -61,7 +61,7 @@ class StepResult:
     tube_view : verified.sets.SetView or None
         The a-priori enclosure as a linear view over symbols of its own (every
         solution from ``previous`` is some ``c + A' p`` over the step), where the
-        stepper keeps one (the composition step, :func:`verified.tm_flow.tube_view`);
+        stepper keeps one (the composition step, :func:`verified.steppers.tm_flow.tube_view`);
         :mod:`mbs.frames` takes the frames over the tube in it.
     """
 
@@ -98,7 +98,7 @@ class Stepper(Protocol):
     the hull ``X`` (B, N) of the sets, ``suggest_step`` for a step size, ``apriori``
     until an enclosure is validated (shrinking ``h`` on failure), then ``step``. After
     the run it reads ``absorbed`` and ``merged`` into the solution's statistics.
-    :class:`verified.lohner.LohnerStepper` implements all of it; the other steppers
+    :class:`verified.steppers.lohner.LohnerStepper` implements all of it; the other steppers
     subclass it.
     """
 

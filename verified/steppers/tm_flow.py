@@ -80,11 +80,11 @@ from numba import njit
 from verified.arith import linalg
 from verified.series.affine_taylor import box_forms
 from verified.arith.interval import Interval, _k_round_up, point
-from verified.lohner import LohnerStepper, _inflate
+from verified.steppers.lohner import LohnerStepper, _inflate
 from verified.policies import REMAINDER_SLACK
 from verified.quadratic import QuadraticSets
 from verified.sets import SetView
-from verified.stepper import StepResult
+from verified.steppers.protocol import StepResult
 from verified.series.taylor_model import (
     _acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length, models_to_interval, star_base
 )

@@ -39,7 +39,7 @@ from verified.arith import linalg
 from verified.arith.interval import Interval, concatenate, point
 from verified.policies import error_basis_policy, orthonormal_basis
 from verified.sets import DoubletonSets  # (its home is verified.sets; re-exported here for old imports)
-from verified.stepper import StepResult
+from verified.steppers.protocol import StepResult
 
 __all__ = ["LohnerStepper", "DoubletonSets", "StepResult", "horner"]
 
@@ -84,7 +84,7 @@ def _inflate(x: Interval, factor=0.1, absolute=1e-14) -> Interval:
 class LohnerStepper:
     """Verified steps of order ``order`` for the ODE behind ``taylor`` (and its variational
     ODE), on :class:`~verified.sets.DoubletonSets` (implements
-    :class:`verified.stepper.Stepper`). ``error_basis``: "qr", "auto" or a policy
+    :class:`verified.steppers.protocol.Stepper`). ``error_basis``: "qr", "auto" or a policy
     object of :mod:`verified.policies` (the basis of the error part ``Q r``)."""
 
     #: absorb the error part into parameters once it is this fraction of the carried part
@@ -121,7 +121,7 @@ class LohnerStepper:
     # -------------------------------------------------------------- pieces
     def begin(self, sets) -> None:
         """Called by the driver before each step with the sets it starts from: nothing to
-        prepare here (:class:`verified.tm_flow.TaylorModelFlowStepper` takes its
+        prepare here (:class:`verified.steppers.tm_flow.TaylorModelFlowStepper` takes its
         coefficients over the sets themselves)."""
         return None
 
@@ -188,7 +188,7 @@ class LohnerStepper:
         given the hull ``X`` (B, N) of the sets, its a-priori enclosure ``E`` (B, N) over
         ``[0, sup h]`` and the Taylor coefficients ``cE`` (B, K+1, N) over ``E``.
 
-        Returns a :class:`~verified.stepper.StepResult` with the new sets and the width
+        Returns a :class:`~verified.steppers.protocol.StepResult` with the new sets and the width
         of the error the linearization injected (the driver stamps the times)."""
         K = self.order
         # 3. centre polynomial plus remainder
