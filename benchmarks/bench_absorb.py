@@ -8,7 +8,7 @@ A first-order set is ``c + C r0 + Q r``; the interval error vector ``r`` is mult
 by ``|Q'^-1 J Q|`` every step, which wraps at the rate of ``||J||`` rather than at the
 flow's growth. ``absorb=True`` turns ``Q r`` into new parameters (columns of the float
 matrix ``C``) once it is 10 % of the carried part, up to 8 parameters per state
-(:meth:`verified.sets.DoubletonSets.absorb_error`).
+(:meth:`verified.sets.first_order.DoubletonSets.absorb_error`).
 
 Cases:
 

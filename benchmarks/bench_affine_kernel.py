@@ -35,7 +35,7 @@ import numpy as np
 from verified.series.affine_taylor import AffineTaylorODE
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.sets import DoubletonSets
+from verified.sets.first_order import DoubletonSets
 from verified.series.taylor import TaylorODE
 from verified.series.variational import variational_graph
 

@@ -6,7 +6,7 @@ Run:  python benchmarks/bench_flow_nonlinearity.py           # arm3, UR5, Panda 
       python benchmarks/bench_flow_nonlinearity.py --cases chain4,chain5,chain6,chain7  # planar chains
 
 A verified set that is a polynomial of degree d in the initial parameters (d = 1: the
-parallelepiped ``c + C r0`` of a first-order Lohner set; d = 2: ``verified.quadratic``'s
+parallelepiped ``c + C r0`` of a first-order Lohner set; d = 2: ``verified.sets.second_order``'s
 second-order sets; higher: the Taylor-model sets of COSY-VI, Flow*, TaylorModels.jl) can
 only be as tight as the best degree-d polynomial image of the initial box. This script
 measures that floor directly: trajectories from ``xi`` in the initial box (normalised to

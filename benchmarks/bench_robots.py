@@ -615,7 +615,7 @@ class Bench:
                                                       arithmetic="taylor_model", params_per_state=12)]}),
                     ("T = 1, 256 pieces", 1.0, 256, [1.0], True,
                      both(dict(order=12, tol=1e-10), dict(order=8, tol=1e-9), dict(order=12, tol=1e-10, absorb=True))),
-                    # second-order sets (verified/quadratic.py): far fewer pieces for the same width
+                    # second-order sets (verified/sets/second_order.py): far fewer pieces for the same width
                     ("T = 1, 64 pieces, set_order 2", 1.0, 64, [1.0], True,
                      {"interval": [dict(order=12, tol=1e-10, set_order=2)], "affine": []}),
                     # affine at 1024 pieces costs ~4 min per setting: one setting, cap 300 s

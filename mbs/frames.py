@@ -17,7 +17,7 @@ results intersected (each encloses the true range, so the intersection does too)
 - ``interval``: plain interval evaluation (only matters for wide boxes).
 
 At the output times the solver also keeps its sets in a linear view over their own
-parameters (``sol.views``, :class:`verified.sets.SetView`: every state is ``c + A' p``,
+parameters (``sol.views``, :class:`verified.sets.protocol.SetView`: every state is ``c + A' p``,
 ``p`` in ``R``), and a fourth form is intersected in:
 
 - ``set``: ``FK(c) + (J_FK(box) A) R``, the mean value theorem over the set's own
@@ -41,7 +41,7 @@ from verified.arith import linalg
 from verified.series.affine_taylor import affine_range
 from verified.graph import trace
 from verified.arith.interval import Interval, concatenate
-from verified.sets import SetView
+from verified.sets.protocol import SetView
 
 from . import spatial as sp3
 from .errors import ModelError
@@ -166,7 +166,7 @@ def _mean_value(graph, X: Interval) -> Interval:
 
 def _over_set(graph, view, X: Interval, n: int, pbox) -> Interval:
     """``FK(c, mid p) + (J_q A) R + J_p (p - mid p)`` over the sets of ``view`` (a
-    :class:`verified.sets.SetView` whose first ``n`` states are q), ``J`` the interval
+    :class:`verified.sets.protocol.SetView` whose first ``n`` states are q), ``J`` the interval
     Jacobian over the box ``X`` (B, n + parameters) widened to hold ``c``: every segment
     from ``(c, mid p)`` into the set lies in it, so the mean value theorem applies
     with ``x_q - c = A' p``, ``A'`` a point matrix of ``A``."""
@@ -190,7 +190,7 @@ def _over_set(graph, view, X: Interval, n: int, pbox) -> Interval:
 def evaluate_frame(graph, X: Interval, method: str = "both", view=None, n: int | None = None,
                    pbox=None) -> Interval:
     """The graph's outputs over boxes ``X`` (B, k) by ``method`` (see module
-    docstring); ``view`` (a :class:`verified.sets.SetView` of the same B sets, its
+    docstring); ``view`` (a :class:`verified.sets.protocol.SetView` of the same B sets, its
     first ``n`` states q; ``pbox`` the parameters' (lo, hi)) adds the ``set`` form."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")

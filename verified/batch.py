@@ -9,7 +9,7 @@ the batched QR-Lohner step of :mod:`verified.steppers.lohner`.
 The driver loop: per step it takes the hull of the sets, asks the step control
 (:mod:`verified.policies`) for a step size the stepper (a
 :class:`verified.steppers.protocol.Stepper` of the run's set kind, :mod:`verified.steppers.set_kinds`) can
-validate, advances the sets (:mod:`verified.sets`) to a
+validate, advances the sets (:mod:`verified.sets.first_order`) to a
 :class:`~verified.steppers.protocol.StepResult`, records it, and calls the hooks
 (:mod:`verified.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow. See ``docs/architecture.md``.
@@ -38,8 +38,9 @@ from verified.arith.linalg import SingularMatrixError
 from verified.steppers.lohner import LohnerStepper
 from verified.policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
 from verified.steppers.set_kinds import SetKind, set_kind
-from verified.quadratic import QuadraticSets
-from verified.sets import DoubletonSets, SetView, set_view
+from verified.sets.second_order import QuadraticSets
+from verified.sets.first_order import DoubletonSets
+from verified.sets.protocol import SetView, set_view
 from verified.solution import Failure, PieceResult, Solution, Start, pieces_summary
 from verified.solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from verified.series.taylor import TaylorODE

@@ -1,14 +1,14 @@
 """Branch and prune at ``t*``: cut sets into parts, discard the inconsistent ones (paper sec. 4).
 
 This module owns the pruning test and the cutting, without state of its own: a set
-``S = c + C r0 + Q r`` (:class:`verified.sets.DoubletonSets`, ``B`` sets of ``n``
+``S = c + C r0 + Q r`` (:class:`verified.sets.first_order.DoubletonSets`, ``B`` sets of ``n``
 states, ``2n`` parameters ``(r0, r)``) holds no true state when one of its checked
 quantities misses its allowed range. The quantities are ``G = H(x) - h`` (must be 0:
 the paper's ``H_H(S) ∩ H_V(S) = ∅``) and every constraint ``g`` (must lie in
 ``[lower, upper]``), each enclosed both naively on the hull and in mean-value form
 ``G(S) ⊆ G(c) + (DG C) r0 + (DG Q) r``, intersected (:func:`checks`). Either
 excluding the range proves the part empty of true states. Second-order sets
-(:class:`verified.quadratic.QuadraticSets`) are cut and checked the same way
+(:class:`verified.sets.second_order.QuadraticSets`) are cut and checked the same way
 through the same interface (``direction_columns`` ``[C + S r0 | Q]``,
 ``direction_widths``, ``subdivide_along``, ``take``, ``concatenate``).
 

@@ -80,8 +80,8 @@ from verified.graph import Graph, GraphBuilder
 from verified.graph.ops import embed, rate_along
 from verified.hooks import Hook, RunSetup
 from verified.arith.interval import Interval, concatenate, point
-from verified.quadratic import QuadraticSets, quadratic_range
-from verified.sets import DoubletonSets
+from verified.sets.second_order import QuadraticSets, quadratic_range
+from verified.sets.first_order import DoubletonSets
 
 __all__ = ["Conserved", "NonIncreasing", "InvariantHook", "InvariantWarning", "invariant_hook"]
 

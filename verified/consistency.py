@@ -66,7 +66,7 @@ from verified.graph.ops import negated
 from verified.hooks import Hook
 from verified.arith.interval import Interval, concatenate, hull, point
 from verified.reduction_area import ConsistencyRecord, ReductionArea, TestRecord
-from verified.sets import DoubletonSets
+from verified.sets.first_order import DoubletonSets
 
 __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES", "EnergyClaimError",
            "EnergyClaimWarning", "prove_energy_rate"]

@@ -31,8 +31,8 @@ import numpy as np
 from verified.consistency_graphs import EnergyClaimWarning
 from verified.hooks import Hook, caps_from
 from verified.arith.interval import matvec
-from verified.quadratic import QuadraticSets
-from verified.sets import DoubletonSets
+from verified.sets.second_order import QuadraticSets
+from verified.sets.first_order import DoubletonSets
 from verified.solution import Start
 from verified.time_chain import chain_in_time
 

@@ -6,7 +6,7 @@ The energy test (:class:`verified.consistency.EnergyTest`) integrates ``h`` with
 
     G(x, h) = H(x) - h = 0        at every time t.
 
-A doubleton set ``S = {c + C a + Q b : a in r0, b in r}`` (:class:`~verified.sets.DoubletonSets`)
+A doubleton set ``S = {c + C a + Q b : a in r0, b in r}`` (:class:`~verified.sets.first_order.DoubletonSets`)
 is a parametrization: a state of the set is ``x(a, b)`` for some parameter ``(a, b)``
 of the box ``R = r0 x r``. In mean-value form over the set
 (:func:`verified.contractor.mean_value_row`),
@@ -49,8 +49,8 @@ from verified.arith import linalg
 from verified.contractor import contract_linear_row, mean_value_row
 from verified.graph import Graph
 from verified.arith.interval import Interval
-from verified.quadratic import QuadraticSets
-from verified.sets import DoubletonSets
+from verified.sets.second_order import QuadraticSets
+from verified.sets.first_order import DoubletonSets
 
 __all__ = ["EnergyContraction", "ContractionResult", "recentre"]
 

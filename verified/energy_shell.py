@@ -36,8 +36,8 @@ from verified.graph.evaluate import eval_interval
 from verified.graph import Graph
 from verified.hooks import Hook, RunSetup
 from verified.arith.interval import Interval
-from verified.quadratic import QuadraticSets
-from verified.sets import DoubletonSets
+from verified.sets.second_order import QuadraticSets
+from verified.sets.first_order import DoubletonSets
 
 __all__ = ["EnergyShellHook", "max_energy"]
 

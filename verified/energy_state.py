@@ -1,7 +1,7 @@
 """The energy state ``h`` (``H_V``, eq. (12)) in the solver's doubleton sets.
 
 This module owns how ``h`` enters and is re-entered into the sets
-``S = c + C r0 + Q r`` (:class:`verified.sets.DoubletonSets`, ``B`` sets of ``n``
+``S = c + C r0 + Q r`` (:class:`verified.sets.first_order.DoubletonSets`, ``B`` sets of ``n``
 states): at ``t0`` it starts correlated with the initial states
 (:func:`initial_sets`), and :func:`reset_h` restarts it from ``H`` where the integrated
 ``h`` has become wider than ``H_H``. Both use the mean value form
@@ -17,7 +17,7 @@ import numpy as np
 
 from verified.arith import linalg
 from verified.arith.interval import Interval, concatenate, point
-from verified.sets import DoubletonSets
+from verified.sets.first_order import DoubletonSets
 
 __all__ = ["assign", "initial_sets", "reset_h"]
 
@@ -27,7 +27,7 @@ def initial_sets(lifted, sets):
     ``H(x0) ∈ H(c) + DH(X0) (x0 - c)`` (mean value theorem), the midpoint of ``DH(X0)``
     times the parameter columns entering the linear part and everything else the error
     part. Doubleton sets (columns ``C``) and second-order sets
-    (:class:`verified.quadratic.QuadraticSets`: columns ``C + S r0``, see its
+    (:class:`verified.sets.second_order.QuadraticSets`: columns ``C + S r0``, see its
     ``direction_columns``; ``h`` gets no quadratic term of its own) alike.
     ``lifted``: the :class:`verified.consistency_graphs.LiftedGraphs` of the run."""
     if lifted.energy is None:

@@ -62,7 +62,7 @@ from verified.graph import Graph, GraphBuilder
 from verified.graph.ops import embed, gradient_graph, params_to_inputs
 from verified.hooks import Hook
 from verified.arith.interval import Interval, concatenate
-from verified.sets import DoubletonSets
+from verified.sets.first_order import DoubletonSets
 
 __all__ = ["QuadraticLyapunov", "InvariantBoxes", "InvariantHook"]
 

@@ -8,8 +8,8 @@ with one message. A short string names each (``solve(..., method="composition")`
 
 | name | class | sets | step |
 |---|---|---|---|
-| ``"lohner"`` | :class:`Lohner` | first order: QR-Lohner doubletons ``c + C r0 + Q r`` (:mod:`verified.sets`) | Taylor series + first variational equations (:mod:`verified.steppers.lohner`) |
-| ``"second_order"`` | :class:`SecondOrder` | second order: ``c + C u + q(u) + Q r`` (:mod:`verified.quadratic`) | + second variational equations at the centre (mean value) |
+| ``"lohner"`` | :class:`Lohner` | first order: QR-Lohner doubletons ``c + C r0 + Q r`` (:mod:`verified.sets.first_order`) | Taylor series + first variational equations (:mod:`verified.steppers.lohner`) |
+| ``"second_order"`` | :class:`SecondOrder` | second order: ``c + C u + q(u) + Q r`` (:mod:`verified.sets.second_order`) | + second variational equations at the centre (mean value) |
 | ``"composition"`` | :class:`Composition` | second order | the Taylor map composed with the set in Taylor models (:mod:`verified.steppers.tm_flow`) |
 | ``"auto"`` | :class:`Auto` | any | a ladder of the above, continued from the verified sets (:mod:`verified.auto`) |
 
@@ -151,7 +151,7 @@ class Lohner(Method):
 class SecondOrder(Method):
     """Second-order sets ``c + C u + q(u) + Q r`` advanced by the mean-value step: the
     Taylor map's first and second derivatives at the centre plus the Hessian's spread
-    over the set (:mod:`verified.quadratic`). Carries the flow's curvature instead of
+    over the set (:mod:`verified.sets.second_order`). Carries the flow's curvature instead of
     wrapping it; costs the second variational equations (n (n + 1) / 2 directions).
 
     error_basis, arithmetic : as for :class:`Lohner`

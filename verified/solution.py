@@ -21,8 +21,8 @@ class Start:
     """Where a run continues from (``solve(..., start=)``; :mod:`verified.parallel` cuts
     a chunk whose sets split into pieces and continues each from here).
 
-    sets : the run's sets (:class:`~verified.sets.DoubletonSets` or
-        :class:`~verified.quadratic.QuadraticSets`, the kind of the run's ``set_order``
+    sets : the run's sets (:class:`~verified.sets.first_order.DoubletonSets` or
+        :class:`~verified.sets.second_order.QuadraticSets`, the kind of the run's ``set_order``
         and ``set_step``) at ``t_exact``, with the uncertain parameters carried as states
         when the run carries them (the same columns a run from boxes has)
     t_exact : Fraction, the exact time of the sets (a sum of float steps)
@@ -177,13 +177,13 @@ class Solution:
     state_names : tuple of str
     consistency : verified.consistency.ConsistencyRecord or None
         RA(t), H_H and H_V per step and a record of every test (paper Figs. 2-3).
-    views : list of verified.sets.SetView or None
+    views : list of verified.sets.protocol.SetView or None
         For each output time (as ``boxes``), the solver's sets there in a linear view
-        over their own parameters (:func:`verified.sets.set_view`, the ``n`` states), so
+        over their own parameters (:func:`verified.sets.protocol.set_view`, the ``n`` states), so
         that a function of the states can be enclosed over the sets rather than their
         hull boxes (:mod:`mbs.frames`); ``None`` where an output has no view (boxes a
         hook wrote), and ``[]`` when the run kept none (the parallel path).
-    tube_views : list of verified.sets.SetView or None
+    tube_views : list of verified.sets.protocol.SetView or None
         For each step (as ``tube``), the a-priori enclosure as a linear view over
         symbols of its own (the ``n`` states), where the stepper keeps one (the
         composition step, ``set_step="composition"``; None elsewhere, and ``[]`` when

@@ -23,7 +23,7 @@ to the chunked execution (:mod:`verified.parallel`: ``workers``, ``client``, ``c
 the driver loop: per step it takes the hull of the sets, asks the step control
 (:mod:`verified.policies`) for a step size the stepper (a
 :class:`verified.steppers.protocol.Stepper` of the run's set kind, :mod:`verified.steppers.set_kinds`) can
-validate, advances the sets (:mod:`verified.sets`) to a
+validate, advances the sets (:mod:`verified.sets.first_order`) to a
 :class:`~verified.steppers.protocol.StepResult`, records it, and calls the hooks
 (:mod:`verified.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow). See ``docs/architecture.md``.

@@ -242,7 +242,7 @@ def test_a_tube_view_with_a_short_linear_part_is_caught(monkeypatch):
     (verified.steppers.tm_flow.tube_view). The tip over the tube, the set form intersected with
     the box forms as always, then misses sampled trajectories."""
     import verified.steppers.tm_flow as tm_flow
-    from verified.sets import SetView
+    from verified.sets.protocol import SetView
     real = tm_flow.tube_view
 
     def short(models, M, mq):

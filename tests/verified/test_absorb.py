@@ -1,5 +1,5 @@
 """Absorbing the error part of first-order sets into parameters
-(:meth:`verified.sets.DoubletonSets.absorb_error`, ``solve(absorb=...)``): exactness,
+(:meth:`verified.sets.first_order.DoubletonSets.absorb_error`, ``solve(absorb=...)``): exactness,
 the shared-symbol affine forms, soundness against sampled trajectories (Pinocchio's
 ``aba`` for the arm) and a mutant that drops the absorbed error."""
 
@@ -10,7 +10,7 @@ import pytest
 
 from oracles.sampling import misses, sample_initial_points, trajectories
 from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
-from verified import sets as vsets
+from verified.sets import first_order
 from verified.series.affine_taylor import forms_to_interval
 from verified.graph import trace
 from verified.arith.interval import Interval
@@ -21,7 +21,7 @@ from models import pendulum as pd
 
 
 def _random_sets(rng, nb=2, n=3, m=3):
-    s = vsets.DoubletonSets(
+    s = first_order.DoubletonSets(
         c=rng.normal(size=(nb, n)), C=rng.normal(size=(nb, n, m)),
         r0=Interval(-rng.uniform(0.1, 1, (nb, m)), rng.uniform(0.1, 1, (nb, m))),
         Q=np.linalg.qr(rng.normal(size=(nb, n, n)))[0],
@@ -44,7 +44,7 @@ def test_absorbing_is_exact_and_batches_pad():
     x_new = a.c + np.einsum("bij,kbj->kbi", a.C, np.concatenate([u, w], axis=2))
     np.testing.assert_allclose(x_new, x, rtol=1e-12, atol=1e-12)
     assert (a.hull().lo <= s.hull().lo + 1e-12).all() and (a.hull().hi >= s.hull().hi - 1e-12).all()
-    both = vsets.DoubletonSets.concatenate([s, a])  # 3 and 6 parameters: padded with zeros
+    both = first_order.DoubletonSets.concatenate([s, a])  # 3 and 6 parameters: padded with zeros
     assert both.C.shape == (4, 3, 6)
     np.testing.assert_allclose(both.hull().lo[:2], s.hull().lo, rtol=1e-14, atol=1e-14)
 
@@ -122,10 +122,10 @@ def test_oracle_bites_when_the_absorbed_error_is_dropped(monkeypatch):
     parameters loses the accumulated error: sampled trajectories must leave it."""
     def broken(self):
         nb, n = self.c.shape
-        return vsets.DoubletonSets(c=self.c, C=np.concatenate([self.C, self.Q], axis=2),
-                                   r0=vsets.concatenate([self.r0, vsets.point(np.zeros((nb, n)))], axis=1),
-                                   Q=np.broadcast_to(np.eye(n), (nb, n, n)).copy(), r=vsets.point(np.zeros((nb, n))))
-    monkeypatch.setattr(vsets.DoubletonSets, "absorb_error", broken)
+        return first_order.DoubletonSets(c=self.c, C=np.concatenate([self.C, self.Q], axis=2),
+                                   r0=first_order.concatenate([self.r0, first_order.point(np.zeros((nb, n)))], axis=1),
+                                   Q=np.broadcast_to(np.eye(n), (nb, n, n)).copy(), r=first_order.point(np.zeros((nb, n))))
+    monkeypatch.setattr(first_order.DoubletonSets, "absorb_error", broken)
     sol, sols = _dp_quarter()
     assert misses(sol, sols) != []
 
@@ -139,7 +139,7 @@ def test_merging_covers_the_merged_parameters_exactly():
     rng = np.random.default_rng(7)
     s = _random_sets(rng, nb=2, n=3, m=3)
     for _ in range(4):  # 3 + 4 * 3 = 15 parameters
-        s = vsets.DoubletonSets(s.c, s.C, s.r0, s.Q, Interval(-rng.uniform(0, 0.1, (2, 3)), rng.uniform(0, 0.1, (2, 3))))
+        s = first_order.DoubletonSets(s.c, s.C, s.r0, s.Q, Interval(-rng.uniform(0, 0.1, (2, 3)), rng.uniform(0, 0.1, (2, 3))))
         s = s.absorb_error()
     m = s.C.shape[2]
     merged = s.merge_params(6, keep_first=3)
@@ -200,8 +200,8 @@ def test_oracle_bites_when_merged_parameters_are_dropped(monkeypatch):
         sel = np.sort(np.argsort(w.max(axis=0), kind="stable")[:count])
         rest = np.setdiff1d(np.arange(m), sel)
         zero = np.zeros((nb, n, n))
-        return vsets.DoubletonSets(self.c, np.concatenate([self.C[:, :, rest], zero], axis=2),
-                                   vsets.concatenate([self.r0[:, rest], vsets.point(np.zeros((nb, n)))], axis=1),
+        return first_order.DoubletonSets(self.c, np.concatenate([self.C[:, :, rest], zero], axis=2),
+                                   first_order.concatenate([self.r0[:, rest], first_order.point(np.zeros((nb, n)))], axis=1),
                                    self.Q, self.r)
 
     real_init = vl.LohnerStepper.__init__
@@ -214,7 +214,7 @@ def test_oracle_bites_when_merged_parameters_are_dropped(monkeypatch):
     sol, sols = _dp_quarter(T=1.0)
     assert sol.stats["merged"] >= 1
     assert misses(sol, sols) == []
-    monkeypatch.setattr(vsets.DoubletonSets, "merge_params", broken)
+    monkeypatch.setattr(first_order.DoubletonSets, "merge_params", broken)
     sol, sols = _dp_quarter(T=1.0)
     assert sol.stats["merged"] >= 1
     assert misses(sol, sols) != []

@@ -696,7 +696,7 @@ def test_batched_kernel_equals_reference_on_robot_graphs():
     """The graphs the solver runs: the paper's double pendulum (and its variational graph
     on a set's own forms) and the 3-link arm, order 12 / 11 as in solve()."""
     from models import double_pendulum as dp
-    from verified.sets import DoubletonSets
+    from verified.sets.first_order import DoubletonSets
     from verified.series.variational import variational_graph
 
     g = trace(dp.rhs, 4)
@@ -769,7 +769,7 @@ def _check_public_calls(g):
     lo_r, hi_r = at.forms_to_interval(kept1.transpose(1, 0, 2))
     np.testing.assert_array_equal(R.lo, lo_r)
     np.testing.assert_array_equal(R.hi, hi_r)
-    from verified.sets import DoubletonSets
+    from verified.sets.first_order import DoubletonSets
     from verified.series.variational import variational_graph
 
     vg = variational_graph(g)
@@ -812,7 +812,7 @@ def test_forms_to_interval_a_nan_anywhere_is_the_whole_line():
 def _arm_set_forms(rq, rqd):
     """Forms (6, 1, 8) of a set over the 3-link arm's box q0 +- rq, qd +- rqd (as the
     solver builds them for the variational series)."""
-    from verified.sets import DoubletonSets
+    from verified.sets.first_order import DoubletonSets
 
     x0 = np.concatenate([ARM_Q0, [0.1, -0.2, 0.3]])
     r = np.array([rq] * 3 + [rqd] * 3)

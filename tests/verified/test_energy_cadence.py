@@ -88,7 +88,7 @@ def test_a_cadence_that_loses_part_of_the_sets_is_caught(monkeypatch):
 def test_drop_appended_projects_the_sets():
     """Sampled points of a set with h mixed into its error basis, projected, lie in the
     set without h."""
-    from verified.quadratic import QuadraticSets
+    from verified.sets.second_order import QuadraticSets
     rng = np.random.default_rng(0)
     B, n, m = 3, 3, 3
     c = rng.normal(size=(B, n))

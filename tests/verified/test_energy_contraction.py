@@ -16,7 +16,7 @@ from verified.consistency import EnergyClaimError, EnergyTest, prove_energy_rate
 from verified.graph import trace
 from verified.graph.ops import rate_along
 from verified.arith.interval import Interval
-from verified.sets import DoubletonSets
+from verified.sets.first_order import DoubletonSets
 from verified.solver import solve
 
 from models import double_pendulum as dp

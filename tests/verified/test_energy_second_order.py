@@ -1,4 +1,4 @@
-"""The energy test on second-order sets (verified.quadratic.QuadraticSets with
+"""The energy test on second-order sets (verified.sets.second_order.QuadraticSets with
 solve(..., set_order=2, consistency=EnergyTest(...)); issues 13 and 17).
 
 Oracles: exact rationals for the set algebra (mean-value columns, subdivision, the
@@ -22,7 +22,7 @@ from verified.consistency_graphs import lift_graphs
 from verified.energy_state import initial_sets
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.quadratic import QuadraticSets
+from verified.sets.second_order import QuadraticSets
 from verified.solver import solve
 
 from models import pendulum as pd
@@ -342,7 +342,7 @@ def test_merging_keeps_the_parameters_the_steering_states_need(kind):
     only: the two that matter for h alone (row 2, in J) are merged, the two the state
     needs are kept; without steer it is the other way round. Either way the merged
     set still covers every point (the merge's own tests), so this is about tightness."""
-    from verified.sets import DoubletonSets
+    from verified.sets.first_order import DoubletonSets
     nb, n, m = 1, 2, 6
     C = np.array([[[1.0, 1.0, 1e-3, 1e-3, 1.0, 1.0], [0.0, 0.0, 100.0, 100.0, 0.0, 0.0]]])
     r0 = Interval(-np.ones((nb, m)), np.ones((nb, m)))

@@ -87,7 +87,7 @@ def test_second_order_sets_are_held_in_the_shell(samples):
 def test_oracle_bites_when_a_second_order_reset_keeps_too_little(samples, monkeypatch):
     """A reset that keeps the middle 80 % of the contracted box's parameters must
     lose sampled trajectories."""
-    from verified.quadratic import QuadraticSets
+    from verified.sets.second_order import QuadraticSets
     real = QuadraticSets.replaced
 
     def shrunk(self, idx, part):
@@ -99,7 +99,7 @@ def test_oracle_bites_when_a_second_order_reset_keeps_too_little(samples, monkey
 
 
 def test_quadratic_sets_with_params_and_replaced_are_exact():
-    from verified.quadratic import QuadraticSets
+    from verified.sets.second_order import QuadraticSets
     rng = np.random.default_rng(3)
     lo = rng.normal(size=(3, 2))
     sets = QuadraticSets.from_boxes(Interval(lo, lo + 0.5))
@@ -144,7 +144,7 @@ def test_sets_inside_the_shell_are_left_and_the_rest_contracted_as_alone():
     outside)."""
     from types import SimpleNamespace
 
-    from verified.sets import DoubletonSets
+    from verified.sets.first_order import DoubletonSets
     sh = _shell()
     hmax = 20.0  # |qd| <= sqrt(40) = 6.32 at q = 0
     boxes = Interval(np.array([[0.0, 1.0], [0.0, -30.0], [3.0, 0.0], [0.0, 5.0]]),

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from verified import invariant as inv
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.sets import DoubletonSets
+from verified.sets.first_order import DoubletonSets
 
 
 def _members(m, r, count, rng):

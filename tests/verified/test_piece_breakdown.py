@@ -18,8 +18,8 @@ from verified import batch
 from verified.graph import trace
 from verified.hooks import Hook
 from verified.arith.interval import Interval
-from verified.quadratic import QuadraticSets
-from verified.sets import DoubletonSets
+from verified.sets.second_order import QuadraticSets
+from verified.sets.first_order import DoubletonSets
 from verified.solution import PieceResult, pieces_summary
 from verified.solver import solve
 

@@ -1,4 +1,4 @@
-"""Second-order sets (verified.quadratic, solve(..., set_order=2)).
+"""Second-order sets (verified.sets.second_order, solve(..., set_order=2)).
 
 Oracles: exact rationals for the quadratic forms' ranges; scipy DOP853 trajectories
 (tests/oracles/sampling.py) for the solver, with Pinocchio's aba as right-hand side for the arm;
@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 
 from oracles.sampling import misses, sample_initial_points, trajectories
 from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
-from verified import quadratic
+from verified.sets import second_order as second_order_sets
+from verified.steppers import second_order as second_order_step
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
@@ -59,7 +60,7 @@ def test_quadratic_range_encloses_exact_values(seed, n):
     S = 0.5 * (S + S.transpose(0, 1, 3, 2))
     lo = -rng.uniform(0, 1, n)
     hi = rng.uniform(0, 1, n)
-    rng_box = quadratic.quadratic_range(S, Interval(lo, hi)[None])
+    rng_box = second_order_sets.quadratic_range(S, Interval(lo, hi)[None])
     for _ in range(20):
         u = [Fraction(float(v)) for v in lo + rng.uniform(0, 1, n) * (hi - lo)]
         for i in range(n):
@@ -119,8 +120,8 @@ def test_oracle_bites_when_third_order_terms_are_dropped(monkeypatch):
     """Without the cubic and Lagrange terms (the curvature beyond what S carries) the
     enclosure must miss sampled states."""
     def zero(H, a, b):
-        return quadratic.Interval(np.zeros(a.shape))
-    monkeypatch.setattr(quadratic, "_bilinear", zero)
+        return second_order_sets.Interval(np.zeros(a.shape))
+    monkeypatch.setattr(second_order_step, "_bilinear", zero)
     sol, sols = _pendulum_run(T=2.0, box_scale=3.0)
     assert misses(sol, sols) != []
 
@@ -130,19 +131,19 @@ def _cubic_shear_run(monkeypatch, lagrange=None):
     one direction of two (the directional Hessian path), whose whole curvature is third
     order (x2(t) = 0.2 + t x1^3, closed form). Returns (misses, calls of the path)."""
     calls = []
-    real = quadratic.QuadraticStepper._directional_lagrange
+    real = second_order_step.QuadraticStepper._directional_lagrange
 
     def spy(self, sets, live, *args):
         calls.append(live.size)
         out = real(self, sets, live, *args)
         return out if lagrange is None else lagrange(out)
-    monkeypatch.setattr(quadratic.QuadraticStepper, "_directional_lagrange", spy)
-    real_directions = quadratic.QuadraticStepper._directions
+    monkeypatch.setattr(second_order_step.QuadraticStepper, "_directional_lagrange", spy)
+    real_directions = second_order_step.QuadraticStepper._directions
 
     def from_two_states(self, sets):  # (the path is meant for big systems; force it here)
         self.directional_min_states = 2
         return real_directions(self, sets)
-    monkeypatch.setattr(quadratic.QuadraticStepper, "_directions", from_two_states)
+    monkeypatch.setattr(second_order_step.QuadraticStepper, "_directions", from_two_states)
     g = trace(lambda x, p: [x[0] * 0.0, x[0] * x[0] * x[0]], 2)
     sol = solve(VerifiedODE(g, "affine"), Interval(np.array([-0.5, 0.2]), np.array([0.5, 0.2])), (0.0, 1.0),
                 t_eval=[0.5, 1.0], set_order=2)
@@ -160,19 +161,19 @@ def test_directional_hessian_path_is_taken_and_sound(monkeypatch):
 
 
 def test_oracle_bites_when_the_directional_lagrange_term_is_dropped(monkeypatch):
-    misses_, calls = _cubic_shear_run(monkeypatch, lagrange=lambda out: quadratic.Interval(np.zeros(out.shape)))
+    misses_, calls = _cubic_shear_run(monkeypatch, lagrange=lambda out: second_order_sets.Interval(np.zeros(out.shape)))
     assert calls and misses_ > 0
 
 
 @pytest.mark.slow  # (~5-8 s: the default run stays under 3 minutes)
 def test_oracle_bites_when_the_quadratic_part_is_dropped(monkeypatch):
-    real = quadratic.QuadraticStepper.step
+    real = second_order_step.QuadraticStepper.step
 
     def no_quadratic(self, sets, h, X, E, cE):
         res = real(self, sets, h, X, E, cE)
         res.sets.S = np.zeros_like(res.sets.S)
         return res
-    monkeypatch.setattr(quadratic.QuadraticStepper, "step", no_quadratic)
+    monkeypatch.setattr(second_order_step.QuadraticStepper, "step", no_quadratic)
     sol, sols = _pendulum_run(T=2.0, box_scale=3.0)
     assert misses(sol, sols) != []
 
@@ -189,7 +190,7 @@ def test_absorbing_the_error_part_is_exact():
     rng = np.random.default_rng(2)
     n = 3
     boxes = Interval(-rng.uniform(0.1, 1, (2, n)), rng.uniform(0.1, 1, (2, n)))
-    s = quadratic.QuadraticSets.from_boxes(boxes)
+    s = second_order_sets.QuadraticSets.from_boxes(boxes)
     s.C = rng.normal(size=(2, n, n))
     S = rng.normal(size=(2, n, n, n))
     s.S = 0.5 * (S + S.transpose(0, 1, 3, 2))
@@ -283,7 +284,7 @@ def test_set_hull_encloses_exact_values_and_is_no_wider(seed, n, m):
     S = 0.5 * (S + S.transpose(0, 1, 3, 2))
     lo = -rng.uniform(0, 1, (nb, m)) * rng.choice([0.0, 1.0])
     hi = rng.uniform(0, 1, (nb, m))
-    sets = quadratic.QuadraticSets(c=rng.normal(size=(nb, n)), C=C, r0=Interval(lo, hi), S=S,
+    sets = second_order_sets.QuadraticSets(c=rng.normal(size=(nb, n)), C=C, r0=Interval(lo, hi), S=S,
                                    Q=np.broadcast_to(np.eye(n), (nb, n, n)).copy(),
                                    r=Interval(np.zeros((nb, n)), np.zeros((nb, n))))
     box = sets.hull()
@@ -311,7 +312,7 @@ def test_split_halves_cover_the_set():
     nb, n, m = 3, 2, 3
     S = rng.normal(size=(nb, n, m, m))
     S = 0.5 * (S + S.transpose(0, 1, 3, 2))
-    sets = quadratic.QuadraticSets(c=rng.normal(size=(nb, n)), C=rng.normal(size=(nb, n, m)),
+    sets = second_order_sets.QuadraticSets(c=rng.normal(size=(nb, n)), C=rng.normal(size=(nb, n, m)),
                                    r0=Interval(-rng.uniform(0.1, 1, (nb, m)), rng.uniform(0.1, 1, (nb, m))), S=S,
                                    Q=np.linalg.qr(rng.normal(size=(nb, n, n)))[0],
                                    r=Interval(-rng.uniform(0, 0.5, (nb, n)), rng.uniform(0, 0.5, (nb, n))))
@@ -376,7 +377,7 @@ def _disparate_sets(seed, nb=2, n=3, m=9):
     S = rng.normal(size=(nb, n, m, m)) * 0.05 * scale[None, :, None, None]
     S = 0.5 * (S + S.transpose(0, 1, 3, 2))
     w = rng.uniform(0.05, 1.0, m)
-    return quadratic.QuadraticSets(c=rng.normal(size=(nb, n)), C=C, r0=Interval(-w * np.ones((nb, m)), w * np.ones((nb, m))),
+    return second_order_sets.QuadraticSets(c=rng.normal(size=(nb, n)), C=C, r0=Interval(-w * np.ones((nb, m)), w * np.ones((nb, m))),
                                    S=S, Q=np.broadcast_to(np.eye(n), (nb, n, n)).copy(),
                                    r=Interval(np.zeros((nb, n)), np.zeros((nb, n))))
 
@@ -416,7 +417,7 @@ def test_merging_covers_the_merged_parameters_and_their_quadratic_terms(monkeypa
     """QuadraticSets.merge_params: the merged part (linear and every quadratic term with a
     merged parameter) lies in the new parameters' box, in the scaled basis as in the raw
     one; kept parameters, their quadratic block and the count are as documented."""
-    monkeypatch.setattr(quadratic.QuadraticSets, "SCALED_MERGE", scaled)
+    monkeypatch.setattr(second_order_sets.QuadraticSets, "SCALED_MERGE", scaled)
     s = _disparate_sets(seed)
     merged = s.merge_params(5, keep_first=3)
     assert merged.C.shape == (2, 3, 9 - 5 + 3)
@@ -427,12 +428,12 @@ def test_merging_covers_the_merged_parameters_and_their_quadratic_terms(monkeypa
 def test_merging_oracle_bites_when_the_quadratic_terms_are_dropped(monkeypatch):
     """The same check fails when merge_params leaves out the merged quadratic terms."""
     s = _disparate_sets(5)
-    real = quadratic.quadratic_range
+    real = second_order_sets.quadratic_range
 
     def dropped(S, u):
         return real(np.zeros_like(S), u)
 
-    monkeypatch.setattr(quadratic, "quadratic_range", dropped)
+    monkeypatch.setattr(second_order_sets, "quadratic_range", dropped)
     merged = s.merge_params(5, keep_first=3)
     assert not _merged_part_is_covered(s, merged, 5, 3, np.random.default_rng(5), points=200)
 
@@ -445,7 +446,7 @@ def test_scaled_merge_does_not_smear_the_wide_states_into_the_narrow_one(monkeyp
     before = s.hull().width()[0]
     widths = {}
     for scaled in (True, False):
-        monkeypatch.setattr(quadratic.QuadraticSets, "SCALED_MERGE", scaled)
+        monkeypatch.setattr(second_order_sets.QuadraticSets, "SCALED_MERGE", scaled)
         widths[scaled] = s.merge_params(5, keep_first=3).hull().width()[0]
     assert widths[True][0] < 0.5 * widths[False][0]  # (0.119 against 0.285)
     # the worst widening relative to each state's width is smaller too (1.5 against 3.3)

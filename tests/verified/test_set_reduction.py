@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from verified.arith.interval import Interval
-from verified.quadratic import QuadraticSets
-from verified.sets import DoubletonSets
+from verified.sets.second_order import QuadraticSets
+from verified.sets.first_order import DoubletonSets
 
 
 def _random_doubletons(rng, nb=2, n=3, m=7):

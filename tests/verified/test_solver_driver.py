@@ -11,14 +11,15 @@ import numpy as np
 import pytest
 
 from oracles.sampling import misses, sample_initial_points, trajectories
-from verified import sets as sets_mod
+from verified.sets import first_order
 from verified.steppers import lohner
 from verified.consistency import EnergyTest
 from verified.graph import trace
 from verified.hooks import Hook, RunSetup, SolverHook, StopAfterWall, check_hooks
 from verified.arith.interval import Interval
 from verified.policies import LANDING_STRETCH, AutoBasis, QRBasis, StepControl, WrapControl, error_basis_policy
-from verified.sets import DoubletonSets, SetBatch
+from verified.sets.first_order import DoubletonSets
+from verified.sets.protocol import SetBatch
 from verified.methods import METHOD_FIELDS
 from verified.solver import VerifiedODE, solve as _solve
 from verified.steppers.protocol import StepResult
@@ -85,7 +86,7 @@ class Recorder(Hook):
 
 # ----------------------------------------------------------------------------- structure
 def test_sets_live_in_their_module_and_old_imports_keep_working():
-    assert lohner.DoubletonSets is sets_mod.DoubletonSets is DoubletonSets
+    assert lohner.DoubletonSets is first_order.DoubletonSets is DoubletonSets
     s = DoubletonSets.from_boxes(Interval([[0.0, 1.0]], [[0.5, 1.5]]))
     assert isinstance(s, SetBatch)
     assert isinstance(EnergyTest(trace(lambda x, p: [x[0] * x[1]], 2)), SolverHook)

@@ -17,7 +17,7 @@ from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/c
 from verified.steppers import tm_flow
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.quadratic import QuadraticSets
+from verified.sets.second_order import QuadraticSets
 from verified.solver import VerifiedODE, solve
 from verified.series.taylor_model import TaylorModelODE, _pairs, _star_pairs, star_base
 

@@ -859,7 +859,7 @@ class TaylorModelODE:
     computed in Taylor models of degree 2, 3 or 4 over the symbols of the inputs.
 
     ``quadratic_symbols``: at most this many symbols (the first ones: a set's own
-    parameters come first in :meth:`verified.sets.DoubletonSets.affine_forms`) get
+    parameters come first in :meth:`verified.sets.first_order.DoubletonSets.affine_forms`) get
     quadratic monomials; the others stay linear. Cost per product grows as its square.
     ``cubic_symbols``: at most this many of those also get cubic monomials (0: degree 2);
     cost per product grows as its cube, and on robots the remainder falls by an order

@@ -68,7 +68,7 @@ def second_variational_graph(graph: Graph, directions: int | None = None) -> Gra
     ``d^2 x(t) / dx_a(t0) dx_b(t0)`` (``V_a`` = column ``a`` of ``V``). Run through a
     Taylor interpreter from ``(c, I, 0)``, the coefficients of ``W`` are the Hessians
     of the Taylor coefficients ``x_[k]`` at ``c`` (over a box: enclosures of them over
-    the box) -- what a second-order set step needs (:mod:`verified.quadratic`).
+    the box) -- what a second-order set step needs (:mod:`verified.sets.second_order`).
 
     Inputs ``(x_1..x_n, V row-major, W_ab for pair_index(p), each an n-vector)``;
     outputs in the same layout. Built by forward mode twice: once for ``Df(x) v`` as a

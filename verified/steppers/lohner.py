@@ -38,7 +38,7 @@ from verified.arith import _kernels as _k
 from verified.arith import linalg
 from verified.arith.interval import Interval, concatenate, point
 from verified.policies import error_basis_policy, orthonormal_basis
-from verified.sets import DoubletonSets  # (its home is verified.sets; re-exported here for old imports)
+from verified.sets.first_order import DoubletonSets  # (its home is verified.sets.first_order; re-exported here for old imports)
 from verified.steppers.protocol import StepResult
 
 __all__ = ["LohnerStepper", "DoubletonSets", "StepResult", "horner"]
@@ -83,7 +83,7 @@ def _inflate(x: Interval, factor=0.1, absolute=1e-14) -> Interval:
 
 class LohnerStepper:
     """Verified steps of order ``order`` for the ODE behind ``taylor`` (and its variational
-    ODE), on :class:`~verified.sets.DoubletonSets` (implements
+    ODE), on :class:`~verified.sets.first_order.DoubletonSets` (implements
     :class:`verified.steppers.protocol.Stepper`). ``error_basis``: "qr", "auto" or a policy
     object of :mod:`verified.policies` (the basis of the error part ``Q r``)."""
 

@@ -2,9 +2,9 @@
 stepper (:class:`Stepper`).
 
 The driver (:func:`verified.solver.solve`) owns time and bookkeeping; a stepper owns
-the arithmetic of one step for one set representation (:mod:`verified.sets`).
+the arithmetic of one step for one set representation (:mod:`verified.sets.first_order`).
 :class:`verified.steppers.lohner.LohnerStepper` is the stepper for
-:class:`~verified.sets.DoubletonSets`; a Taylor-model stepper would implement the same
+:class:`~verified.sets.first_order.DoubletonSets`; a Taylor-model stepper would implement the same
 four methods for its own sets.
 """
 
@@ -58,7 +58,7 @@ class StepResult:
         The exact times (a sum of float steps; every enclosure belongs to them).
     landed : bool
         The step ended on a requested output time.
-    tube_view : verified.sets.SetView or None
+    tube_view : verified.sets.protocol.SetView or None
         The a-priori enclosure as a linear view over symbols of its own (every
         solution from ``previous`` is some ``c + A' p`` over the step), where the
         stepper keeps one (the composition step, :func:`verified.steppers.tm_flow.tube_view`);

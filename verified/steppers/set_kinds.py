@@ -1,16 +1,16 @@
 """The set representations the solver carries and the steppers that advance them.
 
 ``solve(..., set_order=, set_step=)`` names a kind; this table says which
-:class:`~verified.sets.SetBatch` type the initial boxes become and which
+:class:`~verified.sets.protocol.SetBatch` type the initial boxes become and which
 :class:`~verified.steppers.protocol.Stepper` advances it (as CAPD pairs a ``dynset`` with its
 ``TimeMap``). A new representation is one more entry here (its sets type and a stepper
 factory): neither the driver loop nor the run set-up change.
 
 | ``(set_order, set_step)`` | sets | stepper |
 |---|---|---|
-| ``(1, "mean_value")`` | :class:`~verified.sets.DoubletonSets` (``c + C r0 + Q r``, CAPD's Rect2) | :class:`~verified.steppers.lohner.LohnerStepper` (QR-Lohner) |
-| ``(2, "mean_value")`` | :class:`~verified.quadratic.QuadraticSets` (``c + C u + q(u) + Q r``) | :class:`~verified.quadratic.QuadraticStepper` (second variational equations at the centre) |
-| ``(2, "composition")`` | :class:`~verified.quadratic.QuadraticSets` | :class:`~verified.steppers.tm_flow.TaylorModelFlowStepper` (the step composed with the set in Taylor models) |
+| ``(1, "mean_value")`` | :class:`~verified.sets.first_order.DoubletonSets` (``c + C r0 + Q r``, CAPD's Rect2) | :class:`~verified.steppers.lohner.LohnerStepper` (QR-Lohner) |
+| ``(2, "mean_value")`` | :class:`~verified.sets.second_order.QuadraticSets` (``c + C u + q(u) + Q r``) | :class:`~verified.steppers.second_order.QuadraticStepper` (second variational equations at the centre) |
+| ``(2, "composition")`` | :class:`~verified.sets.second_order.QuadraticSets` | :class:`~verified.steppers.tm_flow.TaylorModelFlowStepper` (the step composed with the set in Taylor models) |
 
 A stepper factory takes the problem (:class:`verified.solver.VerifiedODE`: its
 evaluators), the Taylor order, the parameter box (or None), the error basis, the cap on
@@ -24,8 +24,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 from verified.steppers.lohner import LohnerStepper
-from verified.quadratic import QuadraticSets, QuadraticStepper
-from verified.sets import DoubletonSets
+from verified.sets.second_order import QuadraticSets
+from verified.steppers.second_order import QuadraticStepper
+from verified.sets.first_order import DoubletonSets
 from verified.steppers.tm_flow import TaylorModelFlowStepper
 
 __all__ = ["SetKind", "SET_KINDS", "set_kind", "set_kind_names"]

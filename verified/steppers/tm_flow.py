@@ -1,6 +1,6 @@
 """Second-order sets advanced by composing the Taylor map with the set in Taylor models.
 
-:class:`verified.quadratic.QuadraticStepper` advances a set ``c + C u + q(u) + Q r``
+:class:`verified.steppers.second_order.QuadraticStepper` advances a set ``c + C u + q(u) + Q r``
 by the Taylor map's derivatives at the centre (second variational equations) and
 bounds the third-order rest by the Hessian's spread over the set,
 ``1/2 (H(U) - H(c))[v, v]``. Over a deep model graph that spread is taken in affine
@@ -82,8 +82,8 @@ from verified.series.affine_taylor import box_forms
 from verified.arith.interval import Interval, _k_round_up, point
 from verified.steppers.lohner import LohnerStepper, _inflate
 from verified.policies import REMAINDER_SLACK
-from verified.quadratic import QuadraticSets
-from verified.sets import SetView
+from verified.sets.second_order import QuadraticSets
+from verified.sets.protocol import SetView
 from verified.steppers.protocol import StepResult
 from verified.series.taylor_model import (
     _acc_add, _pairs, _scale_into, _star_pairs, forms_to_models, model_length, models_to_interval, star_base
@@ -257,7 +257,7 @@ def set_models(sets: QuadraticSets, quadratic_cap: int = QUADRATIC_CAP, cubic_ca
 def tube_view(models: np.ndarray, M: int, mq: int) -> SetView:
     """The a-priori enclosure's models (n, B, L) over ``M`` symbols (the set's and one
     per power of ``s / h``, :meth:`TaylorModelFlowStepper.apriori`) as a
-    :class:`verified.sets.SetView`: ``x = c + A' p`` with ``A = [linear part | I]``,
+    :class:`verified.sets.protocol.SetView`: ``x = c + A' p`` with ``A = [linear part | I]``,
     ``p`` the ``M`` symbols in ``[-1, 1]`` and, per state, the range of the rest (the
     monomials of degree 2 and more and the remainder, rounded outward). Every solution
     from the set stays in the models' range over the step, so it is some ``c + A' p``.
@@ -438,7 +438,7 @@ def step_tube(out: np.ndarray, cE: Interval, h_top: float, M: int, mq: int, piec
 
 
 class TaylorModelFlowStepper(LohnerStepper):
-    """Verified steps of :class:`~verified.quadratic.QuadraticSets` by composition in
+    """Verified steps of :class:`~verified.sets.second_order.QuadraticSets` by composition in
     degree-2 Taylor models (module docstring).
 
     ``taylor``: the evaluator of Taylor coefficients over boxes (step size and a-priori
@@ -449,7 +449,7 @@ class TaylorModelFlowStepper(LohnerStepper):
     ``SMALL_SYSTEM`` states, else ``QUADRATIC_CAP`` / ``CUBIC_CAP``; larger caps cost
     more for next to nothing, docs/lab/code_notes.md) and, at degree 4, ``quartic_cap``
     of them quartic ones. The error part is absorbed
-    into parameters as :class:`~verified.quadratic.QuadraticStepper` does (``absorb_ratio``,
+    into parameters as :class:`~verified.steppers.second_order.QuadraticStepper` does (``absorb_ratio``,
     up to ``max_params``, default 12 per state, then merged).
 
     ``star_cap``: the widest symbols that get star monomials (default ``STAR_CAP`` = 6;
