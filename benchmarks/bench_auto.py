@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from verified.graph import trace
-from verified.hooks import StopAfterWall
+from verified.driver.hooks import StopAfterWall
 from verified.arith.interval import Interval
 
 #: the hand-picked settings of the robots (docs/robots_benchmark.md, bench_robots case 8)

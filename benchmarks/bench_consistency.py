@@ -174,7 +174,7 @@ def urdf_robot(T):
 def long_horizon(T=5.0, pieces=48, cap=900.0):
     """Issue 13's long-horizon target: box (25) to T = 5 with the test (ratio, aim <= 2),
     and the same solver without it (eq. (22) through ``solve``; mode i)."""
-    from verified.hooks import StopAfterWall
+    from verified.driver.hooks import StopAfterWall
     from verified.solver import solve
     lo, hi = dp.initial_box()
     ts = np.round(np.arange(1, 6) * (T / 5), 12)  # five output times
@@ -259,8 +259,8 @@ def work_precision(out_json="work_precision.json", plot="work_precision.png", qu
     import json
     from mbs.simulate import system_for
     from verified.energy_shell import EnergyShellHook
-    from verified.hooks import StopAfterWall
-    from verified.policies import BlockBasis
+    from verified.driver.hooks import StopAfterWall
+    from verified.sets.bases import BlockBasis
     from verified.solver import solve
     # pendulum: "auto" (with "qr" no run without the shell reaches T = 3 below 64 x 64)
     cases = [("double pendulum T=1", "double_pendulum_paper", 1.0, [16, 64, 256], "auto"),

@@ -111,7 +111,7 @@ def capture_lohner_sets(box, times):
     """QR-Lohner sets of a single-box double pendulum run from ``box`` at the given
     times (None when this checkout's solver has no hooks or the run fails)."""
     try:
-        from verified.hooks import Hook
+        from verified.driver.hooks import Hook
         from verified.solver import solve
     except ImportError:
         return None

@@ -6,7 +6,7 @@ Run:  python benchmarks/bench_jacobian_spread.py                 # both cases (~
 
 A QR-Lohner step (:mod:`verified.steppers.lohner`) encloses the Jacobian ``J`` of its Taylor map
 over the set; ``(J - mid J)`` times the set's linear part is the error the step injects,
-and the wrapping control (``verified.policies.WrapControl``) shortens the steps until
+and the wrapping control (``verified.driver.control.WrapControl``) shortens the steps until
 that error is ``wrap_target`` (3 %) of the set's width. An enclosure of ``J`` wider than
 its true spread therefore costs steps one for one, and the injected error feeds the
 set's growth. Each case runs the solver as its benchmark does, stops after ``--steps``
@@ -36,7 +36,7 @@ import numpy as np
 
 
 from verified.series.affine_taylor import AffineTaylorODE
-from verified.hooks import Hook
+from verified.driver.hooks import Hook
 from verified.arith.interval import Interval, concatenate, point
 from verified.steppers.lohner import horner
 from verified.series.taylor import TaylorODE

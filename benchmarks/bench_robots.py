@@ -106,7 +106,7 @@ from mbs.app.sampling import Ensemble as Oracle
 from mbs.app.sampling import count_outside, inside_union
 from mbs.app.sampling import sample_initial_points as sample_points
 from verified.graph import trace
-from verified.hooks import Hook
+from verified.driver.hooks import Hook
 from verified.arith.interval import Interval
 from verified.solver import Solution, VerifiedODE, solve
 
@@ -208,7 +208,7 @@ def containment(sol, oracle):
 class _WallCap(Hook):
     """Stops a run (``status="stopped"``, reason "wall cap (S s)") once ``cap`` seconds
     have passed since ``start``, checked after every accepted step like
-    :class:`verified.hooks.StopAfterWall` (which counts from the integration's start,
+    :class:`verified.driver.hooks.StopAfterWall` (which counts from the integration's start,
     after the tapes are built; the bench counts the set-up too). ``on_progress(t,
     wall)`` is called after every accepted step."""
 

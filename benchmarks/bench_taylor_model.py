@@ -33,7 +33,7 @@ import numpy as np
 
 import bench_robots as br
 from verified.series.affine_taylor import AffineTaylorODE
-from verified.hooks import StopAfterWall
+from verified.driver.hooks import StopAfterWall
 from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 from verified.series.taylor import TaylorODE

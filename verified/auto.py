@@ -26,7 +26,7 @@ time: a continuation from the failed attempt's own sets at exactly their time (o
 hull boxes, when the next method advances another kind of set), a restart from the
 piece's own initial box at ``t0``. The Solution of a continued piece is the failed
 attempt's record up to the switch followed by the continuation
-(:func:`verified.time_chain.chain_in_time`), and the result is the union of the attempts that
+(:func:`verified.driver.time_chain.chain_in_time`), and the result is the union of the attempts that
 together cover every initial piece (:func:`verified.parallel.merge_solutions`). A
 piece that fails on every rung keeps the failed attempt's enclosure, verified up to
 where that attempt got, and the run is a break-down at the earliest such time, naming
@@ -45,11 +45,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from verified.hooks import Hook, caps_from
+from verified.driver.hooks import Hook, caps_from
 from verified.arith.interval import Interval, concatenate
 from verified.methods import Auto, Composition, Lohner, Method
-from verified.solution import Failure, Solution, Start
-from verified.time_chain import chain_in_time
+from verified.driver.solution import Failure, Solution, Start
+from verified.driver.time_chain import chain_in_time
 
 __all__ = ["solve_auto", "default_rungs", "split_boxes", "split_pieces", "influences", "COMPOSITION_MAX_STATES"]
 
@@ -268,8 +268,8 @@ def solve_auto(solve, ode, x0, t_span, *, method: Auto, params=None, t_eval=None
     execution), the same for every attempt. With ``method.target_ratio``, the ladder is
     repeated on split pieces while its final enclosure is wider than that ratio times
     the sampled spread (:func:`sampled_spread`)."""
-    from verified.batch import VerifiedODE
-    from verified.solver_args import check_graph, check_params, initial_boxes
+    from verified.driver.batch import VerifiedODE
+    from verified.driver.solver_args import check_graph, check_params, initial_boxes
 
     wall0 = time.perf_counter()
     graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
@@ -399,7 +399,7 @@ def _piece_excess(sol, k: int, lo, hi, pieces: Interval):
 def _restrict(sol, keep: np.ndarray):
     """``sol`` with the boxes of the pieces ``keep`` (bool (k,)) only (one box per piece
     at every output and step: :func:`_piece_excess`)."""
-    from verified.batch import _restricted
+    from verified.driver.batch import _restricted
     k = keep.size
     ident = np.arange(k)
     out = _restricted(sol, keep, [ident] * len(sol.boxes), [ident] * len(sol.tube))
@@ -789,7 +789,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
     pieces it ended with (k, n), their parameters: ``pv`` as given, or rows (k, p)
     where splitting gave the parts their own)."""
     from verified.parallel import merge_solutions
-    from verified.solver_args import check_settings
+    from verified.driver.solver_args import check_settings
 
     n = graph.n_inputs
     t0, t1, outs, _ = check_settings(

@@ -78,7 +78,7 @@ from verified.energy_shell import reset_to_contracted
 from verified.graph.evaluate import eval_interval
 from verified.graph import Graph, GraphBuilder
 from verified.graph.ops import embed, rate_along
-from verified.hooks import Hook, RunSetup
+from verified.driver.hooks import Hook, RunSetup
 from verified.arith.interval import Interval, concatenate, point
 from verified.sets.second_order import QuadraticSets, quadratic_range
 from verified.sets.first_order import DoubletonSets

@@ -63,7 +63,7 @@ from verified.energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
 from verified.energy_state import assign, initial_sets, reset_h
 from verified.graph import Graph
 from verified.graph.ops import negated
-from verified.hooks import Hook
+from verified.driver.hooks import Hook
 from verified.arith.interval import Interval, concatenate, hull, point
 from verified.reduction_area import ConsistencyRecord, ReductionArea, TestRecord
 from verified.sets.first_order import DoubletonSets
@@ -110,7 +110,7 @@ class BackOff:
 class EnergyTest(Hook):
     """The energy consistency test, optional further constraints, and the backward test.
 
-    A solver hook (:mod:`verified.hooks`; ``solve(..., consistency=test)`` or
+    A solver hook (:mod:`verified.driver.hooks`; ``solve(..., consistency=test)`` or
     ``hooks=[test]``): ``before_run`` appends the energy state ``h`` and caps the step
     at ``test_interval``; ``after_step`` records ``RA(t)`` and, at ``t*``, prunes the sets
     (rolling the last step back when ``RA`` peaked at the step before);
@@ -255,7 +255,7 @@ class EnergyTest(Hook):
         self.prune = bool(prune)
         if align is not None and not callable(getattr(align, "set_direction", None)):
             raise ValueError("align must be an error-basis policy with set_direction "
-                             "(verified.policies.EnergyAlignedBasis) or None")
+                             "(verified.sets.bases.EnergyAlignedBasis) or None")
         self.align = align
         self.check_claim = bool(check_claim)
         self.reset_h = bool(reset_h)

@@ -16,7 +16,7 @@ EnergyTest` whose last ``suspend_after`` tests pruned and narrowed nothing stops
 
 Every phase continues from exactly the sets the previous one ended with, at their exact
 time, and the Solution is the phases laid end to end
-(:func:`verified.time_chain.chain_in_time`): sound as the runs it is made of. The test
+(:func:`verified.driver.time_chain.chain_in_time`): sound as the runs it is made of. The test
 records are concatenated, with no entries while the test was off.
 """
 
@@ -29,12 +29,12 @@ import warnings
 import numpy as np
 
 from verified.consistency_graphs import EnergyClaimWarning
-from verified.hooks import Hook, caps_from
+from verified.driver.hooks import Hook, caps_from
 from verified.arith.interval import matvec
 from verified.sets.second_order import QuadraticSets
 from verified.sets.first_order import DoubletonSets
-from verified.solution import Start
-from verified.time_chain import chain_in_time
+from verified.driver.solution import Start
+from verified.driver.time_chain import chain_in_time
 
 __all__ = ["solve_with_cadence", "drop_appended", "PauseAt", "FIRST_OFF_TESTS", "PROBE_TESTS"]
 
@@ -47,7 +47,7 @@ FIRST_OFF_TESTS = 8
 
 class PauseAt(Hook):
     """Stop the run at the first step that ends at or after ``t`` (status "stopped")
-    and keep where it stands in :attr:`point` (a :class:`~verified.solution.Start`);
+    and keep where it stands in :attr:`point` (a :class:`~verified.driver.solution.Start`);
     not on the step that records the last output (the run is done then)."""
 
     def __init__(self, t: float):
@@ -97,7 +97,7 @@ def drop_appended(start: Start, n_run: int) -> Start:
 def solve_with_cadence(run, x0, t_span, test, hooks, n_state: int, n_run: int, test_interval: float):
     """The run with an energy test that is suspended while idle (module docstring).
     ``run(x0, start, consistency, hooks)`` is one in-process batch run
-    (:func:`verified.batch.solve_batch` with the caller's other arguments); ``n_run``
+    (:func:`verified.driver.batch.solve_batch` with the caller's other arguments); ``n_run``
     the number of states the run integrates without the test (the ``n_state`` states
     and the parameters carried as states); ``test_interval`` the test's longest
     interval (s)."""

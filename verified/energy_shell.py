@@ -34,7 +34,7 @@ import numpy as np
 from verified.contractor import EnergyShell
 from verified.graph.evaluate import eval_interval
 from verified.graph import Graph
-from verified.hooks import Hook, RunSetup
+from verified.driver.hooks import Hook, RunSetup
 from verified.arith.interval import Interval
 from verified.sets.second_order import QuadraticSets
 from verified.sets.first_order import DoubletonSets

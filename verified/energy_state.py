@@ -74,7 +74,7 @@ def reset_h(lifted, sets):
     ``t0`` (:func:`initial_sets`): ``H(x) ∈ H(c) + DH(X) (C r0 + Q r)``, its
     ``r0`` part (midpoint) linear, the rest a fresh error. Done only for sets whose
     ``Q`` keeps ``h`` in its own column and row (block diagonal, as
-    :class:`verified.policies.BlockBasis` keeps it; a QR basis that mixed ``h``
+    :class:`verified.sets.bases.BlockBasis` keeps it; a QR basis that mixed ``h``
     into the state directions cannot be separated without wrapping)."""
     n_s = lifted.n_s
     nb = sets.n_sets

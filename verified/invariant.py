@@ -60,7 +60,7 @@ from verified.graph.evaluate import eval_float, eval_interval, jacobian_float, j
 from verified.contractor import mean_value_row
 from verified.graph import Graph, GraphBuilder
 from verified.graph.ops import embed, gradient_graph, params_to_inputs
-from verified.hooks import Hook
+from verified.driver.hooks import Hook
 from verified.arith.interval import Interval, concatenate
 from verified.sets.first_order import DoubletonSets
 

@@ -14,7 +14,7 @@ with one message. A short string names each (``solve(..., method="composition")`
 | ``"auto"`` | :class:`Auto` | any | a ladder of the above, continued from the verified sets (:mod:`verified.auto`) |
 
 A method turns into the driver's settings with :meth:`Method.settings` (the keyword
-arguments of :func:`verified.batch.solve_batch`); nothing else in the library needs to
+arguments of :func:`verified.driver.batch.solve_batch`); nothing else in the library needs to
 know its fields.
 """
 
@@ -28,7 +28,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from verified.solver_args import (ARITHMETICS, ERROR_BASES, MAX_ORDER, check_model_cap, check_params_per_state)
+from verified.driver.solver_args import ARITHMETICS, ERROR_BASES, MAX_ORDER, check_model_cap, check_params_per_state
 
 __all__ = ["Method", "Lohner", "SecondOrder", "Composition", "Auto", "METHODS", "as_method", "METHOD_FIELDS"]
 
@@ -81,7 +81,7 @@ class Method:
         _positive(f"{self.name}: tol", self.tol)
 
     def settings(self) -> dict:
-        """The keyword arguments of :func:`verified.batch.solve_batch` that run this method."""
+        """The keyword arguments of :func:`verified.driver.batch.solve_batch` that run this method."""
         raise NotImplementedError
 
     def refuse(self, *, adaptive=False, consistency=False, params=False, appended_states=False,
@@ -210,7 +210,7 @@ class Composition(Method):
         if self.model_caps is not None:
             if not isinstance(self.model_caps, dict):
                 raise ValueError(f"{self.name}: model_caps must be None or a dict, got {self.model_caps!r}")
-            from verified.batch import MODEL_CAPS  # (the keys the composition stepper knows)
+            from verified.driver.batch import MODEL_CAPS  # (the keys the composition stepper knows)
             for k, v in self.model_caps.items():
                 if k not in MODEL_CAPS:
                     raise ValueError(f"{self.name}: model_caps: unknown key {k!r} (known: {', '.join(MODEL_CAPS)})")

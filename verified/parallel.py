@@ -4,7 +4,7 @@ The initial boxes of a run (after ``subdivision``) are independent: the union of
 their solutions is the reachable set. :func:`solve_parallel` (what
 ``solve(..., workers=, client=, chunks=)`` delegates to) partitions them into
 contiguous *chunks*, runs each chunk as its own one-batch solve
-(:func:`verified.batch.solve_batch`, what ``solve(..., workers=1)`` runs) --
+(:func:`verified.driver.batch.solve_batch`, what ``solve(..., workers=1)`` runs) --
 with its own step sizes, wrapping control and (with ``adaptive``) its own splitting
 -- and merges the chunk Solutions into one :class:`~verified.solver.Solution`.
 
@@ -105,7 +105,7 @@ up to the step-size differences):
     reaching ``t0``.
 ``piece_results``, ``surviving``
     Per initial piece its status, ``t_reached`` and reason: a chunk's own report where
-    it ran as one batch (its pieces break down alone there, :mod:`verified.batch`),
+    it ran as one batch (its pieces break down alone there, :mod:`verified.driver.batch`),
     else (not run, re-chunked) the chunk's outcome for each of its pieces. ``surviving``
     (where some pieces broke down and others went on): the chunks' parts that went on
     merged as above (a chunk without a failed piece whole, else its ``surviving``). A
@@ -139,7 +139,7 @@ up to the step-size differences):
 
 Hooks: on Dask every chunk gets its own (pickled) copy of ``hooks`` and
 ``consistency``; in-process the hooks are shared by the chunks (one run after the
-other) and ``consistency`` is copied per chunk. :class:`verified.hooks.StopAfterWall`
+other) and ``consistency`` is copied per chunk. :class:`verified.driver.hooks.StopAfterWall`
 becomes one wall-clock deadline for the whole call (a chunk that starts after it stops
 after one step). ``progress(t, t_end)`` is called in this process with the chunks'
 mean time reached (workers report every ~0.3 s). Ctrl-C while waiting cancels the
@@ -176,11 +176,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from verified.hooks import Hook, StopAfterWall
+from verified.driver.hooks import Hook, StopAfterWall
 from verified.arith.interval import Interval, concatenate, hull, stack
-from verified.batch import VerifiedODE, solve_batch
-from verified.solution import PieceResult, Solution, Start, pieces_summary
-from verified.solver_args import _subdivision, check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+from verified.driver.batch import VerifiedODE, solve_batch
+from verified.driver.solution import PieceResult, Solution, Start, pieces_summary
+from verified.driver.solver_args import (
+    _subdivision, check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+)
 
 __all__ = ["solve_parallel", "plan_chunks", "merge_solutions", "local_client", "connect", "close_local_clients",
            "default_workers", "dask_available", "auto_workers", "subprocess_workers_supported", "SchedulerError",
@@ -1568,7 +1570,7 @@ def merge_solutions(results, ranges, initial, outs, t0, state_names, interrupted
     Per initial piece (``piece_results``): a chunk's own report (offset to the run's
     indices) where it ran as one batch; every piece of a chunk that did not run, or of
     a re-chunked chunk, with that chunk's status. Where some pieces broke down and
-    others went on, ``reason`` says which (:func:`verified.solution.pieces_summary`) and
+    others went on, ``reason`` says which (:func:`verified.driver.solution.pieces_summary`) and
     ``surviving`` merges the chunks' surviving parts (a chunk without a failed piece
     whole, a chunk with some its ``surviving``)."""
     sol = _merge(results, ranges, initial, outs, t0, state_names, interrupted)

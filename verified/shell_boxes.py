@@ -11,7 +11,7 @@ constants ``c_i >= (M(q)^-1)_ii`` valid for every ``q``, every true state satisf
 Taylor sets of a chaotic run break down at ``t_b`` with the states in a box ``X_b``,
 the positions stay in ``Q_b + [-u, u] (t - t_b)`` and the rates in ``[-u, u]``: a crude
 enclosure, but finite and sound at every later time. :func:`continue_in_shell` appends
-it to a broken-down :class:`~verified.solution.Solution`, one step per output interval.
+it to a broken-down :class:`~verified.driver.solution.Solution`, one step per output interval.
 
 Proof of a step ``[t_k, t_k+1]`` (length ``h``), positions ``Q_k`` at ``t_k``: the
 whole continuation first finds ``u`` with ``u >= u(Q_b + [-u, u] (T - t_b))`` (an
@@ -45,7 +45,7 @@ from verified.arith import interval as iv
 from verified.contractor import EnergyShell
 from verified.graph.evaluate import eval_interval, jacobian_interval
 from verified.arith.interval import Interval
-from verified.solution import Solution
+from verified.driver.solution import Solution
 
 __all__ = ["continue_in_shell", "min_value", "speed_bound"]
 

@@ -19,20 +19,20 @@ returned with ``status = "breakdown"`` and the reason; so is a stop asked for by
 
 :func:`solve` is the public entry: it checks how the run is to be executed and hands it
 to the chunked execution (:mod:`verified.parallel`: ``workers``, ``client``, ``chunks``,
-``rechunk``) or runs it as one batch in this process (:func:`verified.batch.solve_batch`,
+``rechunk``) or runs it as one batch in this process (:func:`verified.driver.batch.solve_batch`,
 the driver loop: per step it takes the hull of the sets, asks the step control
-(:mod:`verified.policies`) for a step size the stepper (a
+(:mod:`verified.driver.control`) for a step size the stepper (a
 :class:`verified.steppers.protocol.Stepper` of the run's set kind, :mod:`verified.steppers.set_kinds`) can
 validate, advances the sets (:mod:`verified.sets.first_order`) to a
 :class:`~verified.steppers.protocol.StepResult`, records it, and calls the hooks
-(:mod:`verified.hooks`: progress, the consistency test, stop rules); adaptive splitting
+(:mod:`verified.driver.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow). See ``docs/architecture.md``.
 
 Imports go one way: ``solver -> parallel -> batch -> solution`` (``solver`` also imports
 ``batch`` and ``solution`` directly). :class:`Solution` and :class:`Start`
-(:mod:`verified.solution`), :class:`VerifiedODE` and :data:`MODEL_CAPS`
-(:mod:`verified.batch`) are importable from here as before; the driver's private
-helpers (``_Run``, ``_stepper``, ``_setup``, ...) are in :mod:`verified.batch` only, so
+(:mod:`verified.driver.solution`), :class:`VerifiedODE` and :data:`MODEL_CAPS`
+(:mod:`verified.driver.batch`) are importable from here as before; the driver's private
+helpers (``_Run``, ``_stepper``, ``_setup``, ...) are in :mod:`verified.driver.batch` only, so
 that a test patches them where the driver looks them up.
 """
 
@@ -41,14 +41,14 @@ from __future__ import annotations
 import numpy as np
 
 from verified.auto import solve_auto
-from verified.batch import MODEL_CAPS, VerifiedODE, solve_batch
+from verified.driver.batch import MODEL_CAPS, VerifiedODE, solve_batch
 from verified.arith.interval import Interval
 from verified.methods import METHOD_FIELDS, METHODS, Auto, as_method, from_settings
 from verified.parallel import auto_workers, solve_parallel
-from verified.solution import Solution, Start
+from verified.driver.solution import Solution, Start
 
-# (Solution, Start, VerifiedODE and MODEL_CAPS live in verified.solution and
-# verified.batch; importable from here as before)
+# (Solution, Start, VerifiedODE and MODEL_CAPS live in verified.driver.solution and
+# verified.driver.batch; importable from here as before)
 __all__ = ["solve", "Solution", "VerifiedODE", "Start", "MODEL_CAPS"]
 
 
@@ -132,12 +132,12 @@ def solve(
         (RA(t), H_H, H_V, every test) is returned as ``Solution.consistency``. In one
         in-process batch, a test that gains nothing steps aside for a while
         (``EnergyTest.suspend_after``, :mod:`verified.energy_cadence`).
-    hooks : sequence of hook objects (:mod:`verified.hooks`)
+    hooks : sequence of hook objects (:mod:`verified.driver.hooks`)
         Called before the run, after every accepted step (with the step's
         :class:`~verified.steppers.protocol.StepResult` and the sets; a hook may replace the sets
         by sets enclosing the same true states, roll the step back, or stop the run) and
         on the Solution, in this order after ``progress`` and ``consistency``. For
-        example :class:`verified.hooks.StopAfterWall` caps the wall-clock time.
+        example :class:`verified.driver.hooks.StopAfterWall` caps the wall-clock time.
     invariants : sequence of :class:`verified.conservation.Conserved` /
         :class:`~verified.conservation.NonIncreasing`
         Quantities of the ODE that are constant (``Conserved([1, 1, 1])`` for
@@ -190,7 +190,7 @@ def solve(
     Raises
     ------
     ValueError
-        for a bad argument, before any work (see :mod:`verified.solver_args`): for
+        for a bad argument, before any work (see :mod:`verified.driver.solver_args`): for
         example ``tol`` or ``h_max`` not a finite number > 0, NaN in ``t_eval`` or
         ``x0``, an empty batch of boxes, or ``subdivision`` of the wrong length.
     TypeError
@@ -229,8 +229,8 @@ def _with_invariants(ode, invariants, hooks) -> list:
     """``hooks`` with the :class:`verified.conservation.InvariantHook` of ``invariants``
     first (the declarations checked and proven against the ODE here, before any work)."""
     from verified.conservation import invariant_hook
-    from verified.hooks import check_hooks
-    from verified.solver_args import check_graph
+    from verified.driver.hooks import check_hooks
+    from verified.driver.solver_args import check_graph
 
     graph = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode)
     hook = invariant_hook(invariants, graph)
@@ -281,7 +281,7 @@ def _method_settings(method, ode, start, flags: dict):
     if given or start is not None or isinstance(ode, VerifiedODE):
         # (checked by the method they describe: the methods own these settings' checks)
         try:
-            # (an error-basis policy object, verified.policies, is the driver's own: not a method field)
+            # (an error-basis policy object, verified.driver.control, is the driver's own: not a method field)
             from_settings(**{k: v for k, v in given.items()
                              if not (k == "arithmetic" and isinstance(ode, VerifiedODE))
                              and not (k == "error_basis" and not isinstance(v, str))})
@@ -327,7 +327,7 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
             params is None or not isinstance(params, Interval) or params.ndim == 1):
         # an energy test that may be suspended while idle (verified.energy_cadence)
         from verified.energy_cadence import solve_with_cadence
-        from verified.solver_args import check_graph
+        from verified.driver.solver_args import check_graph
 
         n_state = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode).n_inputs
         carried = params.shape[-1] if isinstance(params, Interval) and bool(np.any(params.width() > 0)) else 0

@@ -63,7 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from verified.graph import trace
-from verified.hooks import StopAfterWall
+from verified.driver.hooks import StopAfterWall
 from verified.arith.interval import Interval
 
 #: Laub-Loomis' coefficient of x2 x7 in x7' (JuliaReach's file: 1.6; Ariadne, Flow*: 1.5)

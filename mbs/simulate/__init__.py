@@ -114,7 +114,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         ``False``: none; ``True``: always.
     max_wall : float or None
         Stop the integration after this many seconds of wall-clock time
-        (:class:`verified.hooks.StopAfterWall`): ``status="stopped"`` with everything
+        (:class:`verified.driver.hooks.StopAfterWall`): ``status="stopped"`` with everything
         verified so far. Ctrl-C during the integration likewise returns the partial
         solution with ``status="interrupted"`` (after the step in progress; a second
         Ctrl-C aborts at once).

@@ -1,5 +1,5 @@
 """The solver hooks :func:`mbs.simulate.simulate` adds to the caller's (the hook
-protocol: :mod:`verified.hooks`): the energy consistency test of modes ii and iii, the
+protocol: :mod:`verified.driver.hooks`): the energy consistency test of modes ii and iii, the
 energy shell, the invariant of a PD controller holding a pose, the wall-clock limit and
 Ctrl-C, which stops the run cleanly after the step in progress."""
 from __future__ import annotations
@@ -14,7 +14,7 @@ from verified.consistency import STRATEGIES, EnergyTest
 from verified.contractor import EnergyShell
 from verified.energy_shell import EnergyShellHook, max_energy
 from verified.graph import Graph
-from verified.hooks import StopAfterWall
+from verified.driver.hooks import StopAfterWall
 from verified.arith.interval import Interval
 from verified.invariant import InvariantHook
 
@@ -168,7 +168,7 @@ class CtrlC:
         self.requested = True
         print("\nCtrl-C: stopping after the current step (press again to abort at once)", file=sys.stderr)
 
-    # the hook protocol of verified.hooks
+    # the hook protocol of verified.driver.hooks
     def before_run(self, setup):
         return None
 

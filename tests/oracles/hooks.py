@@ -1,7 +1,7 @@
 """Hooks the tests hand to runs (picklable: module level, so Dask workers can load them)."""
 import time
 
-from verified.hooks import Hook
+from verified.driver.hooks import Hook
 
 
 class SlowSteps(Hook):

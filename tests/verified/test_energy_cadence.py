@@ -17,7 +17,7 @@ from verified.consistency import EnergyTest
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.methods import Composition, Lohner
-from verified.solution import Start
+from verified.driver.solution import Start
 from verified.solver import solve
 
 BOX = Interval([0.30, 0.0], [0.31, 0.01])

@@ -278,7 +278,7 @@ def test_block_basis_keeps_the_states_enclosure_of_the_run_without_the_test():
     """With h in its own block of the error basis, the energy test's augmented run
     encloses the states exactly as the run without it (same steps); the contraction
     can then only narrow. Sound against the sampling oracle."""
-    from verified.policies import BlockBasis
+    from verified.sets.bases import BlockBasis
     rhs, H = _dp()
     lo, hi = dp.initial_box()
     kw = dict(t_eval=[0.25, 0.5], subdivision=[16, 1, 1, 1], h_max=0.1)

@@ -88,12 +88,12 @@ def test_graph_modules_import_downward():
 
 def test_solver_parallel_and_the_driver_import_one_way_also_inside_functions():
     """``verified.solver.solve`` dispatches to ``verified.parallel``, which runs its chunks
-    with ``verified.batch`` (the one-batch driver); ``Solution`` and ``Start`` are in
-    ``verified.solution``. No import of a lower one reaches a higher one, not even one
+    with ``verified.driver.batch`` (the one-batch driver); ``Solution`` and ``Start`` are in
+    ``verified.driver.solution``. No import of a lower one reaches a higher one, not even one
     inside a function (run when it is called), directly or through other modules."""
     mods = _modules()
     edges = {m: _module_level_imports(mods, m, in_functions=True) for m in mods}
-    order = ["verified.solution", "verified.batch", "verified.parallel", "verified.solver"]
+    order = ["verified.driver.solution", "verified.driver.batch", "verified.parallel", "verified.solver"]
     for i, m in enumerate(order):
         assert not (edges[m] & set(order[i + 1:])), m
         seen, todo = set(), list(edges[m])

@@ -175,7 +175,7 @@ def test_a_wall_clock_cap_counts_for_the_whole_auto_run():
     gets what is left (the bench's 300 s cap had let a split run take 555 s)."""
     import time
 
-    from verified.hooks import StopAfterWall, caps_from
+    from verified.driver.hooks import StopAfterWall, caps_from
     cap = StopAfterWall(8.0)
     (h,) = caps_from([cap], time.perf_counter() - 5.0)
     assert isinstance(h, StopAfterWall) and 2.5 < h.seconds <= 3.0

@@ -16,7 +16,7 @@ import pytest
 from models import double_pendulum as dp
 from verified import parallel
 from verified.graph import trace
-from verified.hooks import StopAfterWall
+from verified.driver.hooks import StopAfterWall
 from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
 

@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 from mbs.app.sampling import dop853
 
-from verified import batch
+from verified.driver import batch
 from verified.graph import trace
-from verified.hooks import Hook
+from verified.driver.hooks import Hook
 from verified.arith.interval import Interval
 from verified.sets.second_order import QuadraticSets
 from verified.sets.first_order import DoubletonSets
-from verified.solution import PieceResult, pieces_summary
+from verified.driver.solution import PieceResult, pieces_summary
 from verified.solver import solve
 
 

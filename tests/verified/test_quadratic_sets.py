@@ -214,7 +214,7 @@ def test_absorbing_the_error_part_is_exact():
 def test_absorption_happens_and_stays_sound():
     """Double pendulum quarter box, T = 0.8: the error part is absorbed at least once and
     DOP853 trajectories stay inside."""
-    import verified.batch as vb  # (the one-batch driver solve runs)
+    import verified.driver.batch as vb  # (the one-batch driver solve runs)
     lo, hi = dp.initial_box()
     c = 0.5 * (lo + hi)
     lo, hi = c - 0.25 * (c - lo), c + 0.25 * (hi - c)
@@ -238,7 +238,7 @@ def test_params_per_state_argument_and_cap():
     """``params_per_state`` reaches both steppers; bad values are a one-line error."""
     import unittest.mock as um
 
-    import verified.batch as vb  # (the one-batch driver solve runs)
+    import verified.driver.batch as vb  # (the one-batch driver solve runs)
     g = trace(pd.rhs, 2)
     lo, hi = pd.initial_box()
     for bad in (0, -1, 2.5, True, "8"):

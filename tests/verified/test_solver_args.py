@@ -10,7 +10,7 @@ ignored and ``subdivision=[4, 4]`` for 4 states leaked a numpy broadcast error).
 import numpy as np
 import pytest
 
-import verified.batch as batch_mod  # (the one-batch driver: where solve prepares and steps)
+import verified.driver.batch as batch_mod  # (the one-batch driver: where solve prepares and steps)
 from verified.graph import trace
 from verified.arith.interval import Interval, empty
 from verified.solver import solve
@@ -125,7 +125,7 @@ def test_bad_setting_is_refused_up_front(no_work, name, kwargs):
 
 def test_size_limits_are_named_and_the_limit_itself_is_accepted(no_work):
     """A size argument past its bound names the bound (issue 39: ``order=10**6`` hung)."""
-    from verified.solver_args import MAX_ORDER
+    from verified.driver.solver_args import MAX_ORDER
     msg = _refused("order", lambda: solve(_oscillator(), BOX2, (0.0, 1.0), order=MAX_ORDER + 1))
     assert f"[2, {MAX_ORDER}]" in msg and str(MAX_ORDER + 1) in msg
     # the bound itself passes the checks (and reaches the preparation no_work refuses)

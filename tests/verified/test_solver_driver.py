@@ -15,9 +15,10 @@ from verified.sets import first_order
 from verified.steppers import lohner
 from verified.consistency import EnergyTest
 from verified.graph import trace
-from verified.hooks import Hook, RunSetup, SolverHook, StopAfterWall, check_hooks
+from verified.driver.hooks import Hook, RunSetup, SolverHook, StopAfterWall, check_hooks
 from verified.arith.interval import Interval
-from verified.policies import LANDING_STRETCH, AutoBasis, QRBasis, StepControl, WrapControl, error_basis_policy
+from verified.driver.control import LANDING_STRETCH, StepControl, WrapControl
+from verified.sets.bases import AutoBasis, QRBasis, error_basis_policy
 from verified.sets.first_order import DoubletonSets
 from verified.sets.protocol import SetBatch
 from verified.methods import METHOD_FIELDS
@@ -286,7 +287,7 @@ def test_stop_after_wall_zero_stops_after_the_first_step_and_huge_never(ode, box
 
 
 def test_bad_hooks_are_refused_in_one_line_before_any_work(box, monkeypatch):
-    import verified.batch as batch_mod  # (the one-batch driver solve runs)
+    import verified.driver.batch as batch_mod  # (the one-batch driver solve runs)
 
     def no_work(*a, **k):
         raise AssertionError("work started before the hooks were checked")

@@ -11,7 +11,7 @@ import numpy as np
 
 from verified.arith import linalg
 from verified.arith.interval import Interval, concatenate, point
-from verified.policies import orthonormal_basis
+from verified.sets.bases import orthonormal_basis
 
 __all__ = ["DoubletonSets"]
 

@@ -52,7 +52,7 @@ import numpy as np
 
 from verified.arith import linalg
 from verified.arith.interval import Interval, concatenate, point, sqr
-from verified.policies import orthonormal_basis, scaled_basis
+from verified.sets.bases import orthonormal_basis, scaled_basis
 from verified.sets.first_order import DoubletonSets, parameter_cuts
 
 __all__ = ["QuadraticSets", "quadratic_range"]
@@ -231,7 +231,7 @@ class QuadraticSets:
         return QuadraticSets(c=c_new, C=C_new, r0=delta, S=self.S, Q=self.Q, r=r)
 
     #: merge into a basis orthonormal in units of the set's extent per state
-    #: (:func:`verified.policies.scaled_basis`); False: in raw units
+    #: (:func:`verified.sets.bases.scaled_basis`); False: in raw units
     SCALED_MERGE = True
 
     def merge_params(self, count: int, keep_first: int, steer: int | None = None) -> "QuadraticSets":

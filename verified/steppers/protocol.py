@@ -20,7 +20,11 @@ import numpy as np
 from verified.arith.exact import enclose_fraction
 from verified.arith.interval import Interval
 
-__all__ = ["StepResult", "Stepper"]
+__all__ = ["StepResult", "Stepper", "REMAINDER_SLACK"]
+
+
+#: a step is retried smaller when its remainder exceeds this many times ``tol``
+REMAINDER_SLACK = 10.0
 
 
 @dataclass

@@ -81,7 +81,7 @@ from verified.arith import linalg
 from verified.series.affine_taylor import box_forms
 from verified.arith.interval import Interval, _k_round_up, point
 from verified.steppers.lohner import LohnerStepper, _inflate
-from verified.policies import REMAINDER_SLACK
+from verified.steppers.protocol import REMAINDER_SLACK
 from verified.sets.second_order import QuadraticSets
 from verified.sets.protocol import SetView
 from verified.steppers.protocol import StepResult

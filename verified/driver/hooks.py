@@ -204,5 +204,5 @@ def check_hooks(hooks) -> list:
     for h in out:
         missing = [m for m in ("before_run", "after_step", "after_run") if not callable(getattr(h, m, None))]
         if missing:
-            raise ValueError(f"hook {h!r} lacks {', '.join(missing)} (subclass verified.hooks.Hook)")
+            raise ValueError(f"hook {h!r} lacks {', '.join(missing)} (subclass verified.driver.hooks.Hook)")
     return out

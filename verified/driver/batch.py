@@ -3,15 +3,15 @@
 :func:`solve_batch` is what ``solve`` runs once it has decided on one batch in this
 process (``workers=1``, or the default on a small batch), and what
 :mod:`verified.parallel` runs for each chunk: the initial boxes (or the sets of a
-:class:`~verified.solution.Start`) advance together with one common step size through
+:class:`~verified.driver.solution.Start`) advance together with one common step size through
 the batched QR-Lohner step of :mod:`verified.steppers.lohner`.
 
 The driver loop: per step it takes the hull of the sets, asks the step control
-(:mod:`verified.policies`) for a step size the stepper (a
+(:mod:`verified.driver.control`) for a step size the stepper (a
 :class:`verified.steppers.protocol.Stepper` of the run's set kind, :mod:`verified.steppers.set_kinds`) can
 validate, advances the sets (:mod:`verified.sets.first_order`) to a
 :class:`~verified.steppers.protocol.StepResult`, records it, and calls the hooks
-(:mod:`verified.hooks`: progress, the consistency test, stop rules); adaptive splitting
+(:mod:`verified.driver.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow. See ``docs/architecture.md``.
 
 Imports: this module sits below :mod:`verified.parallel` and :mod:`verified.solver`
@@ -32,17 +32,18 @@ import numpy as np
 from verified.series.affine_taylor import AffineTaylorODE
 from verified.arith.exact import enclose_fraction
 from verified.graph import Graph
-from verified.hooks import ProgressHook, RunSetup, check_hooks
+from verified.driver.hooks import ProgressHook, RunSetup, check_hooks
 from verified.arith.interval import Interval, concatenate, hull, stack_hulls
 from verified.arith.linalg import SingularMatrixError
 from verified.steppers.lohner import LohnerStepper
-from verified.policies import BlockBasis, MergePolicy, SplitPolicy, StepControl, WrapControl
+from verified.sets.bases import BlockBasis
+from verified.driver.control import MergePolicy, SplitPolicy, StepControl, WrapControl
 from verified.steppers.set_kinds import SetKind, set_kind
 from verified.sets.second_order import QuadraticSets
 from verified.sets.first_order import DoubletonSets
 from verified.sets.protocol import SetView, set_view
-from verified.solution import Failure, PieceResult, Solution, Start, pieces_summary
-from verified.solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+from verified.driver.solution import Failure, PieceResult, Solution, Start, pieces_summary
+from verified.driver.solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
 from verified.series.taylor import TaylorODE
 from verified.series.taylor_model import TaylorModelODE
 from verified.series.variational import params_as_states, second_variational_graph, variational_graph
@@ -529,7 +530,7 @@ class _PieceBook:
         return keep
 
     def results(self, boxes: Interval, status: str, t_reached: float, reason: str) -> list:
-        """:class:`~verified.solution.PieceResult` per piece: a dead piece's failure, a
+        """:class:`~verified.driver.solution.PieceResult` per piece: a dead piece's failure, a
         live one with the run's ``status``, ``t_reached`` and ``reason``."""
         out = []
         for i in range(self.group.size):
@@ -544,7 +545,7 @@ class _PieceBook:
 
 class _Run:
     """The state of one integration: the sets, the exact time, what has been recorded,
-    and the counters. It is the :class:`~verified.hooks.RunControl` the hooks get."""
+    and the counters. It is the :class:`~verified.driver.hooks.RunControl` the hooks get."""
 
     def __init__(self, setup: RunSetup, initial: Interval, outs: np.ndarray, make_stepper, t_exact=None, wrap=None):
         self.sets = setup.sets
@@ -668,7 +669,7 @@ class _Run:
         return enclose_fraction(gap)  # the exact gap between two doubles
 
     def advance(self, stepper, X, found, gap_lo, gap_hi):
-        """Take the validated step ``found`` (:class:`~verified.policies.Validated`),
+        """Take the validated step ``found`` (:class:`~verified.driver.control.Validated`),
         stamp its times and record its tube; returns the StepResult."""
         E, cE = found.enclosure
         h = found.h
@@ -778,7 +779,7 @@ class _Run:
         return main
 
     def _failures(self, full: Solution) -> list:
-        """:class:`~verified.solution.Failure` per group of pieces that broke down: each
+        """:class:`~verified.driver.solution.Failure` per group of pieces that broke down: each
         failure event's pieces (their record up to the event, the sets it dropped), and
         the pieces still alive when the whole run broke down (the sets at the stop)."""
         book = self.pieces

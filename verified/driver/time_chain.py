@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from verified.arith.interval import Interval, stack_hulls
-from verified.solution import Solution
+from verified.driver.solution import Solution
 
 __all__ = ["chain_in_time", "records_in_time"]
 

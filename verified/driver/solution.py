@@ -1,7 +1,7 @@
 """What a run returns and where a run continues from: :class:`Solution` (the result of
 :func:`verified.solver.solve`, of one in-process batch as of a chunked run) and
 :class:`Start` (``solve(..., start=)``). Plain data: the one-batch driver
-(:mod:`verified.batch`) and the chunked execution (:mod:`verified.parallel`) both build
+(:mod:`verified.driver.batch`) and the chunked execution (:mod:`verified.parallel`) both build
 them, so they live below both."""
 
 from __future__ import annotations
@@ -165,7 +165,7 @@ class Solution:
     t_reached : float
         The last time up to which the enclosure is verified.
     status : "completed", "breakdown", "stopped" or "interrupted"
-        "stopped": a hook asked to stop (:mod:`verified.hooks`, e.g. a wall-clock cap);
+        "stopped": a hook asked to stop (:mod:`verified.driver.hooks`, e.g. a wall-clock cap);
         "interrupted": ``KeyboardInterrupt`` during the integration. Everything up to
         ``t_reached`` is verified in every case.
     reason : str
@@ -204,7 +204,7 @@ class Solution:
         "breakdown", ``t_reached`` the time up to which *every* piece is verified, and
         ``t``, ``boxes``, ``hull``, ``tube``... stop there (they enclose every solution
         from the whole initial set); the pieces that went on are in ``surviving``.
-        Pieces whose sets were linked (see :func:`verified.batch.solve_batch`) fail
+        Pieces whose sets were linked (see :func:`verified.driver.batch.solve_batch`) fail
         together.
     surviving : Solution or None
         Only where some pieces broke down and others went on: the run restricted to the
