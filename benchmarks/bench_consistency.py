@@ -208,12 +208,12 @@ def long_horizon(T=5.0, pieces=48, cap=900.0):
 
 
 def _test_for(system, **kw):
-    from verified.consistency import EnergyTest
-    return EnergyTest(system.energy, system.energy_rate, **kw)  # "derive", "zero" or a graph (verified.energy_rate)
+    from verified.consistency.energy_test import EnergyTest
+    return EnergyTest(system.energy, system.energy_rate, **kw)  # "derive", "zero" or a graph (verified.consistency.energy_rate)
 
 
 def _shell(mod, lo, hi):
-    """``(EnergyShell, hmax)`` of item 1 (``verified.energy_shell``) as ``simulate(...,
+    """``(EnergyShell, hmax)`` of item 1 (``verified.consistency.energy_shell``) as ``simulate(...,
     energy_shell=True)`` builds them (:func:`mbs.simulate.energy_shell_of`), from the
     model's chain: the same physics as eq. 18 / 22, checked against Pinocchio; both
     pendulums are conservative."""
@@ -258,7 +258,7 @@ def work_precision(out_json="work_precision.json", plot="work_precision.png", qu
     ``out_json`` and ``plot`` are relative to the directory ``out`` (None: not written)."""
     import json
     from mbs.simulate import system_for
-    from verified.energy_shell import EnergyShellHook
+    from verified.consistency.energy_shell import EnergyShellHook
     from verified.driver.hooks import StopAfterWall
     from verified.sets.bases import BlockBasis
     from verified.solver import solve

@@ -1,11 +1,11 @@
-"""How much the contractors of verified/contractor.py narrow, and what they cost.
+"""How much the contractors of verified/consistency/contractor.py narrow, and what they cost.
 
     python benchmarks/bench_contractor.py [--boxes 2000] [--no-lohner]
 
 On the paper's double pendulum (m = l = 1, g = 9.81; models/double_pendulum.py):
 
 1. Energy shell: boxes much wider than the shell H <= Hmax (Hmax = upper end of H over
-   the initial box eq. (25)), contracted by :class:`verified.contractor.EnergyShell`.
+   the initial box eq. (25)), contracted by :class:`verified.consistency.contractor.EnergyShell`.
 2. HC4 on H: boxes around the initial box widened by a factor, contracted under
    H(x) in [H(X0)] (a conservative system keeps H in the initial enclosure).
 3. Linear row: QR-Lohner sets c + C r0 + Q r captured from verified.solver.solve (a
@@ -27,7 +27,7 @@ import numpy as np
 
 from models import double_pendulum as dp
 from verified.arith import linalg
-from verified.contractor import HC4, EnergyShell, contract_linear_row, mean_value_row
+from verified.consistency.contractor import HC4, EnergyShell, contract_linear_row, mean_value_row
 from verified.graph.evaluate import eval_interval
 from verified.graph import trace
 from verified.arith.interval import Interval

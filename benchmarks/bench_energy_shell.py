@@ -1,5 +1,5 @@
 """The energy shell as a solver hook (issue 13): the paper's pendulum over the top,
-with and without :class:`verified.energy_shell.EnergyShellHook`, side by side in one run.
+with and without :class:`verified.consistency.energy_shell.EnergyShellHook`, side by side in one run.
 
     python benchmarks/bench_energy_shell.py          # ~3 min
     python benchmarks/bench_energy_shell.py --quick  # 1 piece, T = 3 only
@@ -26,8 +26,8 @@ import numpy as np
 
 import bench_robots as br  # (Oracle, sample_points, containment, md_table)
 from models import pendulum as pd
-from verified.contractor import EnergyShell
-from verified.energy_shell import EnergyShellHook, max_energy
+from verified.consistency.contractor import EnergyShell
+from verified.consistency.energy_shell import EnergyShellHook, max_energy
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import solve

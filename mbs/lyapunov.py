@@ -17,7 +17,7 @@ The choice ``phi(p) = dV(q_ref, p) - 1/2 e*^T Kp e*``, with ``e*(p)`` a quadrati
 parameters fitted to the offsets at which the controller balances the gravity it does not
 compensate (:func:`_equilibrium_fit`; any function of ``p`` is sound, a close one keeps
 the floor of the decay low), puts ``L``'s minimum near zero for every ``p`` and gives the
-structure :class:`verified.invariant.QuadraticLyapunov` bounds: ``A = M(q, p)``,
+structure :class:`verified.consistency.invariant.QuadraticLyapunov` bounds: ``A = M(q, p)``,
 ``K = Kp``, centre ``e*(p)``, ``grad = G = grad_q dV`` (``hess_q dV = dG/dq``),
 ``rho(p) = G(q_ref, p) + Kp e*(p)`` (the second-order offset between ``q_ref`` and the
 equilibrium) and the dissipation ``Kd + D``.
@@ -29,7 +29,7 @@ import numpy as np
 from verified.graph.evaluate import eval_float, jacobian_float
 from verified.graph import GraphBuilder
 from verified.graph.ops import embed, gradient_graph
-from verified.invariant import QuadraticLyapunov
+from verified.consistency.invariant import QuadraticLyapunov
 
 from . import spatial as sp3
 from .control import PD, ClosedLoop, ControlError
@@ -226,7 +226,7 @@ def _equilibrium_fit(G_g, K, qref, lo, hi):
 
 
 def pd_hold_lyapunov(loop: ClosedLoop, samples=None, rhs=None):
-    """The :class:`verified.invariant.QuadraticLyapunov` of ``loop`` (one PD controller
+    """The :class:`verified.consistency.invariant.QuadraticLyapunov` of ``loop`` (one PD controller
     holding a constant pose; see the module docstring), with graphs over the loop's states
     and parameters (``loop.state_names``, ``loop.param_names``).
 

@@ -135,7 +135,7 @@ def system_entry(name):
     paper's models, :class:`models.paper.PaperModel`), or None: a name of a chain
     model, or not a name at all. The factory has ``chain(params=None)``,
     ``system(mode, energy_rate, cparams=None)`` (None: integrate the chain;
-    ``energy_rate`` one of :data:`verified.energy_rate.MODEL_RATES`) and
+    ``energy_rate`` one of :data:`verified.consistency.energy_rate.MODEL_RATES`) and
     ``param_names``."""
     if not isinstance(name, str):
         return None

@@ -7,7 +7,7 @@ bound every joint rate, whatever the positions:
     qd_i^2 <= 2 (hmax - V(q)) (M(q)^-1)_ii <= 2 (hmax - min V) c_i
 
 (for fixed ``q``, ``min {qd^T M qd : qd_i = v} = v^2 / (M^-1)_ii``). That is what lets
-:mod:`verified.shell_boxes` continue a passive chain's enclosure after its Taylor sets
+:mod:`verified.consistency.shell_boxes` continue a passive chain's enclosure after its Taylor sets
 break down (a chaotic free fall): the positions there grow past any box on which an
 interval evaluation of ``M(q)^-1`` could be proven.
 

@@ -3,7 +3,7 @@
 With ``simulate(..., energy_shell=True)`` on a chain without controller or uncertain
 parameters, a run whose Taylor sets break down (a chaotic free fall) does not end
 there: :func:`carry_on` continues it to ``t_end`` with the crude but sound boxes of
-:func:`verified.shell_boxes.continue_in_shell` -- every joint rate bounded by the
+:func:`verified.consistency.shell_boxes.continue_in_shell` -- every joint rate bounded by the
 energy (``|qd_i| <= sqrt(2 (hmax - min V) c_i)`` with the chain's proven
 ``c_i >= (M(q)^-1)_ii`` for every ``q``, :func:`mbs.shell_bounds.inverse_mass_bounds`),
 the positions grown by that rate. The result says so: ``status="completed"``, its
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from verified.energy_shell import EnergyShellHook
-from verified.shell_boxes import continue_in_shell
+from verified.consistency.energy_shell import EnergyShellHook
+from verified.consistency.shell_boxes import continue_in_shell
 
 from .shell_bounds import inverse_mass_bounds
 
@@ -38,7 +38,7 @@ def _bounds(chain):
 def carry_on(sol, masses, hooks, box, t_eval, t_end: float):
     """``sol`` carried on to ``t_end`` with the energy shell's boxes when it broke down
     (module docstring); ``masses``: the run's chain record (``.chain``, ``.cparams``),
-    ``hooks``: the run's hooks (one :class:`~verified.energy_shell.EnergyShellHook`),
+    ``hooks``: the run's hooks (one :class:`~verified.consistency.energy_shell.EnergyShellHook`),
     ``box``: the initial box. Anything else (completed, stopped, no shell hook) is
     returned unchanged."""
     if sol.status != "breakdown" or masses is None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from verified.energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
+from verified.consistency.energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
 from verified.graph import Graph
 
 
@@ -30,14 +30,14 @@ class System:
         ``x -> [H]`` (1 output, J): the constraint ``H_H``.
     energy_rate : "derive", "zero" or Graph
         How ``dH/dt``, integrated alongside the state for ``H_V``, is obtained (the
-        vocabulary: :mod:`verified.energy_rate`). "derive" (default): the verified
+        vocabulary: :mod:`verified.consistency.energy_rate`). "derive" (default): the verified
         side forms ``dH/dt = grad H(x) . f(x)`` by forward-mode differentiation of the
         graphs (what the paper did with FADBAD++ in mode (ii)); "zero": ``dH/dt`` is
         identically 0 (declared, e.g. after symbolic simplification), ``H_V`` stays
         ``H(0)`` and no rate is integrated; a Graph: ``x -> [dH/dt]`` (1 output, W).
         A declaration is used only once proven exactly equal to ``grad H . f`` (when
         the run starts); an unproven one is replaced by the derived rate, with an
-        ``EnergyClaimWarning`` (:mod:`verified.energy_rate`). Old spellings, with a
+        ``EnergyClaimWarning`` (:mod:`verified.consistency.energy_rate`). Old spellings, with a
         ``DeprecationWarning``: ``None`` for "derive", ``conservative=True`` for "zero".
     params : dict
         Parameter values (numbers or ``(lo, hi)``) by name, if the graphs have any.

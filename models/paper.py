@@ -60,7 +60,7 @@ class PaperModel:
     def system(self, mode, energy_rate: str, cparams=None) -> System | None:
         """The hand-written System of mode iii (``mode.symbolic``), else ``None``: modes
         i and ii integrate :meth:`chain` through the numeric model. ``energy_rate``:
-        "unsimplified" or "simplified" (:mod:`verified.energy_rate`; "simplified" is
+        "unsimplified" or "simplified" (:mod:`verified.consistency.energy_rate`; "simplified" is
         proved 0 here, so the System declares "zero"); ``cparams``: the
         :class:`mbs.uncertain.ChainParameters` of uncertain parameters, or None."""
         if not mode.symbolic:

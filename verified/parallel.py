@@ -1706,8 +1706,8 @@ def _merge_records(records):
         return None
     if len(records) == 1:
         return records[0]
-    # (only with a consistency test: verified.consistency costs ~0.2 s to import)
-    from verified.consistency import ConsistencyRecord
+    # (only with a consistency test: verified.consistency.energy_test costs ~0.2 s to import)
+    from verified.consistency.energy_test import ConsistencyRecord
     tests = sorted((t for r in records for t in r.tests), key=lambda t: t.t)
     series = [r for r in records if len(r.ra_t)]
     if not series:

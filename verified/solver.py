@@ -125,28 +125,28 @@ def solve(
         both is at most ``1 + merge_slack`` times as wide as their union's hull
         (default None: never). Off by default: merging turns linear parts into wrapped
         error boxes and makes enclosures wider (docs/lab/code_notes.md).
-    consistency : verified.consistency.EnergyTest or None
+    consistency : verified.consistency.energy_test.EnergyTest or None
         Energy (Hamiltonian) consistency test, further constraints and the backward
         test (paper sec. 4): branch and prune at the first local maximum of the
         reduction area RA(t), at least every ``test_interval`` seconds. Its record
         (RA(t), H_H, H_V, every test) is returned as ``Solution.consistency``. In one
         in-process batch, a test that gains nothing steps aside for a while
-        (``EnergyTest.suspend_after``, :mod:`verified.energy_cadence`).
+        (``EnergyTest.suspend_after``, :mod:`verified.consistency.energy_cadence`).
     hooks : sequence of hook objects (:mod:`verified.driver.hooks`)
         Called before the run, after every accepted step (with the step's
         :class:`~verified.steppers.protocol.StepResult` and the sets; a hook may replace the sets
         by sets enclosing the same true states, roll the step back, or stop the run) and
         on the Solution, in this order after ``progress`` and ``consistency``. For
         example :class:`verified.driver.hooks.StopAfterWall` caps the wall-clock time.
-    invariants : sequence of :class:`verified.conservation.Conserved` /
-        :class:`~verified.conservation.NonIncreasing`
+    invariants : sequence of :class:`verified.consistency.conservation.Conserved` /
+        :class:`~verified.consistency.conservation.NonIncreasing`
         Quantities of the ODE that are constant (``Conserved([1, 1, 1])`` for
         ``x + y + z``, or a graph / callable ``I(x, p)``) or never rise along its
         solutions. A conserved one is proven (``grad I . f`` identically 0, exactly)
         before any work, else a ValueError; a non-increasing one is checked on every
         step (``dI/dt <= 0`` over the step's enclosure). After every step the sets are
-        contracted to the level the initial sets give (:mod:`verified.conservation`,
-        the hook :class:`~verified.conservation.InvariantHook`, run before ``hooks``).
+        contracted to the level the initial sets give (:mod:`verified.consistency.conservation`,
+        the hook :class:`~verified.consistency.conservation.InvariantHook`, run before ``hooks``).
     progress : callable(t, t_end) or None
         Called after every accepted step (for progress bars).
     wrap_target : wrapping control: the next step is shortened when a step injected
@@ -226,9 +226,9 @@ def solve(
 
 
 def _with_invariants(ode, invariants, hooks) -> list:
-    """``hooks`` with the :class:`verified.conservation.InvariantHook` of ``invariants``
+    """``hooks`` with the :class:`verified.consistency.conservation.InvariantHook` of ``invariants``
     first (the declarations checked and proven against the ODE here, before any work)."""
-    from verified.conservation import invariant_hook
+    from verified.consistency.conservation import invariant_hook
     from verified.driver.hooks import check_hooks
     from verified.driver.solver_args import check_graph
 
@@ -325,8 +325,8 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
                  absorb=absorb, params_per_state=params_per_state, progress=progress)
     if start is None and getattr(consistency, "can_suspend", None) is not None and (
             params is None or not isinstance(params, Interval) or params.ndim == 1):
-        # an energy test that may be suspended while idle (verified.energy_cadence)
-        from verified.energy_cadence import solve_with_cadence
+        # an energy test that may be suspended while idle (verified.consistency.energy_cadence)
+        from verified.consistency.energy_cadence import solve_with_cadence
         from verified.driver.solver_args import check_graph
 
         n_state = check_graph(ode.graph if isinstance(ode, VerifiedODE) else ode).n_inputs

@@ -49,7 +49,7 @@ for the sampler's own error).
 
 ``--invariant on|both`` declares the conserved x + y + z of Robertson and
 Production-Destruction (``solve(..., invariants=[Conserved([1, 1, 1])])``,
-:mod:`verified.conservation`: proven, then imposed on the sets after every step).
+:mod:`verified.consistency.conservation`: proven, then imposed on the sets after every step).
 
 The table (Markdown) goes to stdout, progress to stderr.
 """
@@ -378,7 +378,7 @@ def with_invariant(case: Case, rows: list, invariant: str) -> list:
     (``"both"``); cases without one run as they are."""
     if invariant == "off" or case.conserved is None:
         return rows
-    from verified.conservation import Conserved
+    from verified.consistency.conservation import Conserved
     w = case.conserved
     name = " + ".join(("" if c == 1 else f"{c:g} ") + v for c, v in zip(w, "xyz"))
     inv = [(f"{label} + invariant {name}", dict(settings, invariants=[Conserved(list(w))]))

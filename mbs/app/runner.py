@@ -411,7 +411,7 @@ def _log_summary(log, report, sol, names, wall, not_drawn, tight):
         log(f"method: {sol.method}")
     if st.get("energy_test_off_s"):
         log(f"energy test: stepped aside for {st['energy_test_off_s']:.3g} s of the run while it pruned "
-            f"nothing ({st.get('energy_test_phases')} phases; verified.energy_cadence)")
+            f"nothing ({st.get('energy_test_phases')} phases; verified.consistency.energy_cadence)")
     if "invariant_from" in st:
         rates = [float(r) for _, lam in st.get("decay_rates", [])[:1] for r in lam]
         log(f"every time after {st['invariant_from']:g} s proven at once by the closed loop's energy"

@@ -81,7 +81,7 @@
     test_splits = 10
     split_strategy = "gradient"
     backward_depth = 0
-    energy_rate = "unsimplified"  # mode iii: "unsimplified" | "simplified" (verified.energy_rate)
+    energy_rate = "unsimplified"  # mode iii: "unsimplified" | "simplified" (verified.consistency.energy_rate)
 
 Numbers are enclosed rigorously, never rounded inward:
 
@@ -114,7 +114,7 @@ import numpy as np
 
 import models
 from models.registry import NAMES, SYSTEMS
-from verified.energy_rate import MODEL_RATES
+from verified.consistency.energy_rate import MODEL_RATES
 from verified.arith.exact import ExpressionError, enclose_fraction, enclose_pi_multiple, parse_pi_expression
 from verified.arith.interval import Interval
 
@@ -144,7 +144,7 @@ _SOLVER = {"order": int, "tol": float, "subdivision": None, "h_max": float, "h_m
 _CONSISTENCY = {"test_interval": float, "test_splits": int, "split_strategy": str,
                 "backward_depth": int, "energy_rate": str, "contract": str, "prune": bool}
 _CONTRACTS = ("step", "test", "off")
-_ENERGY_RATES = MODEL_RATES  # the scene's energy_rate: what simulate() takes (verified.energy_rate)
+_ENERGY_RATES = MODEL_RATES  # the scene's energy_rate: what simulate() takes (verified.consistency.energy_rate)
 
 
 class SceneError(ValueError):

@@ -8,7 +8,7 @@
 - mode ``"iii"``: the symbolic model (sympy) with symbolic constraints, ``dH/dt``
   left unsimplified as in the paper (``energy_rate="unsimplified"``) or simplified
   (``"simplified"``: ``qd^T tau``, identically 0 for a conservative system). The
-  values of ``energy_rate`` in every layer: :mod:`verified.energy_rate`.
+  values of ``energy_rate`` in every layer: :mod:`verified.consistency.energy_rate`.
 
 Example::
 
@@ -95,19 +95,19 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     subdivision : solver setting (see :func:`verified.solver.solve`)
     energy_rate : "unsimplified" or "simplified"
         Which of the symbolic model's ``dH/dt`` mode iii integrates (modes i and ii
-        derive it; :mod:`verified.energy_rate`)
+        derive it; :mod:`verified.consistency.energy_rate`)
     test_interval, test_splits : longest time between energy tests (s) and parts per
         set at a test; defaults per mode in :data:`TEST_DEFAULTS` (the paper's)
-    split_strategy : "gradient", "widest" or "grid" (see :class:`verified.consistency.EnergyTest`)
+    split_strategy : "gradient", "widest" or "grid" (see :class:`verified.consistency.energy_test.EnergyTest`)
     refine, min_gain : "pruned" (replace a set by its surviving parts only when that
         narrows its hull by ``min_gain``, default 0.1) or "always"
     backward_depth : backward consistency test depth (0 = off)
     contract : "step" (default), "test" or "off": where the energy relation ``H(x) = h``
-        contracts the sets (modes ii, iii; :class:`verified.consistency.EnergyTest`):
+        contracts the sets (modes ii, iii; :class:`verified.consistency.energy_test.EnergyTest`):
         after every step, only at the tests, or never
     prune : bool (default True): branch and prune at the tests (the paper's test); with
         ``False`` only the contraction narrows the sets
-    constraints : further :class:`verified.consistency.Constraint` objects (modes ii, iii)
+    constraints : further :class:`verified.consistency.energy_test.Constraint` objects (modes ii, iii)
     progress : None, bool or callable(t, t_end)
         Called after every step. ``None`` (default): a tqdm progress bar over simulated
         time in an interactive terminal or notebook (after 2 s), nothing otherwise;
@@ -133,14 +133,14 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     invariant_after : float or None
         With a PD controller holding a pose: from this time (s) on, end the integration
         as soon as every set lies in a verified invariant box of the closed-loop energy
-        (:mod:`mbs.lyapunov`, :class:`verified.invariant.InvariantHook`); every later
+        (:mod:`mbs.lyapunov`, :class:`verified.consistency.invariant.InvariantHook`); every later
         output time then gets those boxes, valid for all later times
         (``stats["invariant_from"]``). While a set's box cannot be verified the
         integration goes on. Runs in one process (the default ``workers=None`` becomes
         ``workers=1`` here; other ``workers``, ``client``, ``chunks`` are refused).
     energy_shell : bool
         Hold the enclosure inside the energy shell ``H(q, qd) <= hmax``
-        (:class:`verified.energy_shell.EnergyShellHook`; ``hmax`` the interval bound of
+        (:class:`verified.consistency.energy_shell.EnergyShellHook`; ``hmax`` the interval bound of
         ``H`` over the initial box): a set the shell cuts by more than 10 % in some
         component is replaced by its contracted box. Sound for a chain without control
         inputs (its energy never rises: damping only takes it away), also with uncertain
@@ -148,7 +148,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         set is held with its own parameter columns). On a bare :class:`System` its
         ``energy`` is the shell: declared ``energy_rate="zero"`` (proven) it is conserved,
         else non-increasing, checked on every step (the declared rate graph, proven equal to
-        ``grad H . f``, or ``grad H . f`` itself; :mod:`verified.conservation`). A
+        ``grad H . f``, or ``grad H . f`` itself; :mod:`verified.consistency.conservation`). A
         controller, or a bare System without energy, is a ValueError. It keeps wide enclosures (the pendulum over
         the top) from breaking down (docs/lab/code_notes.md). Where a chain's sets still
         break down (a chaotic free fall), the run is carried on to ``t_end`` with boxes

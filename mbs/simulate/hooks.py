@@ -10,13 +10,13 @@ import threading
 
 import numpy as np
 
-from verified.consistency import STRATEGIES, EnergyTest
-from verified.contractor import EnergyShell
-from verified.energy_shell import EnergyShellHook, max_energy
+from verified.consistency.energy_test import STRATEGIES, EnergyTest
+from verified.consistency.contractor import EnergyShell
+from verified.consistency.energy_shell import EnergyShellHook, max_energy
 from verified.graph import Graph
 from verified.driver.hooks import StopAfterWall
 from verified.arith.interval import Interval
-from verified.invariant import InvariantHook
+from verified.consistency.invariant import InvariantHook
 
 from ..lyapunov import pd_hold_lyapunov
 from ..system import System
@@ -24,7 +24,7 @@ from ..system import System
 
 def energy_test(system: System, mode, constraints, *, test_interval, test_splits, split_strategy, refine,
                 min_gain, backward_depth, max_boxes, contract, prune):
-    """The :class:`~verified.consistency.EnergyTest` of ``mode`` (None in mode i, which
+    """The :class:`~verified.consistency.energy_test.EnergyTest` of ``mode`` (None in mode i, which
     refuses ``constraints``); ``test_interval`` and ``test_splits`` default to the
     mode's (:data:`mbs.simulate.TEST_DEFAULTS`)."""
     if split_strategy not in STRATEGIES:
@@ -94,17 +94,17 @@ def _energy_shell_hook(masses, loop, box: Interval, system: System | None = None
     uncertain parameters, over the parameter box too (sound because
     ``dH/dt = -qd^T D qd <= 0`` without inputs, eq. (7), for every parameter value).
 
-    A bare System with an energy: its ``H`` as a :class:`verified.conservation.NonIncreasing`
+    A bare System with an energy: its ``H`` as a :class:`verified.consistency.conservation.NonIncreasing`
     invariant (the rate its ``energy_rate`` declares, proven, else ``grad H . f``, checked
     ``<= 0`` on every step) or, with ``energy_rate="zero"``, a proven
-    :class:`~verified.conservation.Conserved` one (:class:`verified.conservation.InvariantHook`)."""
+    :class:`~verified.consistency.conservation.Conserved` one (:class:`verified.consistency.conservation.InvariantHook`)."""
     if loop is not None:
         raise ValueError("energy_shell=True needs a system without control inputs (a controller can add energy)")
     if masses is None:
         if system is None or system.energy is None:
             raise ValueError("energy_shell=True on a bare System needs its energy (System(energy=H)); "
                              "without one it has no shell")
-        from verified.conservation import Conserved, NonIncreasing, invariant_hook
+        from verified.consistency.conservation import Conserved, NonIncreasing, invariant_hook
         rate = system.energy_rate
         if isinstance(rate, str) and rate == "zero":
             decl = Conserved(system.energy, name="H")

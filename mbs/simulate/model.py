@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from verified.energy_rate import MODEL_RATES, check_energy_rate
+from verified.consistency.energy_rate import MODEL_RATES, check_energy_rate
 from verified.arith.interval import Interval
 
 from ..chain import Chain

@@ -16,7 +16,7 @@ import pytest
 from mbs.simulate import simulate
 from mbs.system import System
 from oracles.sampling import misses, sample_initial_points, trajectories
-from verified.consistency import EnergyClaimError, EnergyClaimWarning
+from verified.consistency.energy_test import EnergyClaimError, EnergyClaimWarning
 from verified.graph import trace
 from verified.arith.interval import Interval
 

@@ -1,4 +1,4 @@
-"""One vocabulary for dH/dt (verified.energy_rate): every layer takes energy_rate
+"""One vocabulary for dH/dt (verified.consistency.energy_rate): every layer takes energy_rate
 with values from one table; old spellings map onto it with a DeprecationWarning
 that names the new one; unknown values get a one-line ValueError naming the
 allowed ones."""
@@ -9,8 +9,8 @@ import pytest
 from mbs.app.scene import SceneError, loads_scene, scene_dir
 from mbs.simulate import simulate, system_for
 from mbs.system import System
-from verified.consistency import EnergyTest
-from verified.energy_rate import DEPRECATED, ENERGY_RATES, MODEL_RATES, SYSTEM_RATES
+from verified.consistency.energy_test import EnergyTest
+from verified.consistency.energy_rate import DEPRECATED, ENERGY_RATES, MODEL_RATES, SYSTEM_RATES
 from verified.graph import trace
 from verified.arith.interval import Interval
 

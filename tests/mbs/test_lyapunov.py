@@ -1,4 +1,4 @@
-"""Invariant sets of a PD controller holding a pose (mbs.lyapunov, verified.invariant):
+"""Invariant sets of a PD controller holding a pose (mbs.lyapunov, verified.consistency.invariant):
 every later time enclosed at once, against an independent oracle (Pinocchio's aba as the
 plant with sampled payloads and damping, the control law evaluated in floats, DOP853)."""
 import itertools
@@ -12,7 +12,7 @@ from oracles.sampling import misses, trajectories
 from mbs.control import PD, ComputedTorque, ControlError, Disturbance, Quintic
 from mbs.simulate import simulate
 from models.registry import get
-from verified import invariant
+from verified.consistency import invariant
 
 SPEC = {"payload": {"link": "link2", "mass": [0.49, 0.51]}, "damping": [0.0, 0.1]}
 T_END = 10.0

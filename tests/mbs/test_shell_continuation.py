@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-import verified.shell_boxes as sb
+import verified.consistency.shell_boxes as sb
 from mbs.app.sampling import (
     Ensemble,
     count_outside,

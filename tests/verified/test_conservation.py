@@ -1,4 +1,4 @@
-"""Declared invariants as contractors (verified.conservation, issue 43 item 2): proven or
+"""Declared invariants as contractors (verified.consistency.conservation, issue 43 item 2): proven or
 refused, sound against dense scipy samples (mbs.app.sampling), and narrowing."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mbs.app.sampling import dop853, radau
-from verified.conservation import Conserved, InvariantHook, InvariantWarning, NonIncreasing
+from verified.consistency.conservation import Conserved, InvariantHook, InvariantWarning, NonIncreasing
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import solve
@@ -114,7 +114,7 @@ def test_a_contractor_that_shrinks_too_much_is_caught(pd_truth, monkeypatch):
     """The oracle is strong enough to see a box contraction that cuts too much (each
     box halved about its middle: it still meets x + y + z = k, so the hook's own
     emptiness check cannot see it)."""
-    import verified.conservation as cons
+    import verified.consistency.conservation as cons
     real = cons.contract_linear_row
 
     def broken(*args, **kw):

@@ -8,7 +8,7 @@ import pytest
 import sympy
 
 from oracles.sampling import misses, sample_initial_points, trajectories
-from verified.consistency import Constraint, EnergyTest
+from verified.consistency.energy_test import Constraint, EnergyTest
 from verified.graph import from_sympy, trace
 from verified.graph.ops import augment_with_rate, negated, rate_along
 from verified.arith.interval import Interval

@@ -1,4 +1,4 @@
-"""verified.contractor against oracles: python-flint ``arb`` decides which sample points
+"""verified.consistency.contractor against oracles: python-flint ``arb`` decides which sample points
 satisfy a constraint; every such point must stay in the contracted box, and a box
 declared empty must hold none. Tightness on cases with known answers. Monkeypatched
 contractors that cut one ulp too far, or drop the remainder, must be caught.
@@ -13,8 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import oracles.arb_oracle  # noqa: F401  (sets flint.ctx.prec = 256)
-from verified import contractor
-from verified.contractor import EnergyShell, HC4, contract_linear_row, hc4, mean_value_row
+from verified.consistency import contractor
+from verified.consistency.contractor import EnergyShell, HC4, contract_linear_row, hc4, mean_value_row
 from verified.graph import GraphBuilder, trace
 from verified.arith.interval import Interval
 

@@ -1,4 +1,4 @@
-"""The energy test steps aside while it gains nothing (verified.energy_cadence, issue 40).
+"""The energy test steps aside while it gains nothing (verified.consistency.energy_cadence, issue 40).
 
 The paper's pendulum swinging near the bottom: the test on second-order sets prunes
 nothing, so the run drops ``h``, goes on without the test, and resumes it with ``h``
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from mbs.app.sampling import dop853
 
-import verified.energy_cadence as cadence
+import verified.consistency.energy_cadence as cadence
 from models import pendulum as pd
-from verified.consistency import EnergyTest
+from verified.consistency.energy_test import EnergyTest
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.methods import Composition, Lohner

@@ -1,4 +1,4 @@
-"""The proof of a declared energy rate (verified.consistency_graphs.prove_claim) and
+"""The proof of a declared energy rate (verified.consistency.graphs.prove_claim) and
 what the energy test does without one (issue 39, item 6).
 
 The proof is exact: constants as the doubles (or enclosures) the graphs hold, no
@@ -7,8 +7,8 @@ integrates the derived ``grad H . f`` instead.
 """
 import sympy
 
-from verified.consistency import EnergyClaimWarning, EnergyTest, prove_energy_rate
-from verified.consistency_graphs import PROOF_MAX_TERMS, claim_graph, prove_claim
+from verified.consistency.energy_test import EnergyClaimWarning, EnergyTest, prove_energy_rate
+from verified.consistency.graphs import PROOF_MAX_TERMS, claim_graph, prove_claim
 from verified.graph import from_sympy, trace
 
 from models import double_pendulum as dp

@@ -1,4 +1,4 @@
-"""Energy contraction of QR-Lohner sets (verified/energy_contraction.py), the per-set
+"""Energy contraction of QR-Lohner sets (verified/consistency/energy_contraction.py), the per-set
 RA(t) of eq. (16), and the check of declared energy rates (issue 13).
 
 Soundness: sampled DOP853 trajectories stay inside every contracted enclosure (output
@@ -11,8 +11,8 @@ import pytest
 
 from oracles.mutants import keeps_lower_quarter
 from oracles.sampling import misses, sample_initial_points, trajectories
-from verified import energy_contraction as ec
-from verified.consistency import EnergyClaimError, EnergyTest, prove_energy_rate
+from verified.consistency import energy_contraction as ec
+from verified.consistency.energy_test import EnergyClaimError, EnergyTest, prove_energy_rate
 from verified.graph import trace
 from verified.graph.ops import rate_along
 from verified.arith.interval import Interval

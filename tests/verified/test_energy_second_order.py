@@ -16,10 +16,10 @@ import pytest
 from oracles.mutants import keeps_lower_quarter
 from oracles.sampling import misses, sample_initial_points, trajectories
 from oracles.taylor_cases import ARM_Q0  # the arm_pin fixture: tests/verified/conftest.py
-from verified import energy_contraction as ec
-from verified.consistency import EnergyTest
-from verified.consistency_graphs import lift_graphs
-from verified.energy_state import initial_sets
+from verified.consistency import energy_contraction as ec
+from verified.consistency.energy_test import EnergyTest
+from verified.consistency.graphs import lift_graphs
+from verified.consistency.energy_state import initial_sets
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.sets.second_order import QuadraticSets
@@ -206,7 +206,7 @@ def test_a_pruning_test_that_drops_consistent_parts_is_caught(monkeypatch):
     in the bisection and ends the run at the first test). The cut's share guard is off
     (``REMAINDER_SHARE = 0``, as when this was measured): with it the run takes four
     steps and no sampled trajectory passes the dropped part."""
-    from verified import branch_prune as bp
+    from verified.consistency import branch_prune as bp
     from verified.steppers.tm_flow import TaylorModelFlowStepper
     monkeypatch.setattr(TaylorModelFlowStepper, "REMAINDER_GROWTH", 1.2)
     monkeypatch.setattr(TaylorModelFlowStepper, "REMAINDER_SHARE", 0.0)
@@ -296,7 +296,7 @@ def test_symbols_are_ordered_by_the_steering_states():
 
 
 def test_back_off_waits_1_2_4_up_to_its_cap_and_resets_on_a_gain():
-    from verified.consistency import BackOff
+    from verified.consistency.energy_test import BackOff
     b = BackOff(4)
     pattern = []
     for gained in (False, False, False, False, True):

@@ -1,4 +1,4 @@
-"""The energy shell as a solver hook (:mod:`verified.energy_shell`): the paper's
+"""The energy shell as a solver hook (:mod:`verified.consistency.energy_shell`): the paper's
 pendulum over the top, one box, held inside ``H <= hmax`` -- bounded where the plain
 run grows to widths of thousands, sampled trajectories (DOP853) inside every output box
 and the tube, and a shell that cuts too far is caught by the samples."""
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from oracles.sampling import misses, sample_initial_points, trajectories
-from verified.contractor import EnergyShell
-from verified.energy_shell import EnergyShellHook, max_energy
+from verified.consistency.contractor import EnergyShell
+from verified.consistency.energy_shell import EnergyShellHook, max_energy
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import solve

@@ -643,7 +643,7 @@ def test_pi_multiples_are_enclosed_by_verified_exact(arb, a, b):
     """Issue 15: multiples of pi have one home, verified.arith.exact; the one-ulp enclosure
     (constant nodes, the contractor's pi) and the two-ulp one (scenes, models) both
     contain a + b pi, also when a + b pi cancels beyond the first working precision."""
-    from verified.contractor import _PI
+    from verified.consistency.contractor import _PI
     from verified.arith.exact import enclose_pi_multiple, pi_multiple_enclosure
     exact = arb(a.numerator) / a.denominator + arb(b.numerator) / b.denominator * arb.pi()
     lo, hi, value = pi_multiple_enclosure(a, b)

@@ -1,11 +1,11 @@
-"""The rigorous pieces of verified.invariant on their own: the positive-definiteness
+"""The rigorous pieces of verified.consistency.invariant on their own: the positive-definiteness
 margin of interval matrices, the ratio bound of two quadratic forms and the second-order
 upper bound of a function over an affine set, against sampled members / points."""
 import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from verified import invariant as inv
+from verified.consistency import invariant as inv
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.sets.first_order import DoubletonSets

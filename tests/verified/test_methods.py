@@ -75,7 +75,7 @@ def test_method_settings_beside_method_are_refused():
 
 
 def test_a_method_refuses_what_it_does_not_support():
-    from verified.consistency import EnergyTest
+    from verified.consistency.energy_test import EnergyTest
     g = trace(lambda x, p: [x[1], -x[0]], 2)
     H = trace(lambda x, p: [0.5 * (x[0] * x[0] + x[1] * x[1])], 2)
     with pytest.raises(ValueError, match="method 'lohner' does not support a consistency"):

@@ -221,7 +221,7 @@ def test_merged_consistency_record_is_the_max_over_chunks_not_a_sawtooth():
     """Two chunks' RA series at their own step times merge on the union of the times:
     at each time the largest latest value and the hull of H_H (the series interleaved
     by time alternated between the chunks)."""
-    from verified.reduction_area import ConsistencyRecord
+    from verified.consistency.reduction_area import ConsistencyRecord
     a = ConsistencyRecord(ra_t=np.array([0.1, 0.3]), ra=np.array([5.0, 6.0]),
                           h_h=Interval([1.0, 1.0], [2.0, 2.0]), h_v=Interval([1.0, 1.0], [2.0, 2.0]))
     b = ConsistencyRecord(ra_t=np.array([0.2, 0.4]), ra=np.array([1.0, 2.0]),

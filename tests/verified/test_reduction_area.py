@@ -1,10 +1,10 @@
 """RA(t) and the test times t* (paper eq. (16)), tracked apart from the pruning."""
 import numpy as np
 
-import verified.consistency as consistency
-import verified.reduction_area as reduction_area
+import verified.consistency.energy_test as consistency
+import verified.consistency.reduction_area as reduction_area
 from verified.arith.interval import Interval
-from verified.reduction_area import ReductionArea
+from verified.consistency.reduction_area import ReductionArea
 
 
 class _Lifted:

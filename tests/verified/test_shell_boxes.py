@@ -1,4 +1,4 @@
-"""Boxes from the energy bound after a break-down (:mod:`verified.shell_boxes`): the
+"""Boxes from the energy bound after a break-down (:mod:`verified.consistency.shell_boxes`): the
 paper's pendulum over the top, made to break down early (a small ``max_width``), carried
 on to T by the shell; every sampled trajectory (DOP853, rtol 1e-13) inside the outputs
 and the tube, a too-small speed bound caught by the samples, wrong claims refused."""
@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from oracles.sampling import misses, sample_initial_points, trajectories
 
-import verified.shell_boxes as sb
+import verified.consistency.shell_boxes as sb
 from models import pendulum as pd
-from verified.contractor import EnergyShell
-from verified.energy_shell import max_energy
+from verified.consistency.contractor import EnergyShell
+from verified.consistency.energy_shell import max_energy
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.shell_boxes import continue_in_shell, min_value
+from verified.consistency.shell_boxes import continue_in_shell, min_value
 from verified.solver import solve
 
 T = 3.0

@@ -9,7 +9,7 @@ number into floats calls these functions instead of repeating the rule:
 - :mod:`verified.graph.ir` (constant nodes, :func:`verified.graph.enclose_rational`),
 - :mod:`verified.graph.sympy_convert` (sympy numbers: multiples of pi by :func:`pi_multiple_enclosure`,
   other constants such as ``E`` by :func:`enclose_approximation` of a 40-digit evalf),
-- :mod:`verified.contractor` (pi for the periodic projections),
+- :mod:`verified.consistency.contractor` (pi for the periodic projections),
 - :mod:`verified.steppers.protocol` and :mod:`verified.solver` (the exact step times and the gap
   to the next output time),
 - :mod:`mbs.app.scene` (numbers and ``pi`` expressions in scene files, read by

@@ -192,7 +192,7 @@ def solve_batch(
     Every argument is checked, in ``solve``'s order, before the tapes are built and before
     any step. ``prepared``: a dict in which the VerifiedODEs this run builds are kept
     by graph, for runs that continue each other on the same graphs
-    (:mod:`verified.energy_cadence`); None: built for this run only."""
+    (:mod:`verified.consistency.energy_cadence`); None: built for this run only."""
     wall0 = time.perf_counter()
     # every argument is checked before the tapes are built and before any step
     t0, t1, outs, h_max = check_settings(
@@ -821,7 +821,7 @@ def _until(sol: Solution, T: float) -> Solution:
 
 
 def _record_until(rec, T: float):
-    """A copy of a consistency record (:class:`verified.reduction_area.ConsistencyRecord`)
+    """A copy of a consistency record (:class:`verified.consistency.reduction_area.ConsistencyRecord`)
     with its series and tests up to time ``T``."""
     if rec is None or not hasattr(rec, "ra_t"):
         return rec

@@ -175,7 +175,7 @@ class Solution:
         at any time), wall time (s); with a consistency test also ``tests``,
         ``pruned_boxes``, ``test_s`` and ``backward_s`` (seconds in the tests).
     state_names : tuple of str
-    consistency : verified.consistency.ConsistencyRecord or None
+    consistency : verified.consistency.energy_test.ConsistencyRecord or None
         RA(t), H_H and H_V per step and a record of every test (paper Figs. 2-3).
     views : list of verified.sets.protocol.SetView or None
         For each output time (as ``boxes``), the solver's sets there in a linear view

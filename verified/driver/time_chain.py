@@ -3,7 +3,7 @@
 ``parts[k + 1]`` continued ``parts[k]`` from its sets where it stopped
 (``solve(..., start=...)`` at ``parts[k].t_reached``): a failed attempt's record and the
 stronger method that took its sets over (:mod:`verified.auto`), or the phases of a run
-whose energy test was suspended and resumed (:mod:`verified.energy_cadence`). Every part
+whose energy test was suspended and resumed (:mod:`verified.consistency.energy_cadence`). Every part
 encloses every solution of the same initial set over its own span, so the outputs and
 steps laid end to end enclose them over the whole span: nothing is wrapped or hulled
 (each output keeps the boxes and set views of the part that recorded it, each step its
@@ -86,7 +86,7 @@ def _padded(views, k: int) -> list:
 
 
 def records_in_time(records):
-    """Consistency records (:class:`verified.reduction_area.ConsistencyRecord`) of runs
+    """Consistency records (:class:`verified.consistency.reduction_area.ConsistencyRecord`) of runs
     one after the other, laid end to end (series and tests in time order; a span
     without a test has no entries); None when no part had a test."""
     records = [r for r in records if r is not None]
@@ -94,7 +94,7 @@ def records_in_time(records):
         return None
     if len(records) == 1:
         return records[0]
-    from verified.reduction_area import ConsistencyRecord
+    from verified.consistency.reduction_area import ConsistencyRecord
 
     def series(name):
         vals = [getattr(r, name) for r in records]

@@ -97,9 +97,9 @@ class AutoBasis(QRBasis):
 class EnergyAlignedBasis(QRBasis):
     """Lohner's QR basis with its first column along a given direction per set, e.g.
     the gradient of the energy residual ``G = H(x) - h`` (set by
-    :class:`verified.consistency.EnergyTest` after every step through
+    :class:`verified.consistency.energy_test.EnergyTest` after every step through
     :meth:`set_direction`). The linear row of the energy contraction
-    (:mod:`verified.energy_contraction`) then has one dominant coefficient, on the
+    (:mod:`verified.consistency.energy_contraction`) then has one dominant coefficient, on the
     error component along the gradient, and narrows it instead of sharing the
     constraint among all components.
 

@@ -355,7 +355,7 @@ class QuadraticSets:
 
     def direction_widths(self) -> np.ndarray:
         """The width each parameter direction gives the set, shape (B, m + n): the
-        interface :mod:`verified.branch_prune` picks cuts with (:meth:`split_widths`)."""
+        interface :mod:`verified.consistency.branch_prune` picks cuts with (:meth:`split_widths`)."""
         return self.split_widths()
 
     def direction_columns(self) -> Interval:

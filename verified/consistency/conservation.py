@@ -6,7 +6,7 @@ it as ``solve(..., invariants=[...])``:
 - :class:`Conserved` ``(I)``: ``I`` is constant along every solution. The claim is
   *proven* when the run is set up: ``dI/dt = grad I . f`` must reduce to 0 identically,
   exactly (rational arithmetic on the expression graph,
-  :func:`verified.consistency_graphs.prove_claim`); an unproven claim is a one-line
+  :func:`verified.consistency.graphs.prove_claim`); an unproven claim is a one-line
   ``ValueError`` before any work. A linear invariant is given by its weights,
   ``Conserved([1, 1, 1])`` for ``x + y + z``.
 - :class:`NonIncreasing` ``(I, rate=None)``: ``I`` never rises. Checked soundly at every
@@ -43,16 +43,16 @@ The contraction, after every accepted step, for each set and each invariant:
 1. (a nonlinear or non-increasing ``I``) the set's own parameters (``x = c + A r``,
    ``r in R``, first- and second-order sets)
    are narrowed with the row ``I(c + A r) in K`` in mean-value form
-   (:func:`verified.contractor.mean_value_row`, Gauss-Seidel with
-   :func:`verified.contractor.contract_linear_row`), then recentred, as the energy
-   contraction does (:mod:`verified.energy_contraction`): the set keeps its shape and
+   (:func:`verified.consistency.contractor.mean_value_row`, Gauss-Seidel with
+   :func:`verified.consistency.contractor.contract_linear_row`), then recentred, as the energy
+   contraction does (:mod:`verified.consistency.energy_contraction`): the set keeps its shape and
    holds every true state it held;
 2. the set's hull is contracted to ``I in K``: for a linear ``I`` exactly (each variable
-   bounded by the level minus the others, :func:`~verified.contractor.contract_linear_row`
+   bounded by the level minus the others, :func:`~verified.consistency.contractor.contract_linear_row`
    on the box: the interval hull of the slab ``w . x in K`` met with the box), else by
-   HC4 (:class:`verified.contractor.HC4`). Where that box is narrower than ``cut`` (0.9)
+   HC4 (:class:`verified.consistency.contractor.HC4`). Where that box is narrower than ``cut`` (0.9)
    times the set's hull in some component, the set is replaced by the box (a fresh set
-   of the same kind), as :class:`verified.energy_shell.EnergyShellHook` does.
+   of the same kind), as :class:`verified.consistency.energy_shell.EnergyShellHook` does.
 
 A set proven to hold no state with ``I in K`` holds no true state and is dropped; if
 every set is dropped the claim was false and the run stops with a breakdown.
@@ -71,10 +71,10 @@ from typing import Sequence
 
 import numpy as np
 
-from verified.consistency_graphs import claim_graph, prove_claim
-from verified.contractor import HC4, contract_linear_row, mean_value_row
-from verified.energy_contraction import recentre
-from verified.energy_shell import reset_to_contracted
+from verified.consistency.graphs import claim_graph, prove_claim
+from verified.consistency.contractor import HC4, contract_linear_row, mean_value_row
+from verified.consistency.energy_contraction import recentre
+from verified.consistency.energy_shell import reset_to_contracted
 from verified.graph.evaluate import eval_interval
 from verified.graph import Graph, GraphBuilder
 from verified.graph.ops import embed, rate_along
@@ -253,7 +253,7 @@ def bind_invariants(invariants, rhs: Graph) -> list[_Bound]:
     out = []
     for d in invariants:
         if not isinstance(d, _Declared):
-            raise ValueError(f"invariants: each entry must be a verified.conservation.Conserved or NonIncreasing, "
+            raise ValueError(f"invariants: each entry must be a verified.consistency.conservation.Conserved or NonIncreasing, "
                              f"got {type(d).__name__} (for weights write Conserved([...]))")
         out.append(_Bound(d, rhs))
     return out
@@ -545,7 +545,7 @@ class InvariantHook(Hook):
     def _with_params(sets, idx, Rk: Interval):
         """The sets ``idx`` with their parameter boxes ``(r0, r)`` replaced by ``Rk`` and
         recentred (a box that no longer holds 0 is shifted; the shift's rounding is
-        enclosed, :func:`verified.energy_contraction.recentre`)."""
+        enclosed, :func:`verified.consistency.energy_contraction.recentre`)."""
         m = sets.C.shape[2]
         if isinstance(sets, QuadraticSets):
             return QuadraticSets(c=sets.c[idx], C=sets.C[idx], r0=Rk[:, :m], S=sets.S[idx], Q=sets.Q[idx],

@@ -15,8 +15,8 @@ through the same interface (``direction_columns`` ``[C + S r0 | Q]``,
 :func:`branch_and_prune` cuts each set into a tree of parts (bisection rounds, or
 one grid; :data:`STRATEGIES`), pruning between rounds, and returns what survives as
 the largest consistent subtrees. The graphs come lifted onto the solver's states
-(:class:`verified.consistency_graphs.LiftedGraphs`); the hook that decides when
-to test is :class:`verified.consistency.EnergyTest`.
+(:class:`verified.consistency.graphs.LiftedGraphs`); the hook that decides when
+to test is :class:`verified.consistency.energy_test.EnergyTest`.
 """
 
 from __future__ import annotations
@@ -116,7 +116,7 @@ def branch_and_prune(lifted, sets, t_iv: Interval, *, strategy: str, test_splits
     is returned as the largest consistent subtrees: a node none of whose
     descendants was pruned stays one set (``refine="pruned"``), so splitting
     costs integration time only where something was cut away. See
-    :class:`verified.consistency.EnergyTest` for ``strategy``, ``test_splits``,
+    :class:`verified.consistency.energy_test.EnergyTest` for ``strategy``, ``test_splits``,
     ``refine`` and ``min_gain``."""
     chk = checks(lifted, sets, t_iv)
     alive = ~inconsistent(chk)

@@ -3,9 +3,9 @@
 Mode (ii) integrates the energy state ``h`` (``H_V``, eq. (12)) beside the states. On
 second-order sets advanced by composition its rate ``dH/dt = grad H . f`` runs through
 the Taylor models with everything else, and a run costs far more than without the test
-even where the test never prunes (a robot near rest). So an :class:`~verified.consistency.
+even where the test never prunes (a robot near rest). So an :class:`~verified.consistency.energy_test.
 EnergyTest` whose last ``suspend_after`` tests pruned and narrowed nothing stops the run
-(:data:`verified.consistency.IDLE`); :func:`solve_with_cadence` then
+(:data:`verified.consistency.energy_test.IDLE`); :func:`solve_with_cadence` then
 
 1. continues from those sets without ``h`` (:func:`drop_appended`) and without the test,
    for a span that doubles each time the test comes back without a gain;
@@ -28,7 +28,7 @@ import warnings
 
 import numpy as np
 
-from verified.consistency_graphs import EnergyClaimWarning
+from verified.consistency.graphs import EnergyClaimWarning
 from verified.driver.hooks import Hook, caps_from
 from verified.arith.interval import matvec
 from verified.sets.second_order import QuadraticSets

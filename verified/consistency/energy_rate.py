@@ -21,11 +21,11 @@ a ``Graph``    given by the caller (``x, p -> [dH/dt]``, W); proven like "zero"
 A declared rate ("zero" or a graph) is only sound if true, and an interval check
 cannot show that it is (around an equilibrium, ``grad H . f - rate`` of a false claim
 encloses 0 on every set). So the energy test uses it only when
-:func:`verified.consistency_graphs.prove_claim` proves ``grad H . f - rate``
+:func:`verified.consistency.graphs.prove_claim` proves ``grad H . f - rate``
 identically 0 (exactly, once at set-up); an unproven one is replaced by the derived
 rate ``grad H . f`` with one ``EnergyClaimWarning``, and any declared rate refuted on
 intervals during the run raises ``EnergyClaimError``
-(:mod:`verified.consistency_graphs`). ``EnergyTest(check_claim=False)`` uses a
+(:mod:`verified.consistency.graphs`). ``EnergyTest(check_claim=False)`` uses a
 declaration unproven (the caller vouches for it).
 
 Which layer takes which (a one-line ``ValueError`` names the allowed ones otherwise):
@@ -35,7 +35,7 @@ Which layer takes which (a one-line ``ValueError`` names the allowed ones otherw
   System factories and scene files (``[consistency] energy_rate``). It chooses
   which symbolic expression mode iii integrates; modes i and ii always derive.
 - :data:`SYSTEM_RATES` ("derive", "zero") or a graph: what a model hands over, in
-  :class:`mbs.system.System` and :class:`verified.consistency.EnergyTest`.
+  :class:`mbs.system.System` and :class:`verified.consistency.energy_test.EnergyTest`.
 
 Old spellings (:data:`DEPRECATED`) still work and raise a ``DeprecationWarning``
 that names the new one.

@@ -1,6 +1,6 @@
 """Energy contraction: narrow QR-Lohner sets with the energy relation ``H(x) - h = 0``.
 
-The energy test (:class:`verified.consistency.EnergyTest`) integrates ``h`` with
+The energy test (:class:`verified.consistency.energy_test.EnergyTest`) integrates ``h`` with
 ``h' = dH/dt`` alongside the state (``H_V``, the paper's eq. (12)), starting from
 ``h(0) = H(x(0))``. Every true trajectory therefore satisfies
 
@@ -9,13 +9,13 @@ The energy test (:class:`verified.consistency.EnergyTest`) integrates ``h`` with
 A doubleton set ``S = {c + C a + Q b : a in r0, b in r}`` (:class:`~verified.sets.first_order.DoubletonSets`)
 is a parametrization: a state of the set is ``x(a, b)`` for some parameter ``(a, b)``
 of the box ``R = r0 x r``. In mean-value form over the set
-(:func:`verified.contractor.mean_value_row`),
+(:func:`verified.consistency.contractor.mean_value_row`),
 
     G(x(a, b)) in G(c) + sum_j g_j (a, b)_j + rem,      g = mid(DG(S) [C | Q]),
 
 so a parameter of a true state satisfies the linear row
 ``0 in G(c) + g . (a, b) + rem`` and Gauss-Seidel on that row
-(:func:`verified.contractor.contract_linear_row`) narrows every component of ``R``,
+(:func:`verified.consistency.contractor.contract_linear_row`) narrows every component of ``R``,
 ``r0`` as well as ``r``.
 
 Why contracting ``r0`` is sound. ``r0`` is the box of initial parameters the set's
@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from verified.arith import linalg
-from verified.contractor import contract_linear_row, mean_value_row
+from verified.consistency.contractor import contract_linear_row, mean_value_row
 from verified.graph import Graph
 from verified.arith.interval import Interval
 from verified.sets.second_order import QuadraticSets

@@ -6,7 +6,7 @@ states): at ``t0`` it starts correlated with the initial states
 (:func:`initial_sets`), and :func:`reset_h` restarts it from ``H`` where the integrated
 ``h`` has become wider than ``H_H``. Both use the mean value form
 ``H(x) ∈ H(c) + DH(X) (C r0 + Q r)`` of the energy (J) over a set. The lifted energy
-graph comes from :mod:`verified.consistency_graphs`.
+graph comes from :mod:`verified.consistency.graphs`.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def initial_sets(lifted, sets):
     part. Doubleton sets (columns ``C``) and second-order sets
     (:class:`verified.sets.second_order.QuadraticSets`: columns ``C + S r0``, see its
     ``direction_columns``; ``h`` gets no quadratic term of its own) alike.
-    ``lifted``: the :class:`verified.consistency_graphs.LiftedGraphs` of the run."""
+    ``lifted``: the :class:`verified.consistency.graphs.LiftedGraphs` of the run."""
     if lifted.energy is None:
         return sets
     nb, n = sets.c.shape

@@ -57,7 +57,7 @@ import numpy as np
 from verified.arith import interval as iv
 from verified.arith import linalg
 from verified.graph.evaluate import eval_float, eval_interval, jacobian_float, jacobian_interval
-from verified.contractor import mean_value_row
+from verified.consistency.contractor import mean_value_row
 from verified.graph import Graph, GraphBuilder
 from verified.graph.ops import embed, gradient_graph, params_to_inputs
 from verified.driver.hooks import Hook

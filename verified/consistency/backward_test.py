@@ -5,7 +5,7 @@ whether they can have come from the forward sets one step earlier. Each part is
 integrated back over the last step (size ``h`` in s) with a verified stepper of the
 negated ODE, and its backward image (a box over the ``n`` integrated states) is
 compared with the forward sets' hulls there. No state of its own: the stepper and
-the previous step are passed in by :class:`verified.consistency.EnergyTest`.
+the previous step are passed in by :class:`verified.consistency.energy_test.EnergyTest`.
 """
 
 from __future__ import annotations

@@ -12,8 +12,8 @@ records it hands back, and nothing that changes the sets:
   step, every test) and :class:`TestRecord` (one test at ``t*``).
 
 The sets are ``B`` doubleton sets over ``n_s`` solver states followed by ``h``; the
-energy graph comes lifted onto them (:class:`verified.consistency_graphs.LiftedGraphs`).
-The hook that runs the tests is :class:`verified.consistency.EnergyTest`, which
+energy graph comes lifted onto them (:class:`verified.consistency.graphs.LiftedGraphs`).
+The hook that runs the tests is :class:`verified.consistency.energy_test.EnergyTest`, which
 re-exports both record classes.
 """
 
@@ -62,7 +62,7 @@ class ConsistencyRecord:
 class ReductionArea:
     """``RA(t)`` over one run and the decision when to test.
 
-    ``lifted``: the run's :class:`verified.consistency_graphs.LiftedGraphs`
+    ``lifted``: the run's :class:`verified.consistency.graphs.LiftedGraphs`
     (``lifted.energy`` None: constraints only, ``RA`` is 0 and only the interval
     triggers tests); ``test_interval``: the longest time (s) between two tests;
     ``t0``: the start of the run, where the interval to the first test starts.

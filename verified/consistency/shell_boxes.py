@@ -20,7 +20,7 @@ somewhere inside it, a contradiction). The step's positions lie in
 ``Q_k + [-u, u] h`` (inside that box), so the speed bound over that smaller box,
 ``u_k <= u``, holds on the step, and ``Q_k+1 = Q_k + [-u_k, u_k] h``. Where the shell's
 interval bound of ``M(q)^-1`` is finite on the step's positions
-(:meth:`verified.contractor.EnergyShell.ellipsoid_bound`, narrow boxes just after the
+(:meth:`verified.consistency.contractor.EnergyShell.ellipsoid_bound`, narrow boxes just after the
 break-down) the smaller of the two is used.
 
 ``min V`` over a box is a branch-and-bound lower bound of interval evaluations. A
@@ -29,7 +29,7 @@ component declared periodic (``periods[i] = P``: ``V`` and ``M`` unchanged by
 than that.
 
 The verified side knows nothing of robots: ``V``, ``M`` come as graphs (an
-:class:`~verified.contractor.EnergyShell`), and ``hmax``, ``c`` and the periods are the
+:class:`~verified.consistency.contractor.EnergyShell`), and ``hmax``, ``c`` and the periods are the
 caller's claims (``mbs.shell_bounds.inverse_mass_bounds`` proves ``c`` for a chain).
 What can be checked is: ``c_i`` against ``(M^-1)_ii`` in floats at the break-down box's
 centre, the periods of ``V`` at sample points, ``hmax`` finite.
@@ -42,7 +42,7 @@ import itertools
 import numpy as np
 
 from verified.arith import interval as iv
-from verified.contractor import EnergyShell
+from verified.consistency.contractor import EnergyShell
 from verified.graph.evaluate import eval_interval, jacobian_interval
 from verified.arith.interval import Interval
 from verified.driver.solution import Solution

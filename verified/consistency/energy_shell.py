@@ -3,7 +3,7 @@
 For a conservative or dissipative mechanical system (``dH/dt <= 0`` along every
 solution, paper eq. (7) with no input power), every true state at every time satisfies
 ``H(x(t)) <= hmax`` with ``hmax`` the largest energy of the initial set (eq. (12):
-``H_V`` never rises). :class:`verified.contractor.EnergyShell` contracts a box in
+``H_V`` never rises). :class:`verified.consistency.contractor.EnergyShell` contracts a box in
 ``(q, qd)`` to that shell: the velocities by the exact ellipsoid bound
 ``|qd_i| <= sqrt(2 (hmax - V(q)) (M(q)^-1)_ii)``, the positions through ``V(q) <= hmax``.
 
@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from verified.contractor import EnergyShell
+from verified.consistency.contractor import EnergyShell
 from verified.graph.evaluate import eval_interval
 from verified.graph import Graph
 from verified.driver.hooks import Hook, RunSetup
@@ -74,7 +74,7 @@ def reset_to_contracted(sets, hull: Interval, lo, hi, keep, cut: float):
     ``keep`` (proven empty) are dropped. Returns ``(sets, resets, dropped)``; ``sets`` is
     the argument itself when nothing changed. Sound: a reset set is a box that holds
     every state of the set the contraction keeps. Shared by the energy shell and the
-    declared invariants (:mod:`verified.conservation`)."""
+    declared invariants (:mod:`verified.consistency.conservation`)."""
     m = lo.shape[1]
     width = hull.width()[:, :m]
     new_w = np.where(keep[:, None], hi - lo, width)
@@ -98,7 +98,7 @@ class EnergyShellHook(Hook):
     """Keep every set inside ``H(q, qd) <= hmax`` (see the module docstring).
 
     Args:
-        shell: the :class:`~verified.contractor.EnergyShell` of the system (``M(q)`` and
+        shell: the :class:`~verified.consistency.contractor.EnergyShell` of the system (``M(q)`` and
             ``V(q)`` graphs); the solver's first ``2 n_q`` states must be ``(q, qd)``.
         hmax: upper bound of ``H`` along every solution from the initial set (J).
         cut: a set is replaced by its contracted box when that box is narrower than
@@ -115,7 +115,7 @@ class EnergyShellHook(Hook):
 
     def __init__(self, shell: EnergyShell, hmax: float, *, cut: float = 0.9, pieces: int = 64, params=None):
         if not isinstance(shell, EnergyShell):
-            raise TypeError(f"shell must be a verified.contractor.EnergyShell, got {type(shell).__name__}")
+            raise TypeError(f"shell must be a verified.consistency.contractor.EnergyShell, got {type(shell).__name__}")
         hmax = float(hmax)
         if not np.isfinite(hmax):
             raise ValueError(f"hmax must be a finite number, got {hmax!r}")

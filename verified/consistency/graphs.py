@@ -1,6 +1,6 @@
 """The graphs the consistency tests evaluate, lifted onto the solver's states (paper sec. 3/4).
 
-This module owns the set-up half of :class:`verified.consistency.EnergyTest`: what
+This module owns the set-up half of :class:`verified.consistency.energy_test.EnergyTest`: what
 the user declares (the energy ``H(x, p)`` in J, its rate ``dH/dt`` in W, constraints
 ``lower <= g(x[, t]) <= upper``) is turned into graphs over the states the verified
 solver integrates, ``(x, [p as states], h)``:
@@ -20,7 +20,7 @@ rate removes true states. A rate given as ``"zero"`` or as a graph is
   models). An interval check cannot prove such an identity (over a box around an
   equilibrium the residual of a false claim encloses 0 too), so an unproven claim
   is not used: ``h`` integrates the derived rate ``grad H . f`` instead (always
-  right), and :class:`verified.consistency.EnergyTest` says so with one
+  right), and :class:`verified.consistency.energy_test.EnergyTest` says so with one
   :class:`EnergyClaimWarning`;
 - refuted on intervals (:func:`refute_claim`) at the initial sets and over every
   step's tube, proven or not: a claim shown wrong somewhere raises
@@ -46,7 +46,7 @@ __all__ = ["ClaimProof", "Constraint", "EnergyClaimError", "EnergyClaimWarning",
 
 class EnergyClaimError(ValueError):
     """A declared energy rate (``energy_rate="zero"`` or an ``energy_rate`` graph;
-    :mod:`verified.energy_rate`) is refuted: ``grad H . f - rate`` excludes 0 somewhere.
+    :mod:`verified.consistency.energy_rate`) is refuted: ``grad H . f - rate`` excludes 0 somewhere.
     Pruning or contracting with it would remove true states."""
 
 
@@ -421,7 +421,7 @@ def lift_graphs(rhs: Graph, integrated: Graph, n_x: int, params: Interval | None
     """Bind the declared energy and constraints to one solve: ``rhs`` is the user's ODE
     over ``(x, p)``; ``integrated`` the graph the solver runs (its parameters possibly
     turned into states after ``x``). ``energy_rate`` is "derive", "zero" or a Graph
-    (:mod:`verified.energy_rate`).
+    (:mod:`verified.consistency.energy_rate`).
 
     A declared rate ("zero" or a Graph) is integrated into ``h`` only when
     :func:`prove_claim` proves ``grad H . f - rate`` identically 0; otherwise ``h``

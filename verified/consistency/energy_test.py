@@ -33,17 +33,17 @@ test back over the last step and compares with the forward sets there.
 This module owns :class:`EnergyTest`, the solver hook that composes the pieces
 below, keeps the statistics and hands the record to the Solution. The pieces:
 
-- :mod:`verified.consistency_graphs`: the energy, its rate claim and the constraints
+- :mod:`verified.consistency.graphs`: the energy, its rate claim and the constraints
   lifted onto the integrated states, and the proof and refutation of a declared rate
   (:class:`Constraint`, :class:`EnergyClaimError`, :class:`EnergyClaimWarning`,
   :func:`prove_energy_rate` live there and are re-exported here);
-- :mod:`verified.energy_state`: ``h(0)`` correlated with the initial states, and
+- :mod:`verified.consistency.energy_state`: ``h(0)`` correlated with the initial states, and
   restarting ``h``;
-- :mod:`verified.branch_prune`: the pruning test and the cutting at ``t*``;
-- :mod:`verified.backward_test`: the backward test;
-- :mod:`verified.reduction_area`: ``RA(t)`` and when to test (``t*``), and the
+- :mod:`verified.consistency.branch_prune`: the pruning test and the cutting at ``t*``;
+- :mod:`verified.consistency.backward_test`: the backward test;
+- :mod:`verified.consistency.reduction_area`: ``RA(t)`` and when to test (``t*``), and the
   records (:class:`ConsistencyRecord`, :class:`TestRecord`, re-exported here);
-- :mod:`verified.energy_contraction`: contracting the sets with ``H(x) - h = 0``.
+- :mod:`verified.consistency.energy_contraction`: contracting the sets with ``H(x) - h = 0``.
 """
 
 from __future__ import annotations
@@ -54,18 +54,19 @@ from dataclasses import replace
 
 import numpy as np
 
-from verified.backward_test import backward_test
-from verified.branch_prune import STRATEGIES, branch_and_prune
-from verified.consistency_graphs import (Constraint, EnergyClaimError, EnergyClaimWarning, lift_graphs, prove_energy_rate,
-                                 refute_claim)
-from verified.energy_contraction import EnergyContraction
-from verified.energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
-from verified.energy_state import assign, initial_sets, reset_h
+from verified.consistency.backward_test import backward_test
+from verified.consistency.branch_prune import STRATEGIES, branch_and_prune
+from verified.consistency.graphs import (
+    Constraint, EnergyClaimError, EnergyClaimWarning, lift_graphs, prove_energy_rate, refute_claim
+)
+from verified.consistency.energy_contraction import EnergyContraction
+from verified.consistency.energy_rate import SYSTEM_RATES, check_energy_rate, deprecated
+from verified.consistency.energy_state import assign, initial_sets, reset_h
 from verified.graph import Graph
 from verified.graph.ops import negated
 from verified.driver.hooks import Hook
 from verified.arith.interval import Interval, concatenate, hull, point
-from verified.reduction_area import ConsistencyRecord, ReductionArea, TestRecord
+from verified.consistency.reduction_area import ConsistencyRecord, ReductionArea, TestRecord
 from verified.sets.first_order import DoubletonSets
 
 __all__ = ["Constraint", "EnergyTest", "ConsistencyRecord", "TestRecord", "STRATEGIES", "EnergyClaimError",
@@ -123,12 +124,12 @@ class EnergyTest(Hook):
         constraints only.
     energy_rate : "derive", "zero" or Graph
         How ``dH/dt(x, p)``, integrated into ``H_V`` (eq. (12)), is obtained (the
-        vocabulary: :mod:`verified.energy_rate`): "derive" forms ``grad H . f`` by
+        vocabulary: :mod:`verified.consistency.energy_rate`): "derive" forms ``grad H . f`` by
         forward-mode differentiation (mode (ii)); "zero" declares the system
         conservative (``H_V = H(0)``); a Graph is the rate itself. ``None``
         (deprecated) means "zero". A declared rate ("zero" or a Graph) is used only
         when proven identically equal to ``grad H . f`` (exact symbolic proof at
-        set-up, :func:`verified.consistency_graphs.prove_claim`); an unproven one is
+        set-up, :func:`verified.consistency.graphs.prove_claim`); an unproven one is
         replaced by the derived rate, with one :class:`EnergyClaimWarning`
         (``claim_proof`` says why; ``stats["energy_rate_unproven"]`` is 1). Either
         way it is refuted on intervals at the initial sets and over every step's
@@ -162,7 +163,7 @@ class EnergyTest(Hook):
         Refinement is skipped when the batch would exceed this many sets.
     contract : "step" (default), "test" or "off"
         Where the sets are contracted with ``H(x) - h = 0``
-        (:mod:`verified.energy_contraction`): after every step, only at the tests, or never.
+        (:mod:`verified.consistency.energy_contraction`): after every step, only at the tests, or never.
     contract_backoff : int or None
         With ``contract="step"``: after a contraction that narrowed nothing, skip the
         next 1, 2, 4, ... steps' contractions, at most this many in a row; any
@@ -177,7 +178,7 @@ class EnergyTest(Hook):
         After this many tests in a row that pruned nothing (and contractions between them
         that narrowed nothing), the run without the test is cheaper: the energy state
         ``h`` is dropped, the run goes on without the test for a while, and the test
-        resumes with ``h`` restarted from ``H`` over the sets (:mod:`verified.energy_cadence`;
+        resumes with ``h`` restarted from ``H`` over the sets (:mod:`verified.consistency.energy_cadence`;
         only in one in-process batch, which continues the run from its sets). 0: never.
         None: 2 on second-order sets where ``h`` integrates the derived rate
         ``grad H . f`` (there it costs most: the rate runs through the composition's
@@ -248,7 +249,7 @@ class EnergyTest(Hook):
         self.contract_backoff = contract_backoff
         self.test_backoff = test_backoff
         self.suspend_after = suspend_after
-        #: set by verified.energy_cadence, the only driver that continues a suspended run
+        #: set by verified.consistency.energy_cadence, the only driver that continues a suspended run
         self.can_suspend = False
         #: where the run stopped because the test was idle (a Start with the sets and h), or None
         self.idle_point = None
@@ -297,7 +298,7 @@ class EnergyTest(Hook):
             self.align.set_direction(g)
         if (self.can_suspend and self._suspend_after and self._idle_tests >= self._suspend_after
                 and not run.status and not run.landed_on_last_output(step)):
-            # idle: the run stops here and verified.energy_cadence goes on without the test
+            # idle: the run stops here and verified.consistency.energy_cadence goes on without the test
             final = sets if out is None else out
             self.idle_point = replace(run.resume_point(), sets=final)
             self.stats["suspensions"] = self.stats.get("suspensions", 0) + 1
@@ -306,7 +307,7 @@ class EnergyTest(Hook):
 
     @property
     def claim_proof(self):
-        """The :class:`verified.consistency_graphs.ClaimProof` of the declared rate in
+        """The :class:`verified.consistency.graphs.ClaimProof` of the declared rate in
         the last run (None: none was checked, or no run yet)."""
         lifted = getattr(self, "_lifted", None)
         return None if lifted is None else lifted.proof
@@ -324,7 +325,7 @@ class EnergyTest(Hook):
             "skip the proof)"), stacklevel=2)
 
     def _refute_claim(self, boxes: Interval, points: np.ndarray, t: float):
-        """See :func:`verified.consistency_graphs.refute_claim`."""
+        """See :func:`verified.consistency.graphs.refute_claim`."""
         refute_claim(self._lifted, boxes, points, t, self.energy_rate)
 
     def _after_step(self, step, sets, run):
@@ -391,7 +392,7 @@ class EnergyTest(Hook):
 
     def _reset_h(self, sets):
         """``(sets, changed)``: ``h`` restarted from ``H`` where ``H_V`` became wider
-        than ``H_H`` (:func:`verified.energy_state.reset_h`, in place: never a change
+        than ``H_H`` (:func:`verified.consistency.energy_state.reset_h`, in place: never a change
         the solver must take over)."""
         sets, resets = reset_h(self._lifted, sets)
         self.stats["h_resets"] += resets
@@ -399,7 +400,7 @@ class EnergyTest(Hook):
 
     def _contract(self, sets):
         """``(sets, changed, narrowed)``: the sets contracted with ``H(x) - h = 0``
-        (:mod:`verified.energy_contraction`); empty sets dropped (``changed``: the batch
+        (:mod:`verified.consistency.energy_contraction`); empty sets dropped (``changed``: the batch
         was replaced; ``narrowed``: some set was narrowed or dropped)."""
         w0 = time.perf_counter()
         lifted = self._lifted
@@ -426,7 +427,7 @@ class EnergyTest(Hook):
         the graph the solver runs (its parameters possibly turned into states after
         ``x``). Returns the graph to integrate (with ``h`` appended when there is an
         energy) and remembers how to evaluate the constraints on the solver's sets
-        (:func:`verified.consistency_graphs.lift_graphs`)."""
+        (:func:`verified.consistency.graphs.lift_graphs`)."""
         lifted = lift_graphs(rhs, integrated, n_x, params, self.energy, self.energy_rate, self.constraints,
                              check_claim=self.check_claim)
         self._lifted = lifted
@@ -457,13 +458,13 @@ class EnergyTest(Hook):
 
     def initial_sets(self, sets):
         """Append ``h(0) = H(x0)`` to the initial sets, correlated with ``r0``
-        (:func:`verified.energy_state.initial_sets`)."""
+        (:func:`verified.consistency.energy_state.initial_sets`)."""
         return initial_sets(self._lifted, sets)
 
     # ------------------------------------------------------------------ RA(t)
     def observe(self, t: float, sets) -> str | None:
         """Record ``RA(t)`` and say whether to test
-        (:meth:`verified.reduction_area.ReductionArea.observe`)."""
+        (:meth:`verified.consistency.reduction_area.ReductionArea.observe`)."""
         return self._tracker.observe(t, sets)
 
     def forget_last(self):
@@ -472,7 +473,7 @@ class EnergyTest(Hook):
 
     @property
     def peaked(self):
-        """The sets whose ``RA`` peaked at ``t*`` (:class:`verified.reduction_area.ReductionArea`)."""
+        """The sets whose ``RA`` peaked at ``t*`` (:class:`verified.consistency.reduction_area.ReductionArea`)."""
         return self._tracker.peaked
 
     # ------------------------------------------------------------------ branch and prune
@@ -485,11 +486,11 @@ class EnergyTest(Hook):
         is returned as the largest consistent subtrees: a node none of whose
         descendants was pruned stays one set (``refine="pruned"``), so splitting
         costs integration time only where something was cut away
-        (:func:`verified.branch_prune.branch_and_prune`).
+        (:func:`verified.consistency.branch_prune.branch_and_prune`).
 
         ``previous``: ``(sets, h_step, make_stepper)`` of the step before, for the
         backward test (or None). ``trigger``: why the test runs, kept in its
-        :class:`~verified.reduction_area.TestRecord` ("RA maximum" or "interval")."""
+        :class:`~verified.consistency.reduction_area.TestRecord` ("RA maximum" or "interval")."""
         w0 = time.perf_counter()
         nb0 = sets.n_sets
         res = branch_and_prune(self._lifted, sets, t_iv, strategy=self.split_strategy, test_splits=self.test_splits,
@@ -524,7 +525,7 @@ class EnergyTest(Hook):
 
     # ------------------------------------------------------------------ backward (cases A, B, C)
     def _backward_test(self, parts, root, previous):
-        """The backward test (:func:`verified.backward_test.backward_test`) on the parts
+        """The backward test (:func:`verified.consistency.backward_test.backward_test`) on the parts
         the energy test kept, with the negated ODE's stepper made once per run; returns
         the kept parts, their root set indices, and the root index of each deleted part."""
         w0 = time.perf_counter()
@@ -540,5 +541,5 @@ class EnergyTest(Hook):
 
     # ------------------------------------------------------------------ results
     def finish(self) -> ConsistencyRecord:
-        """The run's :class:`ConsistencyRecord` (:meth:`verified.reduction_area.ReductionArea.finish`)."""
+        """The run's :class:`ConsistencyRecord` (:meth:`verified.consistency.reduction_area.ReductionArea.finish`)."""
         return self._tracker.finish()
