@@ -82,6 +82,6 @@ def main(argv=None, out=print):
 if __name__ == "__main__":
     # one core against one core (CAPD, earlier runs): workers=None stays one in-process
     # batch here (bench_parallel measures the cluster; explicit workers= are kept)
-    import verified.parallel
-    verified.parallel.DEFAULT_PARALLEL = False
+    import verified.execution.plan
+    verified.execution.plan.DEFAULT_PARALLEL = False
     sys.exit(0 if main() else 1)

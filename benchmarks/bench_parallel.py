@@ -1,4 +1,4 @@
-"""Chunked execution (verified/parallel.py, issue 16): speed-up, per-chunk step sizes,
+"""Chunked execution (verified/execution/, issue 16): speed-up, per-chunk step sizes,
 overhead, scaling, and a paper estimate for a 64-worker cluster.
 
     python benchmarks/bench_parallel.py                 # everything (~6 min on 2 cores)
@@ -113,7 +113,8 @@ def timed(fn):
 
 
 def section_speedup(ode, box, pieces, T, repeat, log):
-    from verified.parallel import default_workers, local_client
+    from verified.execution.plan import default_workers
+    from verified.execution.cluster import local_client
     from verified.solver import solve
     n = default_workers()
     log(f"\n## speedup: double pendulum, {pieces} pieces, T = {T}: workers=1 against the default (None: "
@@ -173,7 +174,7 @@ def section_mixed(ode, box, n_each, T, repeat, log):
 
 
 def section_rechunk(ode, box, n_each, T, repeat, log):
-    from verified.parallel import local_client
+    from verified.execution.cluster import local_client
     from verified.solver import solve
     boxes = mixed_boxes(box, n_each)
     log(f"\n## re-chunking: {n_each} pieces of the paper's box + {n_each} pieces 10x wider, adaptive, T = {T}, "
@@ -206,7 +207,7 @@ def section_rechunk(ode, box, n_each, T, repeat, log):
 
 
 def section_overhead(ode, box, Ts, repeat, log):
-    from verified.parallel import local_client
+    from verified.execution.cluster import local_client
     from verified.solver import solve
     sub = [16, 1, 1, 1]
     clients = {w: local_client(w) for w in (1, 2)}
@@ -249,16 +250,18 @@ def section_start(repeat, log, workers=2):
     then after prepare_worker ran in each (what local_client returns after)."""
     from distributed import Client, LocalCluster
 
-    from verified import parallel
+    from verified.execution import cluster
+    from verified.execution import run as exec_run
+    from verified.execution import worker
     log(f"\n## cluster start: {workers} workers, fresh each time")
     rows = []
     for r in range(repeat):
-        parallel.close_local_clients()
+        cluster.close_local_clients()
         l1 = load()
         t = time.perf_counter()
-        cluster, client = parallel.start_local_cluster(workers)
+        cluster, client = cluster.start_local_cluster(workers)
         t_up = time.perf_counter() - t
-        client.run(parallel.prepare_worker)
+        client.run(worker.prepare_worker)
         t_warm = time.perf_counter() - t
         client.close()
         cluster.close()
@@ -269,7 +272,7 @@ def section_start(repeat, log, workers=2):
         lcl = Client(lc, set_as_default=False)
         lcl.wait_for_workers(workers)
         l_up = time.perf_counter() - t
-        lcl.run(parallel.prepare_worker)
+        lcl.run(worker.prepare_worker)
         l_warm = time.perf_counter() - t
         lcl.close()
         lc.close()
@@ -285,15 +288,17 @@ def section_cluster(ode, box, pieces, T, repeat, log, workers=2):
     interpreters under nannies) against LocalCluster (spawned workers), warm."""
     from distributed import Client, LocalCluster
 
-    from verified import parallel
+    from verified.execution import cluster
+    from verified.execution import run as exec_run
+    from verified.execution import worker
     from verified.solver import solve
     log(f"\n## cluster: {pieces} pieces, T = {T}, {workers} workers: local_client against LocalCluster, warm")
-    ours = parallel.local_client(workers)
+    ours = cluster.local_client(workers)
     lc = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=50)
     theirs = Client(lc, set_as_default=False)
     theirs.wait_for_workers(workers)
-    theirs.run(parallel.prepare_worker)
+    theirs.run(worker.prepare_worker)
     sub = [pieces, 1, 1, 1]
     for c in (ours, theirs):
         solve(ode, box, (0, 0.05), subdivision=sub, client=c)  # graph shipped, first steps
@@ -318,7 +323,7 @@ def section_cluster(ode, box, pieces, T, repeat, log, workers=2):
 
 
 def section_scaling(ode, box, pieces, T, log, workers=(1, 2, 4)):
-    from verified.parallel import close_local_clients, local_client
+    from verified.execution.cluster import close_local_clients, local_client
     from verified.solver import solve
     log(f"\n## scaling: {pieces} pieces, T = {T}, local clusters of 1-thread processes")
     rows = []
@@ -477,7 +482,7 @@ def section_unequal(ode, box, pieces, T, repeat, log, workers=2, x3_max=10.0):
     paused and cut for the free worker), interleaved; for reference one in-process batch
     (one core) and the same pieces as 16 in-process chunks (each chunk's own steps: what
     an ideal cost-based plan could start from)."""
-    from verified.parallel import local_client
+    from verified.execution.cluster import local_client
     from verified.solver import solve
     boxes = unequal_boxes(box, pieces, x3_max)
     log(f"\n## unequal cost: {pieces} pieces, x3(0) from 0.43 to {x3_max} along the pieces, T = {T}, warm local "
@@ -532,7 +537,7 @@ def section_unequal(ode, box, pieces, T, repeat, log, workers=2, x3_max=10.0):
 
 
 def section_granular(ode, box, pieces, T, repeat, log, workers=2, plans=(2, 4, 8)):
-    from verified.parallel import local_client
+    from verified.execution.cluster import local_client
     from verified.solver import solve
     log(f"\n## chunk granularity: {pieces} pieces, T = {T}, warm local cluster of {workers}, chunks = {plans}")
     client = local_client(workers)
@@ -603,7 +608,7 @@ def section_model16(ode, box, pieces, T, first_rows, log, workers=16):
                 speedup_first=t1 / model_first, speedup_later=t1 / model_later, load=ld)
 
 
-#: cluster costs measured on the 2-core machine (docs/lab/parallel.md: the 'first' row of
+#: cluster costs measured on the 2-core machine (docs/lab/exec_run.md: the 'first' row of
 #: 2026-11-28 18:18 UTC with work stealing, --only first --repeat 1), used by model16 and
 #: model16so when 'first' did not run in the same call
 MEASURED_CLUSTER = dict(cluster_start_s=3.82, to_first_task_first_s=0.74, to_first_task_later_s=0.03,
@@ -670,7 +675,7 @@ def estimate(scaling, pieces, log, target_pieces=65536, target_workers=64, bandw
     (pieces 64x narrower take no more steps: the step size is set by the order-K term,
     not the width); the chunk results (outputs and the tube of every step) go to the
     client at ``bandwidth`` bytes/s; ``task_overhead`` s of scheduling per chunk."""
-    from verified.parallel import plan_chunks
+    from verified.execution.plan import plan_chunks
     ranges = plan_chunks(target_pieces, target_workers)
     per_chunk = target_pieces / len(ranges)
     best = min(scaling, key=lambda r: abs(pieces / r["chunks"] - per_chunk))

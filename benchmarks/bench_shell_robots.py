@@ -115,6 +115,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    import verified.parallel
-    verified.parallel.DEFAULT_PARALLEL = False  # one process, CPU seconds comparable
+    import verified.execution.plan
+    verified.execution.plan.DEFAULT_PARALLEL = False  # one process, CPU seconds comparable
     main()

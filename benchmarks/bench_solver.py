@@ -131,6 +131,6 @@ def main(argv=None):
 if __name__ == "__main__":
     # one core against one core (CAPD, earlier runs): workers=None stays one in-process
     # batch here (bench_parallel measures the cluster; explicit workers= are kept)
-    import verified.parallel
-    verified.parallel.DEFAULT_PARALLEL = False
+    import verified.execution.plan
+    verified.execution.plan.DEFAULT_PARALLEL = False
     sys.exit(main())

@@ -27,7 +27,7 @@ hull boxes, when the next method advances another kind of set), a restart from t
 piece's own initial box at ``t0``. The Solution of a continued piece is the failed
 attempt's record up to the switch followed by the continuation
 (:func:`verified.driver.time_chain.chain_in_time`), and the result is the union of the attempts that
-together cover every initial piece (:func:`verified.parallel.merge_solutions`). A
+together cover every initial piece (:func:`verified.execution.merge.merge_solutions`). A
 piece that fails on every rung keeps the failed attempt's enclosure, verified up to
 where that attempt got, and the run is a break-down at the earliest such time, naming
 what was tried. A run with a consistency test is never continued from sets (they carry
@@ -491,10 +491,10 @@ def _prove_spec(solve, ode, graph, boxes, pv, t_span, method: Auto, kw: dict, so
     step ends leave the bounds too: only narrower sets help) or the steps shortened
     (where the step ends keep inside and only the tube between them leaves); a
     refinement that does not gain is undone and the other one tried. The result is the
-    union of the groups of pieces (:func:`verified.parallel.merge_solutions`), its spec
+    union of the groups of pieces (:func:`verified.execution.merge.merge_solutions`), its spec
     judged on its own tube (:func:`verified.spec.check_tube`). Sampled trajectories that
     leave the bounds (:func:`sampled_violation`) make the spec "false" and stop it."""
-    from verified.parallel import merge_solutions
+    from verified.execution.merge import merge_solutions
     from verified.spec import FALSE, check_tube, describe, tube_excess
 
     n = graph.n_inputs
@@ -788,7 +788,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
     """One pass of the ladder from ``boxes`` (module docstring): (the Solution, the
     pieces it ended with (k, n), their parameters: ``pv`` as given, or rows (k, p)
     where splitting gave the parts their own)."""
-    from verified.parallel import merge_solutions
+    from verified.execution.merge import merge_solutions
     from verified.driver.solver_args import check_settings
 
     n = graph.n_inputs

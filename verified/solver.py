@@ -18,7 +18,7 @@ returned with ``status = "breakdown"`` and the reason; so is a stop asked for by
 (``"stopped"``) and a ``KeyboardInterrupt`` (``"interrupted"``).
 
 :func:`solve` is the public entry: it checks how the run is to be executed and hands it
-to the chunked execution (:mod:`verified.parallel`: ``workers``, ``client``, ``chunks``,
+to the chunked execution (:mod:`verified.execution`: ``workers``, ``client``, ``chunks``,
 ``rechunk``) or runs it as one batch in this process (:func:`verified.driver.batch.solve_batch`,
 the driver loop: per step it takes the hull of the sets, asks the step control
 (:mod:`verified.driver.control`) for a step size the stepper (a
@@ -44,7 +44,8 @@ from verified.auto import solve_auto
 from verified.driver.batch import MODEL_CAPS, VerifiedODE, solve_batch
 from verified.arith.interval import Interval
 from verified.methods import METHOD_FIELDS, METHODS, Auto, as_method, from_settings
-from verified.parallel import auto_workers, solve_parallel
+from verified.execution.plan import auto_workers
+from verified.execution.run import solve_parallel
 from verified.driver.solution import Solution, Start
 
 # (Solution, Start, VerifiedODE and MODEL_CAPS live in verified.driver.solution and
@@ -152,14 +153,14 @@ def solve(
     wrap_target : wrapping control: the next step is shortened when a step injected
         more than this fraction of a set's linear size through the spread of the
         Jacobian over the set (np.inf turns the control off)
-    workers, client, chunks : chunked execution (:mod:`verified.parallel`). With any of
+    workers, client, chunks : chunked execution (:mod:`verified.execution`). With any of
         them given the initial boxes are split into ``chunks`` contiguous chunks, each
         integrated with its own step sizes, and the results merged into one Solution
         (merged tube: one box per chunk on the union of the chunks' step times).
         ``workers``: None (default) or ``"auto"``: every core of this machine when it is
         worthwhile -- dask.distributed installed (an optional extra: without it the run
         is one batch in this process, silently), more than one core, and at least
-        ``verified.parallel.AUTO_MIN_PIECES`` (128) boxes -- else one batch in this
+        ``verified.execution.plan.AUTO_MIN_PIECES`` (128) boxes -- else one batch in this
         process; no ``if __name__ == "__main__":`` guard is needed (the local workers
         are fresh interpreters that do not import the calling script; on Windows None
         stays in this process). ``1``: one batch in this process (``chunks=k``: k
@@ -168,7 +169,7 @@ def solve(
         ``client``: a ``distributed.Client`` or a scheduler address ``"tcp://host:port"``.
     rechunk : None, True or False (chunked runs with ``adaptive``): a chunk whose sets
         split to twice its size pauses and its sets are cut into new chunks that continue
-        from that time, each with its own step sizes (:mod:`verified.parallel`). None: on
+        from that time, each with its own step sizes (:mod:`verified.execution`). None: on
         Dask workers, off in this process. ``False`` also turns off work stealing (on
         Dask, an idle worker takes over part of the chunk with the most time left).
     start : :class:`Start` or None: continue from these sets at their exact time instead
@@ -299,10 +300,10 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
                       max_width, adaptive, split_ratio, max_boxes, wrap_target, merge_slack, error_basis,
                       arithmetic, set_order, set_step, model_degree, model_caps, absorb, params_per_state,
                       consistency, hooks, progress, workers, client, chunks, rechunk, start) -> Solution:
-    """One method's run: chunked (:mod:`verified.parallel`) or one batch here."""
+    """One method's run: chunked (:mod:`verified.execution`) or one batch here."""
     asked_auto = isinstance(workers, str) and workers == "auto"
     if (workers is None or asked_auto) and client is None and chunks is None:
-        # None / "auto": every core when worthwhile (verified.parallel.auto_workers), else one
+        # None / "auto": every core when worthwhile (verified.execution.plan.auto_workers), else one
         # batch here (which, unlike one chunk of a chunked run, can suspend an idle energy test)
         if start is not None:
             workers = 1
@@ -310,7 +311,7 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
             workers = 1
     one_batch = client is None and chunks is None and not rechunk and (
         isinstance(workers, (int, np.integer)) and not isinstance(workers, (bool, np.bool_)) and workers == 1)
-    if not one_batch:  # chunked: verified/parallel.py
+    if not one_batch:  # chunked: verified/execution/
         if start is not None:
             raise ValueError("start= continues one batch: it cannot be combined with workers, client or chunks")
         kw = {k: v for k, v in locals().items()

@@ -100,7 +100,7 @@ def cmd_simulate(args) -> int:
 
 
 def _parallel_flags(args, runner):
-    """(workers, client) from --workers / --scheduler (issue 16, verified/parallel.py)."""
+    """(workers, client) from --workers / --scheduler (issue 16, verified/execution/)."""
     from .scene import SceneError  # (import here: see cmd_simulate)
     workers = args.workers
     if workers != "auto":

@@ -17,8 +17,9 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 import numpy as np
 
 from verified.arith.interval import Interval
-from verified.parallel import (SchedulerError, connect, dask_available, default_workers, interrupt_runs,
-                               local_client)
+from verified.execution.cluster import SchedulerError, connect, local_client
+from verified.execution.plan import dask_available, default_workers
+from verified.execution.interrupt import interrupt_runs
 from verified.warmup import finish_background, start_in_background
 
 from ..control import ControlError
@@ -123,7 +124,7 @@ def run_scene(scene: Scene, out, *, mode=None, t_end=None, output_dt=None, sampl
 
     ``samples``: exactly this many sampled trajectories (default 64; 0: none).
     ``max_wall``: stop the integration after this many seconds (status "stopped").
-    ``workers``, ``client``: chunked execution (:func:`parallel_kwargs`, verified/parallel.py).
+    ``workers``, ``client``: chunked execution (:func:`parallel_kwargs`, verified/execution/).
     ``progress``: True (a bar on an interactive stderr: :class:`mbs.progress.Progress`,
     its clock counting from ``started``, ``time.time()`` of the command's start, and its
     description naming the phase: model, compiling, solving, sampling, frame
@@ -504,7 +505,7 @@ def parallel_kwargs(workers=None, client=None) -> dict:
     """Keyword arguments of simulate for chunked execution: ``{"workers": 1}`` for one
     in-process batch (``workers`` None or 1 and no client: simulate's own default, None,
     is every core when worthwhile), else ``workers``/``client`` (see
-    :mod:`verified.parallel`; ``workers="auto"``: every core when worthwhile)."""
+    :mod:`verified.execution`; ``workers="auto"``: every core when worthwhile)."""
     if client is not None:
         return {"client": client}
     if workers is None or workers == 1:
@@ -514,7 +515,7 @@ def parallel_kwargs(workers=None, client=None) -> dict:
 
 def scheduler_client(address):
     """A ``distributed.Client`` for ``--scheduler ADDR``; a SceneError (one line, naming
-    the address) when it cannot be reached within verified.parallel.CONNECT_TIMEOUT s."""
+    the address) when it cannot be reached within verified.execution.cluster.CONNECT_TIMEOUT s."""
     try:
         return connect(address)
     except (SchedulerError, ValueError) as e:

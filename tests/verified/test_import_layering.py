@@ -87,13 +87,13 @@ def test_graph_modules_import_downward():
 
 
 def test_solver_parallel_and_the_driver_import_one_way_also_inside_functions():
-    """``verified.solver.solve`` dispatches to ``verified.parallel``, which runs its chunks
+    """``verified.solver.solve`` dispatches to ``verified.execution``, which runs its chunks
     with ``verified.driver.batch`` (the one-batch driver); ``Solution`` and ``Start`` are in
     ``verified.driver.solution``. No import of a lower one reaches a higher one, not even one
     inside a function (run when it is called), directly or through other modules."""
     mods = _modules()
     edges = {m: _module_level_imports(mods, m, in_functions=True) for m in mods}
-    order = ["verified.driver.solution", "verified.driver.batch", "verified.parallel", "verified.solver"]
+    order = ["verified.driver.solution", "verified.driver.batch", "verified.execution", "verified.solver"]
     for i, m in enumerate(order):
         assert not (edges[m] & set(order[i + 1:])), m
         seen, todo = set(), list(edges[m])

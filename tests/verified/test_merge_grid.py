@@ -1,4 +1,4 @@
-"""Merging chunk Solutions (:func:`verified.parallel.merge_solutions`) on a grid of step
+"""Merging chunk Solutions (:func:`verified.execution.merge.merge_solutions`) on a grid of step
 boundaries whose last step is one ulp long: each grid step is found by its start, since
 its midpoint rounds to its end (auto's spec refinement merged two groups whose tubes ended
 with such a step and failed with an IndexError)."""
@@ -7,7 +7,7 @@ import numpy as np
 
 from verified.graph import trace
 from verified.arith.interval import Interval
-from verified.parallel import merge_solutions
+from verified.execution.merge import merge_solutions
 from verified.solver import solve
 
 

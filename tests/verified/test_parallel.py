@@ -1,4 +1,4 @@
-"""Chunked execution (verified/parallel.py): in-process chunks and Dask workers give
+"""Chunked execution (verified/execution/): in-process chunks and Dask workers give
 enclosures that contain sampled DOP853 trajectories, with the status and t_reached of
 the in-process run; a killed worker's chunk is retried; an unreachable scheduler is a
 one-line error; re-chunked runs (sets of adaptive splitting cut into new chunks) contain
@@ -14,7 +14,13 @@ import numpy as np
 import pytest
 
 from models import double_pendulum as dp
-from verified import parallel
+from verified.execution import cluster
+from verified.execution import hooks as exec_hooks
+from verified.execution import interrupt
+from verified.execution import merge
+from verified.execution import plan
+from verified.execution import rechunk
+from verified.execution import run as exec_run
 from verified.graph import trace
 from verified.driver.hooks import StopAfterWall
 from verified.arith.interval import Interval
@@ -48,12 +54,12 @@ def oracle(box):
 
 @pytest.fixture(scope="module")
 def client():
-    """The local cluster workers=None / "auto" / N start (parallel.local_client: fresh
+    """The local cluster workers=None / "auto" / N start (cluster.local_client: fresh
     worker interpreters with this process's sys.path, so they import this module for
     the hooks below, and tests/ for the oracles)."""
-    c = parallel.local_client(2)
+    c = cluster.local_client(2)
     yield c
-    parallel.close_local_clients()
+    cluster.close_local_clients()
 
 
 @pytest.fixture(scope="module")
@@ -158,13 +164,13 @@ def test_killed_worker_chunk_is_retried(ode, box, oracle, single, client):
 
 
 def test_unreachable_scheduler_is_one_line_error(monkeypatch, box):
-    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT", 1.0)
-    with pytest.raises(parallel.SchedulerError) as e:
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT", 1.0)
+    with pytest.raises(cluster.SchedulerError) as e:
         solve(trace(dp.rhs, 4), box, (0.0, 0.1), client="tcp://127.0.0.1:9")
     msg = str(e.value)  # "within 1 s": the timeout given to Dask (no hang: it is what Dask waits)
     assert "tcp://127.0.0.1:9" in msg and "\n" not in msg and "1 s" in msg
     with pytest.raises(ValueError, match="tcp://host:port"):
-        parallel.connect("nonsense")
+        cluster.connect("nonsense")
 
 
 def test_an_address_that_is_no_scheduler_is_one_line_error(monkeypatch):
@@ -186,11 +192,11 @@ def test_an_address_that_is_no_scheduler_is_one_line_error(monkeypatch):
                 pass
     th = threading.Thread(target=accept, daemon=True)
     th.start()
-    monkeypatch.setattr(parallel, "HANDSHAKE_GRACE", 1.0)
+    monkeypatch.setattr(cluster, "HANDSHAKE_GRACE", 1.0)
     address = f"tcp://127.0.0.1:{srv.getsockname()[1]}"
     try:
-        with pytest.raises(parallel.SchedulerError) as e:
-            parallel.connect(address, timeout=1.0)
+        with pytest.raises(cluster.SchedulerError) as e:
+            cluster.connect(address, timeout=1.0)
     finally:
         stop.set()
         th.join()
@@ -202,18 +208,18 @@ def test_an_address_that_is_no_scheduler_is_one_line_error(monkeypatch):
 
 def test_interrupt_runs_stops_a_run_waiting_in_a_thread(ode, box, client):
     """A scenario batch waits on Dask in threads, which Ctrl-C does not reach (it hung
-    once the local workers died of the same Ctrl-C): parallel.interrupt_runs() stops
+    once the local workers died of the same Ctrl-C): interrupt.interrupt_runs() stops
     such a run as Ctrl-C stops one, its chunks cancelled and its Solution "interrupted"."""
     out = {}
     th = threading.Thread(target=lambda: out.setdefault(
         "sol", solve(ode, box, (0.0, T), subdivision=SUB, client=client, chunks=2, hooks=[SlowSteps(0.2)])))
     th.start()
     time.sleep(1.0)
-    parallel.interrupt_runs()
+    interrupt.interrupt_runs()
     try:
         th.join(120)  # (a guard against a hang, not a timing)
     finally:
-        parallel.interrupt_runs(False)
+        interrupt.interrupt_runs(False)
     assert not th.is_alive() and out["sol"].status == "interrupted"
 
 
@@ -226,7 +232,7 @@ def test_merged_consistency_record_is_the_max_over_chunks_not_a_sawtooth():
                           h_h=Interval([1.0, 1.0], [2.0, 2.0]), h_v=Interval([1.0, 1.0], [2.0, 2.0]))
     b = ConsistencyRecord(ra_t=np.array([0.2, 0.4]), ra=np.array([1.0, 2.0]),
                           h_h=Interval([0.5, 0.5], [1.5, 1.5]), h_v=Interval([0.5, 0.5], [1.5, 1.5]))
-    m = parallel._merge_records([a, b])
+    m = merge._merge_records([a, b])
     np.testing.assert_array_equal(m.ra_t, [0.1, 0.2, 0.3, 0.4])
     np.testing.assert_array_equal(m.ra, [5.0, 5.0, 6.0, 6.0])  # (interleaved: 5, 1, 6, 2)
     np.testing.assert_array_equal(m.h_h.lo, [1.0, 0.5, 0.5, 0.5])
@@ -241,15 +247,15 @@ def test_local_workers_that_cannot_start_are_one_clear_error(monkeypatch):
 
     def failing(*args, **kwargs):
         raise RuntimeError("Nanny failed to start.")
-    monkeypatch.setattr(parallel, "_LOCAL", {})
-    monkeypatch.setattr(parallel, "start_local_cluster", lambda workers: failing())
-    with pytest.raises(parallel.WorkerStartError, match="Nanny failed to start") as e:
-        parallel.local_client(2)
+    monkeypatch.setattr(cluster, "_LOCAL", {})
+    monkeypatch.setattr(cluster, "start_local_cluster", lambda workers: failing())
+    with pytest.raises(cluster.WorkerStartError, match="Nanny failed to start") as e:
+        cluster.local_client(2)
     assert "\n" not in str(e.value) and "workers=1" in str(e.value)
-    monkeypatch.setattr(parallel, "subprocess_workers_supported", lambda: False)
+    monkeypatch.setattr(cluster, "subprocess_workers_supported", lambda: False)
     monkeypatch.setattr(distributed, "LocalCluster", failing)
-    with pytest.raises(parallel.WorkerStartError, match="__name__ == .__main__.") as e:
-        parallel.local_client(2)
+    with pytest.raises(cluster.WorkerStartError, match="__name__ == .__main__.") as e:
+        cluster.local_client(2)
     assert "\n" not in str(e.value) and "workers=1" in str(e.value)
 
 
@@ -261,11 +267,11 @@ def test_worker_process_that_exits_at_start_is_one_line_error(tmp_path, monkeypa
     (fake / "__init__.py").write_text("")
     (fake / "__main__.py").write_text("raise SystemExit(3)\n")
     env = {**os.environ, "PYTHONPATH": str(tmp_path)}
-    monkeypatch.setattr(parallel, "_worker_env", lambda: env)
-    monkeypatch.setattr(parallel, "_LOCAL", {})
+    monkeypatch.setattr(cluster, "_worker_env", lambda: env)
+    monkeypatch.setattr(cluster, "_LOCAL", {})
     t = time.perf_counter()
-    with pytest.raises(parallel.WorkerStartError, match="exited with code 3") as e:
-        parallel.local_client(2)
+    with pytest.raises(cluster.WorkerStartError, match="exited with code 3") as e:
+        cluster.local_client(2)
     assert "\n" not in str(e.value) and time.perf_counter() - t < 30
 
 
@@ -323,28 +329,29 @@ def test_default_workers_on_a_small_batch_stays_in_process(ode, box, single, mon
     script."""
     def no_cluster(workers):
         raise AssertionError("a local cluster was asked for")
-    monkeypatch.setattr(parallel, "local_client", no_cluster)
-    monkeypatch.setattr(parallel, "default_workers", lambda: 2)
+    monkeypatch.setattr(exec_run, "local_client", no_cluster)
+    monkeypatch.setattr(plan, "default_workers", lambda: 2)  # (auto_workers)
+    monkeypatch.setattr(exec_run, "default_workers", lambda: 2)  # (solve_parallel)
     sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB)
     assert "backend" not in sol.stats and sol.status == single.status and sol.t_reached == single.t_reached
     np.testing.assert_array_equal(sol.tube_t, single.tube_t)
     np.testing.assert_array_equal(sol.hull[-1].lo, single.hull[-1].lo)
-    n = parallel.AUTO_MIN_PIECES
+    n = plan.AUTO_MIN_PIECES
     one = solve(ode, box, (0.0, 0.01), subdivision=[n, 1, 1, 1], workers=1)
     assert "backend" not in one.stats and one.status == "completed" and one.boxes[-1].shape == (n, 4)
-    auto = parallel.auto_workers
+    auto = plan.auto_workers
     assert auto(ode, box, [n - 1, 1, 1, 1]) is None and auto(ode, box, [n, 1, 1, 1]) == "auto"
     assert auto(ode, box.subdivide([n, 1, 1, 1]).reshape(-1, 4)) == "auto"
     assert auto(ode, "not a box", [n, 1, 1, 1]) is None  # (solve's own checks report it)
     for name, value in (("subprocess_workers_supported", False), ("dask_available", False),
                         ("_in_dask_worker", True)):
         with monkeypatch.context() as m:
-            m.setattr(parallel, name, lambda value=value: value)
+            m.setattr(plan, name, lambda value=value: value)
             assert auto(ode, box, [n, 1, 1, 1]) is None
     with monkeypatch.context() as m:  # (the benchmarks' switch: one core against one core)
-        m.setattr(parallel, "DEFAULT_PARALLEL", False)
+        m.setattr(plan, "DEFAULT_PARALLEL", False)
         assert auto(ode, box, [n, 1, 1, 1]) is None
-    monkeypatch.setattr(parallel, "default_workers", lambda: 1)
+    monkeypatch.setattr(plan, "default_workers", lambda: 1)
     assert auto(ode, box, [n, 1, 1, 1]) is None
 
 
@@ -352,14 +359,15 @@ def test_default_workers_fall_back_to_one_batch_when_no_cluster_starts(ode, box,
     """workers=None must not fail a run one process can do: a local cluster that cannot
     start is a warning and one in-process batch; an explicit workers=2 raises."""
     def broken(workers):
-        raise parallel.WorkerStartError("could not start 2 local Dask worker processes (test)")
-    monkeypatch.setattr(parallel, "local_client", broken)
-    monkeypatch.setattr(parallel, "default_workers", lambda: 2)
-    n = parallel.AUTO_MIN_PIECES
+        raise cluster.WorkerStartError("could not start 2 local Dask worker processes (test)")
+    monkeypatch.setattr(exec_run, "local_client", broken)
+    monkeypatch.setattr(plan, "default_workers", lambda: 2)  # (auto_workers)
+    monkeypatch.setattr(exec_run, "default_workers", lambda: 2)  # (solve_parallel)
+    n = plan.AUTO_MIN_PIECES
     with pytest.warns(RuntimeWarning, match="workers=None runs in this process"):
         sol = solve(ode, box, (0.0, 0.01), subdivision=[n, 1, 1, 1])
     assert sol.stats["backend"] == "inprocess" and sol.stats["chunks"] == 1 and sol.status == "completed"
-    with pytest.raises(parallel.WorkerStartError):
+    with pytest.raises(cluster.WorkerStartError):
         solve(ode, box, (0.0, 0.01), subdivision=[n, 1, 1, 1], workers=2)
 
 
@@ -376,7 +384,7 @@ def test_fallbacks_and_bad_arguments(ode, box, monkeypatch):
     sol = solve(ode, box.subdivide([2, 1, 1, 1]).reshape(-1, 4)[:1], (0.0, 0.05), workers=2)
     assert sol.stats["backend"] == "inprocess" and sol.stats["chunks"] == 1
     # Dask missing: an explicit workers > 1 warns and runs in-process; "auto" silently
-    monkeypatch.setattr(parallel, "dask_available", lambda: False)
+    monkeypatch.setattr(exec_run, "dask_available", lambda: False)
     with pytest.warns(RuntimeWarning, match="not installed"):
         sol = solve(ode, box, (0.0, 0.05), subdivision=[4, 1, 1, 1], workers=2)
     assert sol.stats["backend"] == "inprocess" and sol.status == "completed"
@@ -396,21 +404,21 @@ def test_wall_cap_is_one_deadline(ode, box):
 
 
 def test_plan_chunks():
-    plan, M = parallel.plan_chunks, parallel.MIN_CHUNK_BOXES
+    plan_of, M = plan.plan_chunks, plan.MIN_CHUNK_BOXES
     # default: no chunk below MIN_CHUNK_BOXES boxes, so a small batch is one chunk
-    assert plan(16, 2) == [(0, 16)]
-    assert plan(3, 4) == [(0, 3)]
-    assert len(plan(2 * M - 1, 2)) == 1 and len(plan(2 * M, 2)) == 2
-    assert len(plan(5 * M, 8)) == 5 and all(b - a >= M for a, b in plan(5 * M, 8))
-    assert plan(1024, 2) == [(0, 512), (512, 1024)]
-    assert len(plan(65536, 64)) == 128
+    assert plan_of(16, 2) == [(0, 16)]
+    assert plan_of(3, 4) == [(0, 3)]
+    assert len(plan_of(2 * M - 1, 2)) == 1 and len(plan_of(2 * M, 2)) == 2
+    assert len(plan_of(5 * M, 8)) == 5 and all(b - a >= M for a, b in plan_of(5 * M, 8))
+    assert plan_of(1024, 2) == [(0, 512), (512, 1024)]
+    assert len(plan_of(65536, 64)) == 128
     # more chunks per worker only for big batches; a wall-clock cap: one per worker
-    assert len(plan(4096, 2)) == 8 and len(plan(4096, 2, max_per_worker=1)) == 2
+    assert len(plan_of(4096, 2)) == 8 and len(plan_of(4096, 2, max_per_worker=1)) == 2
     # explicit chunks are used as given, also below the minimum (never more than boxes)
-    assert plan(16, 2, 2) == [(0, 8), (8, 16)]
-    assert plan(16, 1, 4) == [(0, 4), (4, 8), (8, 12), (12, 16)]
-    assert plan(3, 4, 4) == [(0, 1), (1, 2), (2, 3)]
-    r = plan(1000, 3, 7)
+    assert plan_of(16, 2, 2) == [(0, 8), (8, 16)]
+    assert plan_of(16, 1, 4) == [(0, 4), (4, 8), (8, 12), (12, 16)]
+    assert plan_of(3, 4, 4) == [(0, 1), (1, 2), (2, 3)]
+    r = plan_of(1000, 3, 7)
     assert len(r) == 7 and r[0][0] == 0 and r[-1][1] == 1000
     assert all(a[1] == b[0] for a, b in zip(r, r[1:]))
 
@@ -420,8 +428,9 @@ def test_small_batch_with_workers_is_one_in_process_batch(ode, box, oracle, sing
     in-process batch itself, also with workers="auto" and with a wall-clock cap."""
     def no_cluster(workers):
         raise AssertionError("a local cluster was asked for")
-    monkeypatch.setattr(parallel, "local_client", no_cluster)
-    monkeypatch.setattr(parallel, "default_workers", lambda: 2)
+    monkeypatch.setattr(exec_run, "local_client", no_cluster)
+    monkeypatch.setattr(plan, "default_workers", lambda: 2)  # (auto_workers)
+    monkeypatch.setattr(exec_run, "default_workers", lambda: 2)  # (solve_parallel)
     sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, workers=2)
     assert sol.stats["backend"] == "inprocess" and sol.stats["chunks"] == 1 and sol.stats["workers"] == 1
     assert sol.status == single.status and sol.t_reached == single.t_reached
@@ -430,7 +439,7 @@ def test_small_batch_with_workers_is_one_in_process_batch(ode, box, oracle, sing
         np.testing.assert_array_equal(a.lo, b.lo)
         np.testing.assert_array_equal(a.hi, b.hi)
     assert not misses(sol, oracle)
-    n = 2 * parallel.MIN_CHUNK_BOXES - 1  # "auto" used a cluster from 32 pieces on before the minimum
+    n = 2 * plan.MIN_CHUNK_BOXES - 1  # "auto" used a cluster from 32 pieces on before the minimum
     for kw in (dict(workers="auto"), dict(workers=2, hooks=[StopAfterWall(60.0)])):
         s = solve(ode, box, (0.0, 0.02), subdivision=[n, 1, 1, 1], **kw)
         assert s.stats["backend"] == "inprocess" and s.stats["chunks"] == 1 and s.status == "completed"
@@ -440,7 +449,7 @@ def test_default_plan_and_explicit_chunks_on_a_cluster(ode, box, oracle, single,
     """workers=2 (the local cluster: here the test's cluster) splits 2 * MIN_CHUNK_BOXES
     boxes in two and honours an explicit chunks= below the minimum; client= runs even a
     one-chunk plan on the cluster."""
-    monkeypatch.setattr(parallel, "local_client", lambda workers: client)
+    monkeypatch.setattr(exec_run, "local_client", lambda workers: client)
     sol = solve(ode, box, (0.0, T), t_eval=[0.1, 0.2, T], subdivision=SUB, workers=2, chunks=4)
     assert sol.stats["backend"] == "dask-local" and sol.stats["chunks"] == 4
     assert [c["boxes"] for c in sol.chunks] == [(0, 4), (4, 8), (8, 12), (12, 16)]
@@ -450,7 +459,7 @@ def test_default_plan_and_explicit_chunks_on_a_cluster(ode, box, oracle, single,
     assert one.chunks[0]["worker_pid"] != os.getpid()
     assert one.status == single.status and one.t_reached == single.t_reached and not misses(one, oracle)
     np.testing.assert_allclose(np.asarray(one.hull[-1].width()), np.asarray(single.hull[-1].width()), rtol=1e-9)
-    n = 2 * parallel.MIN_CHUNK_BOXES
+    n = 2 * plan.MIN_CHUNK_BOXES
     two = solve(ode, box, (0.0, 0.02), subdivision=[n, 1, 1, 1], workers=2)
     assert two.stats["backend"] == "dask-local" and [c["boxes"] for c in two.chunks] == [(0, n // 2), (n // 2, n)]
     assert two.status == "completed" and two.boxes[-1].shape == (n, 4)
@@ -609,7 +618,7 @@ def test_cli_bad_parallel_flags(tmp_path, monkeypatch, capsys):
     scene.write_text(SWEEP.split("[[scenarios]]")[0])
     assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--workers", "0"]) == 2
     assert "--workers" in capsys.readouterr().err
-    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT", 1.0)
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT", 1.0)
     assert main(["simulate", str(scene), "--out", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9"]) == 2
     err = capsys.readouterr().err
     assert "tcp://127.0.0.1:9" in err and err.count("\n") == 1
@@ -663,7 +672,7 @@ def mixed_plain(ode, mixed):
 
 
 def _rechunked(ode, mixed, monkeypatch, **kw):
-    monkeypatch.setattr(parallel, "RECHUNK_MIN_SETS", 8)  # pieces of 8 sets (64 by default)
+    monkeypatch.setattr(rechunk, "RECHUNK_MIN_SETS", 8)  # pieces of 8 sets (64 by default)
     kw.setdefault("workers", 1)
     return solve(ode, mixed, (0.0, RT), t_eval=R_EVAL, chunks=2, adaptive=True, **kw)
 
@@ -696,7 +705,7 @@ def test_rechunked_run_contains_samples(ode, mixed, mixed_oracle, mixed_plain, m
 
 @pytest.mark.slow  # (with its fixtures ~5 s: the default run stays under its 3-minute budget)
 def test_a_rechunking_that_drops_a_set_is_caught(ode, mixed, mixed_oracle, mixed_plain, monkeypatch):
-    cut = parallel._Pieces._cut
+    cut = rechunk._Pieces._cut
 
     def dropping(self, index, *args):  # the wide chunk's first cut loses one set of its first piece
         new = cut(self, index, *args)
@@ -708,7 +717,7 @@ def test_a_rechunking_that_drops_a_set_is_caught(ode, mixed, mixed_oracle, mixed
             p.start.sets = p.start.sets.take(np.arange(1, p.start.sets.n_sets))
             p.lo, p.hi = p.lo[1:], p.hi[1:]
         return new
-    monkeypatch.setattr(parallel._Pieces, "_cut", dropping)
+    monkeypatch.setattr(rechunk._Pieces, "_cut", dropping)
     sol = _rechunked(ode, mixed, monkeypatch, rechunk=True)
     with pytest.raises(AssertionError):
         _check_rechunked(sol, mixed_plain, mixed_oracle)
@@ -727,7 +736,7 @@ def test_resume_from_a_pause_continues_the_run(ode, box):
     for set_order in (1, 2):
         kw = dict(t_eval=[0.1, 0.2, T], subdivision=[4, 1, 1, 1], set_order=set_order, adaptive=True)
         full = solve(ode, box, (0.0, T), **kw)
-        pause = parallel._Pause(6)
+        pause = exec_hooks._Pause(6)
         first = solve(ode, box, (0.0, T), hooks=[pause], **kw)
         st = pause.start
         assert first.status == "stopped" and st is not None and st.sets.n_sets >= 6

@@ -1,14 +1,18 @@
 """Chunked runs that divide evenly (issue 42 item 2): a piece that lags on the cluster
 is paused and its sets cut into new pieces for the free worker (work stealing); every
 set goes to exactly one new piece; a run's cuts, replayed in this process
-(``with parallel.replaying(sol): solve(...)``), give its result float for float; families are
+(``with exec_run.replaying(sol): solve(...)``), give its result float for float; families are
 stitched as their last piece comes in."""
 
 import numpy as np
 import pytest
 
 from models import double_pendulum as dp
-from verified import parallel
+from verified.execution import cluster
+from verified.execution import dask_run
+from verified.execution import hooks as exec_hooks
+from verified.execution import rechunk
+from verified.execution import run as exec_run
 from verified.graph import trace
 from verified.driver.hooks import Hook
 from verified.arith.interval import Interval
@@ -75,12 +79,12 @@ def test_a_cut_puts_every_set_in_exactly_one_piece(ode, box):
     """Cut into k = 2 .. more than the sets: the pieces' sets, in order, are the paused
     piece's sets (none dropped, none twice, none empty)."""
     boxes = box.subdivide([12, 1, 1, 1]).reshape(-1, 4)
-    pause = parallel._Pause(at_step=3)
+    pause = exec_hooks._Pause(at_step=3)
     sol = solve(ode, boxes, (0.0, T), hooks=[pause], workers=1)
     assert sol.status == "stopped" and pause.start is not None and pause.steps == 3
     X = pause.start.sets.hull()
     for k in (2, 3, 5, 7, 12, 40):
-        pieces = parallel._Pieces(boxes, [(0, 12)], lambda a, b: None, False, 4096)
+        pieces = rechunk._Pieces(boxes, [(0, 12)], lambda a, b: None, False, 4096)
         new = pieces.done(0, sol, pause.start, k=k, why="lag")
         assert len(new) == min(k, 12) and all(pieces.items[j].start.sets.n_sets > 0 for j in new)
         got = [pieces.items[j].start.sets.hull() for j in new]
@@ -98,7 +102,7 @@ def test_replayed_cuts_in_process(ode, box, oracle):
     float for float."""
     cuts = [dict(path=[1], steps=4, k=3), dict(path=[1, 1], steps=2, k=2)]
     kw = dict(t_eval=EVAL, subdivision=SUB, workers=1, chunks=2)
-    with parallel.replaying(cuts):
+    with exec_run.replaying(cuts):
         sol = solve(ode, box, (0.0, T), **kw)
     assert sol.status == "completed" and sol.t_reached == T and not misses(sol, oracle)
     assert [(c["path"], c["steps"], c["k"], c["why"]) for c in sol.stats["cuts"]] == [
@@ -107,23 +111,23 @@ def test_replayed_cuts_in_process(ode, box, oracle):
     assert [b.shape for b in sol.boxes] == [(16, 4)] * 4
     assert len(sol.chunks[1]["pieces"]) == 6 and sol.chunks[0]["pieces"] is None
     assert sol.stats["stitch_s"] > 0  # (the families were stitched as they completed)
-    with parallel.replaying(sol):
+    with exec_run.replaying(sol):
         _same(solve(ode, box, (0.0, T), **kw), sol)
     # the plain plan (no cuts) differs: per-piece step sizes after the cut
     plain = solve(ode, box, (0.0, T), **kw)
     assert not all(np.array_equal(a.lo, b.lo) for a, b in zip(plain.boxes, sol.boxes))
-    with pytest.raises(ValueError, match="replay"), parallel.replaying([dict(path=[1])]):
+    with pytest.raises(ValueError, match="replay"), exec_run.replaying([dict(path=[1])]):
         solve(ode, box, (0.0, T), **kw)
-    with pytest.raises(ValueError, match="cover"), parallel.replaying(sol):
+    with pytest.raises(ValueError, match="cover"), exec_run.replaying(sol):
         solve(ode, box, (0.0, T), **dict(kw, subdivision=[8, 1, 1, 1]))
 
 
 @pytest.fixture(scope="module")
 def client():
     pytest.importorskip("distributed")
-    c = parallel.local_client(2)
+    c = cluster.local_client(2)
     yield c
-    parallel.close_local_clients()
+    cluster.close_local_clients()
 
 
 @pytest.mark.slow  # ~12 s with the cluster's start (default-run budget); the cuts' replay runs by default above
@@ -132,8 +136,9 @@ def test_lagging_chunk_is_stolen_and_replays_in_process(ode, box, oracle, client
     is done, the second is asked to pause, its sets go to both workers, and the result
     contains the samples; the same cuts replayed in this process give it float for float
     (stealing depends on timing, the result on the cuts only). rechunk=False: no cut."""
-    monkeypatch.setattr(parallel, "STEAL_MIN_SETS", 2)
-    monkeypatch.setattr(parallel, "STEAL_MIN_S", 0.0)
+    monkeypatch.setattr(rechunk, "STEAL_MIN_SETS", 2)  # (_Pieces)
+    monkeypatch.setattr(dask_run, "STEAL_MIN_SETS", 2)  # (_run_on_dask)
+    monkeypatch.setattr(dask_run, "STEAL_MIN_S", 0.0)
     q3 = float(box.lo[0] + 0.75 * (box.hi[0] - box.lo[0]))  # (inside the second chunk's first box)
     kw = dict(t_eval=EVAL, subdivision=SUB, chunks=2)
     sol = solve(ode, box, (0.0, T), client=client, hooks=[SlowAbove(0.3, q3)], **kw)
@@ -144,7 +149,7 @@ def test_lagging_chunk_is_stolen_and_replays_in_process(ode, box, oracle, client
     assert {r["parent"] for r in sol.stats["timeline"] if r["parent"] is not None} == {1}
     assert not misses(sol, oracle)
     assert [b.shape for b in sol.boxes] == [(16, 4)] * 4
-    with parallel.replaying(sol):
+    with exec_run.replaying(sol):
         _same(solve(ode, box, (0.0, T), workers=1, **kw), sol)
     off = solve(ode, box, (0.0, T), client=client, rechunk=False, hooks=[SlowAbove(0.05, q3)], **kw)
     assert not off.stats["steal"] and off.stats["cuts"] == [] and off.stats["pieces"] == 2

@@ -3,7 +3,7 @@
 The scheduler and each worker are their own processes started here with ``dask
 scheduler`` / ``dask worker --no-nanny``, each worker in its own working and local
 directory (as separate machines would have), not the local cluster of
-verified.parallel. A worker killed mid-run stays dead (no nanny brings it back): its
+verified.execution. A worker killed mid-run stays dead (no nanny brings it back): its
 chunk is run again on the other worker and the result is the in-process result of the
 same plan, float for float; when the last worker is gone the run ends with one clear
 error instead of waiting for ever.
@@ -21,7 +21,7 @@ import pytest
 
 from models import double_pendulum as dp
 from oracles.hooks import SlowSteps
-from verified import parallel
+from verified.execution import dask_run
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import VerifiedODE, solve
@@ -118,12 +118,12 @@ def test_separate_workers_lose_one_then_all(separate_cluster, monkeypatch):
         np.testing.assert_array_equal(a.lo, b.lo)
         np.testing.assert_array_equal(a.hi, b.hi)
     # the last worker killed mid-run: one clear error, not a hang
-    monkeypatch.setattr(parallel, "NO_WORKERS_TIMEOUT", 2.0)
+    monkeypatch.setattr(dask_run, "NO_WORKERS_TIMEOUT", 2.0)
     left = {a: p for a, (p, _) in workers.items() if a not in killed}
     killed2 = {}
     th = _kill_when_busy(client, left, killed2)
     t = time.monotonic()
-    with pytest.raises(parallel.WorkersLostError, match="every Dask worker left"):
+    with pytest.raises(dask_run.WorkersLostError, match="every Dask worker left"):
         solve(ode, box, (0.0, T), client=client, hooks=[SlowSteps(0.05)], **kw)
     th.join()
     assert killed2 and time.monotonic() - t < 30

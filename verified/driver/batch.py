@@ -2,7 +2,7 @@
 
 :func:`solve_batch` is what ``solve`` runs once it has decided on one batch in this
 process (``workers=1``, or the default on a small batch), and what
-:mod:`verified.parallel` runs for each chunk: the initial boxes (or the sets of a
+:mod:`verified.execution` runs for each chunk: the initial boxes (or the sets of a
 :class:`~verified.driver.solution.Start`) advance together with one common step size through
 the batched QR-Lohner step of :mod:`verified.steppers.lohner`.
 
@@ -14,7 +14,7 @@ validate, advances the sets (:mod:`verified.sets.first_order`) to a
 (:mod:`verified.driver.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow. See ``docs/architecture.md``.
 
-Imports: this module sits below :mod:`verified.parallel` and :mod:`verified.solver`
+Imports: this module sits below :mod:`verified.execution` and :mod:`verified.solver`
 (``solver -> parallel -> batch -> solution``) and imports neither.
 """
 

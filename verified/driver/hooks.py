@@ -108,7 +108,7 @@ class RunControl(Protocol):
     def resume_point(self):
         """Where the run stands after this step, as ``solve(start=...)`` continues from
         it: a :class:`verified.solver.Start` with the sets, their exact time and the
-        wrapping control's step limit (re-chunking in :mod:`verified.parallel`)."""
+        wrapping control's step limit (re-chunking in :mod:`verified.execution`)."""
 
     def landed_on_last_output(self, step) -> bool:
         """Whether ``step`` landed on the run's last output time (the run ends with it)."""

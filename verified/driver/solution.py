@@ -1,7 +1,7 @@
 """What a run returns and where a run continues from: :class:`Solution` (the result of
 :func:`verified.solver.solve`, of one in-process batch as of a chunked run) and
 :class:`Start` (``solve(..., start=)``). Plain data: the one-batch driver
-(:mod:`verified.driver.batch`) and the chunked execution (:mod:`verified.parallel`) both build
+(:mod:`verified.driver.batch`) and the chunked execution (:mod:`verified.execution`) both build
 them, so they live below both."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ __all__ = ["Solution", "Start", "PieceResult", "Failure", "pieces_summary"]
 
 @dataclass
 class Start:
-    """Where a run continues from (``solve(..., start=)``; :mod:`verified.parallel` cuts
+    """Where a run continues from (``solve(..., start=)``; :mod:`verified.execution` cuts
     a chunk whose sets split into pieces and continues each from here).
 
     sets : the run's sets (:class:`~verified.sets.first_order.DoubletonSets` or
@@ -189,12 +189,12 @@ class Solution:
         composition step, ``set_step="composition"``; None elsewhere, and ``[]`` when
         the run kept none): :mod:`mbs.frames` encloses the frames over the tube in it.
     chunks : list of dict or None
-        A chunked run (:mod:`verified.parallel`: ``workers``, ``client`` or ``chunks``):
+        A chunked run (:mod:`verified.execution`: ``workers``, ``client`` or ``chunks``):
         per initial chunk its boxes ``(start, stop)``, status, ``t_reached``, steps,
         tube and, with re-chunking, its ``pieces``; None for one in-process batch.
     pieces : list of dict or None
         A chunk's run that was re-chunked: each piece's parent, start time and status
-        (:func:`verified.parallel.solve_parallel`); None otherwise. (Not the initial
+        (:func:`verified.execution.run.solve_parallel`); None otherwise. (Not the initial
         pieces: those are ``piece_results``.)
     piece_results : list of PieceResult or None
         Per initial box of the run (after ``subdivision``): its status, ``t_reached`` and
