@@ -62,9 +62,9 @@ def kernel_cache_warm(module: str):
     try:
         mod = sys.modules.get(module)
         if mod is None:  # (the kernel modules of KERNEL_FAMILIES; by name they are not imported here)
-            from verified.steppers import tm_flow  # noqa: F401
-            from verified.series import affine_taylor, taylor, taylor_model  # noqa: F401
             from verified.arith import _kernels, linalg  # noqa: F401
+            from verified.series import affine_taylor, taylor, taylor_model  # noqa: F401
+            from verified.steppers import tm_flow  # noqa: F401
             mod = sys.modules.get(module)
         if mod is None:
             return None

@@ -11,9 +11,9 @@ check costs nothing and needs no cold cache.
 import ast
 import inspect
 
-from verified.steppers import tm_flow
-from verified.series import affine_taylor, taylor, taylor_model
 from verified.arith import _kernels, linalg
+from verified.series import affine_taylor, taylor, taylor_model
+from verified.steppers import tm_flow
 
 MODULES = [_kernels, taylor, taylor_model, affine_taylor, tm_flow, linalg]
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from oracles.sampling import misses, sample_initial_points, trajectories
-from verified.sets import first_order
 from verified.steppers import lohner
+from verified.sets import first_order
 from verified.consistency.energy_test import EnergyTest
 from verified.graph import trace
 from verified.driver.hooks import Hook, RunSetup, SolverHook, StopAfterWall, check_hooks
