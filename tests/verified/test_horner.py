@@ -1,5 +1,5 @@
 """The compiled interval Horner sum of the Lohner and second-order steps
-(``verified.lohner.horner`` over ``verified._kernels.horner_loop``): bit for bit the
+(``verified.steppers.lohner.horner`` over ``verified.arith._kernels.horner_loop``): bit for bit the
 sum the interval operators give (which the arb oracle checks operation by operation),
 and every exact polynomial value at a point of the boxes lies inside it."""
 
@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import verified._kernels as _k
-import verified.lohner as lohner
-from verified.interval import Interval
-from verified.lohner import _horner_python, horner
+import verified.arith._kernels as _k
+import verified.steppers.lohner as lohner
+from verified.arith.interval import Interval
+from verified.steppers.lohner import _horner_python, horner
 
 _finite = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False, allow_infinity=False)
 
