@@ -1,8 +1,10 @@
 """Issue 15: no import cycles. The graph modules import in one direction,
-opcodes -> evaluate -> ir -> tracer, graph_sympy -> graph (the public front), and
+opcodes -> evaluate -> ir -> tracer, sympy_convert -> verified.graph (the public front), and
 no module of mbs/, models/ or verified/ takes part in a cycle of module-level imports; the
 solver imports the chunked execution and the one-batch driver in one direction, also with
-the imports inside functions, solution -> batch -> parallel -> solver."""
+the imports inside functions, driver.solution -> driver.batch -> execution -> solver.
+Issue 44: verified's rooms (arith, graph, series, sets, steppers, driver, consistency,
+execution, then the modules at the top) import only the rooms below them."""
 import ast
 from pathlib import Path
 
@@ -93,13 +95,46 @@ def test_solver_parallel_and_the_driver_import_one_way_also_inside_functions():
     inside a function (run when it is called), directly or through other modules."""
     mods = _modules()
     edges = {m: _module_level_imports(mods, m, in_functions=True) for m in mods}
-    order = ["verified.driver.solution", "verified.driver.batch", "verified.execution", "verified.solver"]
-    for i, m in enumerate(order):
-        assert not (edges[m] & set(order[i + 1:])), m
-        seen, todo = set(), list(edges[m])
-        while todo:
-            t = todo.pop()
-            if t not in seen:
-                seen.add(t)
-                todo.extend(edges[t])
-        assert not (seen & set(order[i:])), (m, sorted(seen & set(order[i:])))
+    execution = sorted(m for m in mods if m.startswith("verified.execution"))
+    order = [["verified.driver.solution"], ["verified.driver.batch"], execution, ["verified.solver"]]
+    for i, group in enumerate(order):
+        higher = {m for g in order[i + 1:] for m in g}
+        for m in group:
+            assert not (edges[m] & higher), m
+            seen, todo = set(), list(edges[m])
+            while todo:
+                t = todo.pop()
+                if t not in seen:
+                    seen.add(t)
+                    todo.extend(edges[t])
+            forbidden = higher if len(group) > 1 else higher | {m}  # (execution's modules import each other)
+            assert not (seen & forbidden), (m, sorted(seen & forbidden))
+
+
+#: verified's rooms, bottom first; the modules at the top (solver, methods, auto, spec, warmup) may import any
+ROOMS = ["arith", "graph", "series", "sets", "steppers", "driver", "consistency", "execution"]
+#: the one import that runs up (inside a function): chaining runs in time carries their consistency records
+UPWARD = {("verified.driver.time_chain", "verified.consistency.reduction_area")}
+
+
+def _room(name):
+    parts = name.split(".")
+    if parts[0] != "verified" or len(parts) == 1:
+        return None
+    return ROOMS.index(parts[1]) if parts[1] in ROOMS else len(ROOMS)
+
+
+def test_rooms_import_only_rooms_below_also_inside_functions():
+    """A room imports its own modules and the rooms below it, never one above (also not inside
+    a function), and nothing of mbs or models; docs/architecture.md draws the same picture."""
+    mods = _modules()
+    up, out = [], []
+    for m in sorted(mods):
+        if _room(m) is None:
+            continue
+        for t in sorted(_module_level_imports(mods, m, in_functions=True)):
+            if not t.startswith("verified"):
+                out.append((m, t))
+            elif _room(t) is not None and _room(t) > _room(m) and (m, t) not in UPWARD:
+                up.append((m, t))
+    assert out == [] and up == []
