@@ -1,6 +1,9 @@
-"""Everything rigorous: interval arithmetic, the expression graph and its evaluators,
-Taylor coefficients of ODE solutions, and (later) the verified ODE solver and the
-consistency tests. Knows nothing about robots."""
+"""Everything rigorous; knows nothing about robots. Its rooms, bottom first (each imports
+only the rooms below it): ``arith`` (outward-rounded numbers), ``graph`` (the one IR),
+``series`` (Taylor coefficients), ``sets``, ``steppers`` (one step for one set kind),
+``driver`` (the loop of one batch), ``consistency`` (tests and contractors), ``execution``
+(chunks, Dask); at the top ``solver`` (``solve``), ``methods``, ``auto``, ``spec``, ``warmup``
+(docs/architecture.md)."""
 
 from verified.graph import Graph, GraphBuilder, Op, Tracer, from_sympy, trace
 from verified.arith.interval import Interval, IntervalError
