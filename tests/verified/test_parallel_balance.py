@@ -8,11 +8,8 @@ import numpy as np
 import pytest
 
 from models import double_pendulum as dp
-from verified.execution import cluster
-from verified.execution import dask_run
-from verified.execution import hooks as exec_hooks
-from verified.execution import rechunk
-from verified.execution import run as exec_run
+from verified.execution import cluster, dask_run, rechunk
+from verified.execution import hooks as exec_hooks, run as exec_run
 from verified.graph import trace
 from verified.driver.hooks import Hook
 from verified.arith.interval import Interval
