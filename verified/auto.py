@@ -1,4 +1,4 @@
-# Whole (~970 lines) for now: the ladder and the spec proof call each other (_ladder <-> _prove_spec).
+# Whole for now: the ladder and the spec proof call each other (_ladder <-> _prove_spec).
 """``method="auto"``: choose the method from the problem and do not give up while a
 stronger one exists.
 

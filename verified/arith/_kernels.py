@@ -1,3 +1,4 @@
+# Whole: the compiled interval kernels are one compilation unit (numba, cached per module).
 """Compiled interval kernels: outward rounding, scalar interval operations, array loops.
 
 This module is the bottom layer of ``verified`` (the layering follows

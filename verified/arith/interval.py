@@ -1,4 +1,4 @@
-# Whole (~840 lines): the Interval type and the functions its operators call are one API.
+# Whole: the Interval type and the functions its operators call are one API.
 """Interval arrays: rigorous, outward-rounded interval arithmetic on numpy arrays.
 
 An :class:`Interval` holds lower and upper bounds as float64 arrays of one shape and

@@ -1,4 +1,4 @@
-# Whole (~780 lines): HC4's projections and the linear contractors share the guard and meet helpers.
+# Whole: HC4's projections and the linear contractors share the guard and meet helpers.
 """Contractors: narrow boxes and parametrized sets with constraints, soundly.
 
 Three tools, all batched over boxes (numpy arrays, one Python loop per graph node or per

@@ -1,4 +1,4 @@
-# Whole (~1130 lines): one 740-line class (QuadraticLyapunov); splitting it would change its methods.
+# Whole: one 740-line class (QuadraticLyapunov); splitting it would change its methods.
 """Invariant sublevel sets of a quadratic Lyapunov function: one box for every later time
 (issue 14 item 4; issue 13 item 1, the energy shell for systems with inputs).
 

@@ -1,4 +1,4 @@
-# Whole (~870 lines): the driver loop (_Run) and its set-up (_setup, VerifiedODE) share the run's state.
+# Whole: the driver loop (_Run) and its set-up (_setup, VerifiedODE) share the run's state.
 """One in-process batch of :func:`verified.solver.solve`: the driver loop.
 
 :func:`solve_batch` is what ``solve`` runs once it has decided on one batch in this

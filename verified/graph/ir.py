@@ -1,4 +1,4 @@
-# Whole (~620 lines): Graph and GraphBuilder are one data structure.
+# Whole: Graph and GraphBuilder are one data structure.
 """The expression graph itself: :class:`Graph` (an immutable DAG) and :class:`GraphBuilder`.
 
 The IR is described in :mod:`verified.graph`, the public front that also re-exports

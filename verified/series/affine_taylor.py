@@ -1,4 +1,4 @@
-# Whole (~1460 lines): its numba kernels and their helpers are one compilation unit.
+# Whole: its numba kernels and their helpers are one compilation unit.
 """Taylor coefficients of ODE solutions in affine arithmetic over the box's own symbols.
 
 Plain interval evaluation of a deep model graph (a robot's crba/rnea followed by an

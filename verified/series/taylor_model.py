@@ -1,4 +1,4 @@
-# Whole (~1010 lines): its numba kernels and their helpers are one compilation unit.
+# Whole: its numba kernels and their helpers are one compilation unit.
 """Taylor coefficients of ODE solutions as Taylor models of degree 2 to 4 in a set's symbols.
 
 Affine arithmetic (:mod:`verified.series.affine_taylor`) carries the first-order dependence

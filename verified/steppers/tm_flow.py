@@ -1,4 +1,4 @@
-# Whole (~840 lines): one stepper and the Taylor-model helpers only it uses (issue 44: one recursion).
+# Whole: one stepper and the Taylor-model helpers only it uses (issue 44: one recursion).
 """Second-order sets advanced by composing the Taylor map with the set in Taylor models.
 
 :class:`verified.steppers.second_order.QuadraticStepper` advances a set ``c + C u + q(u) + Q r``
