@@ -235,7 +235,7 @@ class Auto(Method):
     when every rung has failed; ``Solution.method_log`` says which method advanced which
     time span and why it switched.
 
-    rungs : None (chosen from the problem: :func:`verified.auto.default_rungs`) or a
+    rungs : None (chosen from the problem: :func:`verified.auto.ladder.default_rungs`) or a
         sequence of methods (objects or names), weakest first
     max_pieces : the most pieces splitting may make of the initial set (>= 1)
     target_ratio : None (default) or a number > 1: after the run reaches ``t1``, the

@@ -17,7 +17,7 @@ shows.
 (``Solution.tube``: boxes that enclose every solution over each step, so every time in
 [t0, t1] and not only the output times) lies inside the bounds (:func:`check_tube`).
 **False** is a float finding, not a proof: a sampled trajectory (scipy's DOP853 from
-points of the initial set, :func:`verified.auto.sampled_violation`) leaves the bounds
+points of the initial set, :func:`verified.auto.spec_proof.sampled_violation`) leaves the bounds
 by more than the sampler's error. Anything else is **not proven**.
 """
 

@@ -1,15 +1,15 @@
 """``auto`` splits the parameter box where the parameters, not the states, make the
 enclosure grow (issue 45: uncertain payloads without a user picking ``param_subdivision``).
 
-:func:`verified.auto.split_pieces` bisects a failed piece along the components, states and
+:func:`verified.auto.splitting.split_pieces` bisects a failed piece along the components, states and
 uncertain parameters alike, whose end-point trajectories move the states most
-(:func:`verified.auto.influences`); every part carries its own parameter row.
+(:func:`verified.auto.splitting.influences`); every part carries its own parameter row.
 """
 
 import numpy as np
 import pytest
 
-import verified.auto as auto_mod
+from verified.auto import splitting
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.solver import solve
@@ -30,7 +30,7 @@ def _covered(states, params, parts: Interval, rows: Interval, slack=0.0):
 
 
 def test_a_point_state_with_a_wide_parameter_splits_the_parameter():
-    parts, rows = auto_mod.split_pieces(_oscillator(), Interval([[1.0, 0.0]], [[1.0, 0.0]]),
+    parts, rows = splitting.split_pieces(_oscillator(), Interval([[1.0, 0.0]], [[1.0, 0.0]]),
                                         Interval([0.5], [1.5]), 4.0)
     assert parts.shape == (2, 2) and rows.shape == (2, 1)
     assert np.all(parts.lo == [1.0, 0.0]) and np.all(parts.hi == [1.0, 0.0])
@@ -40,9 +40,9 @@ def test_a_point_state_with_a_wide_parameter_splits_the_parameter():
 def test_states_that_matter_more_than_a_parameter_are_split_instead():
     """x' = -x + 1e-6 p over x in [0, 1], p in [0, 1]: the parameter barely moves x."""
     g = trace(lambda x, p: [-x[0] + 1e-6 * p[0]], 1, 1)
-    infl = auto_mod.influences(g, [0.0], [1.0], [0.0], [1.0], 1.0)
+    infl = splitting.influences(g, [0.0], [1.0], [0.0], [1.0], 1.0)
     assert infl[0] == 1.0 and infl[1] < 1e-5
-    parts, rows = auto_mod.split_pieces(g, Interval([[0.0]], [[1.0]]), Interval([0.0], [1.0]), 1.0)
+    parts, rows = splitting.split_pieces(g, Interval([[0.0]], [[1.0]]), Interval([0.0], [1.0]), 1.0)
     assert parts.shape == (2, 1) and np.all(rows.lo == 0.0) and np.all(rows.hi == 1.0)
 
 
@@ -51,19 +51,19 @@ def test_a_state_that_only_moves_itself_is_not_split_beside_the_parameter():
     width, y by p across [0, T]. Scored against each state's own largest mover, x counted
     as much as p and every piece became four; the parameter alone is split."""
     g = trace(lambda x, p: [0.0 * x[0], p[0]], 2, 1)
-    infl = auto_mod.influences(g, [0.0, 0.0], [1e-3, 0.0], [0.0], [1.0], 2.0)
+    infl = splitting.influences(g, [0.0, 0.0], [1e-3, 0.0], [0.0], [1.0], 2.0)
     assert infl[2] == 1.0 and infl[0] < 1e-2
-    parts, rows = auto_mod.split_pieces(g, Interval([[0.0, 0.0]], [[1e-3, 0.0]]), Interval([0.0], [1.0]), 2.0)
+    parts, rows = splitting.split_pieces(g, Interval([[0.0, 0.0]], [[1e-3, 0.0]]), Interval([0.0], [1.0]), 2.0)
     assert parts.shape == (2, 2) and np.all(parts.hi[:, 0] == 1e-3)
     assert sorted(map(tuple, np.c_[rows.lo, rows.hi])) == [(0.0, 0.5), (0.5, 1.0)]
 
 
 def test_without_uncertain_parameters_the_states_are_split_as_before():
     boxes = Interval([[0.0, 0.0], [1.0, 1.0]], [[1.0, 0.2], [2.0, 3.0]])
-    parts, rows = auto_mod.split_pieces(_oscillator(), boxes, Interval([1.0], [1.0]), 1.0)
-    assert parts.shape == auto_mod.split_boxes(boxes).shape
-    assert np.all(parts.lo == auto_mod.split_boxes(boxes).lo)
-    rows2 = auto_mod.split_pieces(_oscillator(), boxes, None, 1.0)[1]
+    parts, rows = splitting.split_pieces(_oscillator(), boxes, Interval([1.0], [1.0]), 1.0)
+    assert parts.shape == splitting.split_boxes(boxes).shape
+    assert np.all(parts.lo == splitting.split_boxes(boxes).lo)
+    rows2 = splitting.split_pieces(_oscillator(), boxes, None, 1.0)[1]
     assert rows2 is None
 
 
@@ -77,7 +77,7 @@ def test_the_parts_cover_every_state_and_parameter_of_the_pieces(rows_2d):
     params = Interval([0.5, 0.0], [1.5, 0.3])
     if rows_2d:
         params = Interval([[0.5, 0.0], [1.0, 0.1]], [[1.5, 0.3], [1.2, 0.2]])
-    parts, rows = auto_mod.split_pieces(g, boxes, params, 3.0)
+    parts, rows = splitting.split_pieces(g, boxes, params, 3.0)
     assert parts.shape[0] == rows.shape[0] > 2
     pts, prm = [], []
     for b in range(2):
@@ -93,8 +93,8 @@ def test_the_parts_cover_every_state_and_parameter_of_the_pieces(rows_2d):
 
 def test_influences_are_none_where_the_trajectories_fail():
     g = trace(lambda x, p: [x[0] * x[0] * p[0]], 1, 1)  # blows up before t = 2 from x = 1
-    assert auto_mod.influences(g, [1.0], [1.1], [1.0], [2.0], 2.0) is None
-    parts, rows = auto_mod.split_pieces(g, Interval([[1.0]], [[1.1]]), Interval([1.0], [2.0]), 2.0)
+    assert splitting.influences(g, [1.0], [1.1], [1.0], [2.0], 2.0) is None
+    parts, rows = splitting.split_pieces(g, Interval([[1.0]], [[1.1]]), Interval([1.0], [2.0]), 2.0)
     # (the fallback: the states' own split and the widest parameter)
     assert parts.shape == (4, 1) and rows.shape == (4, 1)
 

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from mbs.app.sampling import dop853
 
-import verified.auto as auto_mod
+import verified.auto
+from verified.auto import ladder, splitting
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.methods import METHODS, Auto, Composition, Lohner, SecondOrder, as_method
@@ -117,12 +118,13 @@ def test_auto_switches_rungs_and_loses_no_state():
 def test_a_split_that_drops_a_piece_is_caught(monkeypatch):
     """The oracle bites: an ``auto`` whose split keeps only half of each failed piece
     completes, but misses sampled true states."""
-    real = auto_mod.split_boxes
+    real = splitting.split_boxes
 
-    def lossy(boxes, max_dims=auto_mod.SPLIT_DIMS):
+    def lossy(boxes, max_dims=splitting.SPLIT_DIMS):
         parts = real(boxes, max_dims)
         return parts[: max(1, parts.shape[0] // 2)]
-    monkeypatch.setattr(auto_mod, "split_boxes", lossy)
+    monkeypatch.setattr(splitting, "split_boxes", lossy)  # (split_pieces)
+    monkeypatch.setattr(verified.auto, "split_boxes", lossy)  # (solve_auto)
     sol = solve(_vdp_like(), BOX, (0.0, 3.0))
     assert sol.status == "completed"
     assert not _inside_union(_sampled_final(3.0), sol.boxes[-1]).all()
@@ -139,7 +141,7 @@ def test_auto_gives_up_with_what_it_tried():
 
 def test_split_boxes_covers_each_box():
     boxes = Interval([[0.0, 0.0, 5.0], [1.0, 1.0, 1.0]], [[1.0, 0.2, 5.0], [2.0, 3.0, 1.5]])
-    parts = auto_mod.split_boxes(boxes)
+    parts = splitting.split_boxes(boxes)
     # box 0 (widths 1, 0.2, 0): x0 only -> 2 parts; box 1 (widths 1, 2, 0.5): x0 and x1 -> 4 parts
     assert parts.shape == (6, 3)
     pts = np.array([[0.3, 0.1, 5.0], [0.7, 0.2, 5.0], [1.5, 2.9, 1.2], [1.0, 1.0, 1.5]])
@@ -245,7 +247,7 @@ def quick_stall(monkeypatch):
     guard), so that x' = -p x with p in [0.5, 0.7] still stalls it: these tests are about
     what auto does with a stall, and this system is the cheapest one that makes one."""
     from verified.steppers.tm_flow import TaylorModelFlowStepper
-    monkeypatch.setattr(auto_mod, "STALL_MIN_STEPS", 100)
+    monkeypatch.setattr(ladder, "STALL_MIN_STEPS", 100)
     monkeypatch.setattr(TaylorModelFlowStepper, "REMAINDER_SHARE", 0.0)
 
 
@@ -269,7 +271,7 @@ def test_a_switch_continues_from_the_verified_sets_and_loses_no_state(quick_stal
 def test_a_switch_that_drops_part_of_a_set_is_caught(monkeypatch, quick_stall):
     """The oracle bites: a switch that hands the next method only the middle half of the
     sets where the composition stopped completes, but misses closed-form states."""
-    real = auto_mod.switch_start
+    real = ladder.switch_start
 
     def lossy(failure, method):
         st = real(failure, method)
@@ -277,7 +279,7 @@ def test_a_switch_that_drops_part_of_a_set_is_caught(monkeypatch, quick_stall):
         mid, rad = X.mid(), 0.25 * X.width()
         shrunk = type(st.sets).from_boxes(Interval(mid - rad, mid + rad))
         return type(st)(sets=shrunk, t_exact=st.t_exact, h_limit=st.h_limit)
-    monkeypatch.setattr(auto_mod, "switch_start", lossy)
+    monkeypatch.setattr(ladder, "switch_start", lossy)
     sol = _decay_switch(np.linspace(0.0, 3.0, 7))
     assert sol.status == "completed"
     assert _decay_misses(sol) > 0

@@ -1,5 +1,5 @@
 """``method=Auto(spec=...)``: bounds on states over the whole run that ``auto`` works to
-prove (:mod:`verified.spec`, :func:`verified.auto._prove_spec`).
+prove (:mod:`verified.spec`, :func:`verified.auto.spec_proof._prove_spec`).
 
 Van der Pol (mu = 1) from x in [1.25, 1.55], y in [2.35, 2.45] (the ARCH-COMP box): x
 rises to about 2.124 at t = 0.55 and falls back; over [0, 1.5] the plain run's tube
@@ -137,14 +137,14 @@ def test_the_tube_rows_are_told_apart_by_piece_and_restricted_exactly():
     """The pieces kept and the pieces split must be told apart exactly (soundness rests
     on it): x's peak rises with x(0), so the piece with the largest x(0) has the largest
     excess; the restricted runs' boxes together are the run's boxes."""
-    import verified.auto as auto_mod
+    from verified.auto import spec_proof
     sol = solve(_graph(), X0, (0.0, 1.5), subdivision=[4, 1])
     pieces = sol.boxes[0]
     lo, hi = np.array([-np.inf, -np.inf]), np.array([2.0, np.inf])
-    pe = auto_mod._piece_excess(sol, 4, lo, hi, pieces)
+    pe = spec_proof._piece_excess(sol, 4, lo, hi, pieces)
     assert pe is not None and list(np.argsort(pe)) == [0, 1, 2, 3]
-    assert auto_mod._piece_excess(sol, 4, lo, hi, pieces[::-1]) is None   # (rows not in the pieces' order)
+    assert spec_proof._piece_excess(sol, 4, lo, hi, pieces[::-1]) is None   # (rows not in the pieces' order)
     keep = pe < pe.max()
-    a, b = auto_mod._restrict(sol, keep), auto_mod._restrict(sol, ~keep)
+    a, b = spec_proof._restrict(sol, keep), spec_proof._restrict(sol, ~keep)
     for j, box in enumerate(sol.tube):
         assert np.array_equal(np.r_[a.tube[j].hi, b.tube[j].hi], box.hi[np.r_[np.flatnonzero(keep), 3]])

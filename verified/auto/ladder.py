@@ -1,0 +1,343 @@
+"""The ladder of ``method="auto"``: the first rung from the problem (:func:`default_rungs`),
+each rung continued from the sets where the one before it stopped (:func:`switch_start`), a
+stall handed down early (:class:`StallGuard`), and failing pieces split and run again
+(:func:`_ladder`).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from verified.driver.hooks import Hook, caps_from
+from verified.arith.interval import Interval, concatenate
+from verified.methods import Auto, Composition, Lohner, Method
+from verified.driver.solution import Failure, Solution, Start
+from verified.driver.time_chain import chain_in_time
+from verified.auto.splitting import split_pieces
+
+__all__ = ["default_rungs", "COMPOSITION_MAX_STATES"]
+
+
+#: up to this many states (parameters carried as states included) the first rung is the
+#: composition: on every case measured for issue 40 (3-link arm, double pendulum, the
+#: paper's pendulum, Laub-Loomis, x'' = -x - 2 x^2 x') it went further than first-order
+#: sets at a similar or lower cost; its Taylor models grow with the square of the states
+COMPOSITION_MAX_STATES = 24
+#: from this many states on (a 5-DOF robot and up) the composition runs at order
+#: LARGE_ORDER with LARGE_PARAMS_PER_STATE parameters per state: shorter Taylor series
+#: of a deep graph, more of the accumulated error carried exactly (the robots' best
+#: setting in benchmarks/bench_robots.py; docs/lab/auto.md)
+LARGE_STATES = 10
+LARGE_ORDER = 8
+LARGE_PARAMS_PER_STATE = 12
+#: split pieces must get further than their parent by this fraction of the time span, or
+#: splitting stops (what stops them is then not the width of the set)
+MIN_GAIN = 0.01
+
+
+def default_rungs(graph, boxes: Interval, params=None) -> tuple[Method, ...]:
+    """The rungs ``auto`` tries, weakest first, for ``graph`` from ``boxes`` (B, n)."""
+    n = graph.n_inputs
+    # (uncertain parameters are carried as constant states)
+    p_wide = 0 if params is None else int(np.count_nonzero(np.any(np.atleast_2d(params.width()) > 0, axis=0)))
+    if n + p_wide <= COMPOSITION_MAX_STATES:
+        if n + p_wide >= LARGE_STATES:
+            return (Composition(order=LARGE_ORDER, params_per_state=LARGE_PARAMS_PER_STATE),)
+        return (Composition(),)
+    return (Lohner(arithmetic="affine"), Lohner(arithmetic="affine", error_basis="auto"))
+
+
+@dataclass
+class _Task:
+    boxes: Interval          # (k, n) initial pieces
+    params: object           # the run's params ((p,) for all) or (k, p) rows, or None
+    rung: int                # index into the rungs
+    splits: int = 0          # how often these pieces were split
+    parent_t: float = -np.inf  # where the pieces they were split from broke down
+    failure: Failure | None = None  # a continuation: the failed attempt's record and sets to go on from
+
+
+def switch_start(failure: Failure, method: Method) -> Start:
+    """The sets ``method`` continues ``failure``'s pieces from, at exactly its time: the
+    failed attempt's own sets where ``method`` advances sets of that kind, else their
+    hull boxes as ``method``'s initial sets (a box holds every point of the sets it is
+    the hull of; the correlation between the sets' components is lost)."""
+    from verified.steppers.set_kinds import set_kind
+
+    st = method.settings()
+    kind = set_kind(st.get("set_order", 1), st.get("set_step", "mean_value"))
+    sets = failure.start.sets
+    if not isinstance(sets, kind.sets):
+        sets = kind.sets.from_boxes(sets.hull())
+    return Start(sets=sets, t_exact=failure.start.t_exact, h_limit=failure.start.h_limit)
+
+
+def _continuable(failure: Failure, params, n_run: int) -> bool:
+    """Whether a failure's sets can be continued by another method: they carry the run's
+    states only (no state appended by a hook, such as the energy test's ``h``), and the
+    parameters are the same for every piece (per-piece exact parameter rows cannot
+    follow sets that mixed pieces)."""
+    if failure.start is None or failure.start.sets.n_sets == 0:
+        return False
+    if failure.start.sets.hull().shape[-1] != n_run:
+        return False
+    return params is None or not isinstance(params, Interval) or params.ndim == 1
+
+
+def _rows(params, idx):
+    """The parameter rows of pieces ``idx`` (params per piece (k, p)), or params as is."""
+    if params is None or not isinstance(params, Interval) or params.ndim != 2:
+        return params
+    return params[np.asarray(idx, dtype=int)]
+
+
+#: the method that takes over the pieces of an attempt that stalled
+FALLBACK = Lohner(arithmetic="affine", error_basis="auto")
+#: an attempt stalls when its first STALL_MIN_STEPS steps would need more than
+#: STALL_STEPS steps for the whole span (far more than the robots' runs take;
+#: docs/lab/code_notes.md)
+STALL_MIN_STEPS = 1000
+STALL_STEPS = 20_000
+STALLED = "stalled"
+
+
+class StallGuard(Hook):
+    """Stop an attempt (a break-down whose reason starts with ``"stalled"``) whose first
+    :data:`STALL_MIN_STEPS` steps are so short that the span would take more than
+    :data:`STALL_STEPS` of them."""
+
+    def __init__(self, t0: float, t1: float):
+        self.t0, self.t1, self.steps = float(t0), float(t1), 0
+
+    def after_step(self, step, sets, run):
+        self.steps += 1
+        done = float(step.t) - self.t0
+        # judged once, at the STALL_MIN_STEPS-th step: a run whose steps shrink only near its
+        # end (a set blowing up before a break-down) is not a stall, it is a split's business
+        if self.steps == STALL_MIN_STEPS and done * STALL_STEPS < self.steps * (self.t1 - self.t0):
+            run.stop(f"{STALLED}: {self.steps} steps to t = {step.t:g} (about "
+                     f"{self.steps * (self.t1 - self.t0) / max(done, 1e-300):.3g} for the span)", "breakdown")
+        return None
+
+
+def _one_batch(common: dict) -> dict:
+    """``common`` for a run continued from sets (``solve(start=)``: one batch here)."""
+    return {**common, "workers": 1, "client": None, "chunks": None, "rechunk": None}
+
+
+def _carried(params) -> int:
+    """How many parameters a run carries as states (all of them when any is uncertain)."""
+    if params is None or not isinstance(params, Interval) or not bool(np.any(params.width() > 0)):
+        return 0
+    return int(params.shape[-1])
+
+
+def _summary(log) -> str:
+    return "auto: " + "; ".join(f"{e['method']} on {e['pieces']} piece(s) {e['status']} to t = {e['t_span'][1]:g}"
+                                + (" (spec: split)" if "split into" in e.get("spec", "") else
+                                   " (spec: shorter steps)" if "h_max" in e.get("spec", "") else "")
+                                for e in log)
+
+
+def _stack_rows(parts, pv):
+    """The parameters of the pieces of ``parts`` ((count, params) each, in order): ``pv``
+    itself where every part has it unchanged (None, or one row for all), else one row
+    per piece (count, p) stacked."""
+    if all(p is pv for _, p in parts) or pv is None:
+        return pv
+    rows = []
+    for k, p in parts:
+        if p.ndim == 1:
+            p = Interval(np.tile(np.asarray(p.lo, float), (k, 1)), np.tile(np.asarray(p.hi, float), (k, 1)))
+        rows.append(p)
+    return concatenate(rows, axis=0)
+
+
+def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_eval, consistency, hooks, progress,
+            started: float, **common):
+    """One pass of the ladder from ``boxes`` (module docstring): (the Solution, the
+    pieces it ended with (k, n), their parameters: ``pv`` as given, or rows (k, p)
+    where splitting gave the parts their own)."""
+    from verified.execution.merge import merge_solutions
+    from verified.driver.solver_args import check_settings
+
+    n = graph.n_inputs
+    t0, t1, outs, _ = check_settings(
+        t_span=t_span, t_eval=t_eval, order=method.order, tol=method.tol, h_max=common.get("h_max"),
+        h_min=common.get("h_min", 1e-9), max_steps=common.get("max_steps", 100_000),
+        max_width=common.get("max_width", 1e3), adaptive=common.get("adaptive", False),
+        split_ratio=common.get("split_ratio", 0.01), max_boxes=common.get("max_boxes", 4096),
+        wrap_target=common.get("wrap_target", 0.03), merge_slack=common.get("merge_slack"),
+        error_basis="qr", progress=progress)
+    rungs = list(method.rungs or default_rungs(graph, boxes, pv))
+    # the method a stalled attempt's pieces go to: first-order sets take long steps where
+    # the composition's remainders keep its steps tiny (docs/lab/code_notes.md)
+    rungs.append(FALLBACK)
+    fallback = len(rungs) - 1
+    for r in rungs:
+        r.refuse(adaptive=bool(common.get("adaptive")), consistency=consistency is not None,
+                 params=pv is not None and bool(np.any(pv.width() > 0)))
+    hooks = list(hooks)
+
+    todo = [_Task(boxes, pv, 0)]
+    first = None
+    covers = []  # [(boxes, Solution, params), ...] of failed attempts that, with the pieces done, covered everything
+    done: list[tuple[Interval, Solution, object]] = []  # (pieces, their Solution, their params)
+    log: list[dict] = []
+    pieces_total = boxes.shape[0]
+    give_up = None
+    while todo:
+        task = todo.pop(0)
+        rung = rungs[task.rung]
+        t_start = time.perf_counter()
+        cont = task.failure
+        t_from = float(t0) if cont is None else float(cont.t)
+        guard = [] if task.rung == fallback else [StallGuard(t_from, t1)]
+        if cont is None:
+            sol = solve(ode, task.boxes, (t0, t1), method=rung, params=task.params, t_eval=t_eval,
+                        consistency=None if consistency is None else copy.deepcopy(consistency),
+                        hooks=caps_from(hooks, started) + guard, progress=progress, **common)
+        else:
+            # continued from the failed attempt's sets at exactly their time (switch_start)
+            start = switch_start(cont, rung)
+            sol = solve(ode, start.sets.hull()[:, :n], (t0, t1), method=rung, params=task.params, t_eval=t_eval,
+                        start=start, hooks=caps_from(hooks, started) + guard, progress=progress,
+                        **_one_batch(common))
+        entry = dict(method=rung.describe(), pieces=int(task.boxes.shape[0]), splits=task.splits,
+                     t_span=(t_from, float(sol.t_reached)), status=sol.status, reason=sol.reason,
+                     wall_s=time.perf_counter() - t_start)
+        if cont is not None:
+            entry["continued"] = f"from the sets of {task.boxes.shape[0]} piece(s) at t = {t_from:g}"
+        log.append(entry)
+        if first is None and cont is None and task.boxes.shape[0] == boxes.shape[0] and task.rung == 0 \
+                and task.splits == 0:
+            first = sol  # (the first attempt, on every initial piece)
+        if cont is not None and sol.status != "breakdown":
+            sol = chain_in_time([cont.record, sol])
+        if sol.status != "breakdown":  # completed, or stopped / interrupted: nothing more is tried
+            done.append((task.boxes, sol, task.params))
+            if sol.status != "completed":
+                give_up = sol.status
+                for rest in todo:  # (not run: their pieces are verified at t0 only)
+                    done.append((rest.boxes, None, rest.params))
+                todo = []
+            continue
+        if cont is not None and float(sol.t_reached) <= t_from + MIN_GAIN * (t1 - t0):
+            # the sets where the weaker method stopped were too far gone for this one too
+            # (an enclosure already too wide, say): this method takes the pieces from t0
+            todo.append(_Task(task.boxes, task.params, task.rung, task.splits, task.parent_t))
+            entry["next"] = f"the continuation got no further: {rung.describe()} from t0"
+            continue
+        if cont is not None:
+            # a continuation that broke down: its sets mix its pieces, which go back to t0
+            # and are split there (below); the failed attempt's record stands for them
+            failed, failures = list(range(task.boxes.shape[0])), []
+            sol = chain_in_time([cont.record, sol])
+        else:
+            failed = [p.index for p in (sol.piece_results or ()) if p.failed]
+            if not failed or sol.surviving is None:
+                failed = list(range(task.boxes.shape[0]))
+            failures = [f for f in (sol.failures or ()) if _continuable(f, task.params, n + _carried(pv))]
+        kept = [i for i in range(task.boxes.shape[0]) if i not in set(failed)]
+        last = fallback if task.rung == fallback else fallback - 1  # (the rung splitting continues with)
+        stalled = sol.reason.startswith(STALLED) and task.rung != fallback
+        if stalled or (task.rung + 1 < fallback and cont is None):
+            # the next rung takes the failed pieces over: from where their sets stopped
+            # (Solution.failures), else (sets that cannot be continued) from t0
+            to = fallback if stalled else task.rung + 1
+            why = " (stalled)" if stalled else ""
+            covered = set()
+            for f in failures:
+                idx = [int(i) for i in f.pieces]
+                covered |= set(idx)
+                todo.append(_Task(task.boxes[np.asarray(idx)], task.params, to, task.splits, task.parent_t,
+                                  failure=f))
+            rest = [i for i in failed if i not in covered]
+            if rest:
+                todo.append(_Task(task.boxes[np.asarray(rest)], _rows(task.params, rest), to, task.splits,
+                                  task.parent_t))
+            if kept:
+                done.append((task.boxes[np.asarray(kept)], sol.surviving, _rows(task.params, kept)))
+            entry["next"] = f"{len(failed)} piece(s) to {rungs[to].describe()}{why}" + (
+                f", continued from their sets at t = {min(f.t for f in failures):g}" if failures else "")
+            continue
+        fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
+        # splitting: the failed pieces' initial boxes, split, from t0 (splitting the sets
+        # where they failed gained less: docs/lab, issue 40)
+        if cont is not None:
+            t_fail = float(sol.t_reached)
+        else:
+            t_fail = min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=sol.t_reached)
+        parts, part_params = split_pieces(graph, fb, fp, float(t_fail) - float(t0))
+        why = None
+        if parts.shape[0] == fb.shape[0]:
+            why = "the pieces cannot be split (no state or parameter of finite, nonzero width)"
+        elif pieces_total - fb.shape[0] + parts.shape[0] > method.max_pieces:
+            why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {method.max_pieces}"
+        elif t_fail <= task.parent_t + MIN_GAIN * (t1 - t0):
+            # splitting did not take the pieces further: the cause is not the sets' width
+            # (a blow-up, a singularity, a step-size limit), and more pieces will not help
+            why = (f"the split pieces broke down at t = {t_fail:g}, no later than the piece they were "
+                   f"split from (t = {task.parent_t:g})")
+        if not todo:
+            # this attempt's pieces and the finished ones cover every initial piece: their
+            # enclosure, verified to where this attempt got, stands if later attempts end earlier
+            covers.append(list(done) + [(task.boxes, sol, task.params)])
+        if why is not None:
+            entry["next"] = f"gave up: {why}"
+            done.append((task.boxes, sol, task.params))  # (the failed attempt encloses all its pieces up to its end)
+            give_up = "breakdown"
+            continue
+        if kept:
+            done.append((task.boxes[np.asarray(kept)], sol.surviving, _rows(task.params, kept)))
+        pieces_total += parts.shape[0] - fb.shape[0]
+        todo.append(_Task(parts, part_params, last, task.splits + 1, t_fail))
+        entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[last].describe()}"
+
+    pieces = concatenate([b for b, _, _ in done], axis=0)
+    piece_params = _stack_rows([(b.shape[0], p) for b, _, p in done], pv)
+
+    def merged(parts):
+        if len(parts) == 1 and parts[0][1] is not None:
+            return parts[0][1]
+        initial = concatenate([b for b, _, _ in parts], axis=0)
+        ends = np.cumsum([b.shape[0] for b, _, _ in parts])
+        ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
+        out = merge_solutions([s for _, s, _ in parts], ranges, initial, outs, t0,
+                              tuple(graph.input_names[:n]), interrupted=give_up == "interrupted")
+        out.chunks = None  # (the attempts are in method_log)
+        return out
+
+    result = merged(done)
+    if result.status != "completed":
+        # the later attempts ended earlier than an earlier one that, with the pieces done
+        # by then, covered every initial piece (a wall-clock cap striking while auto
+        # splits, say): that enclosure of the whole initial set, verified further, is the
+        # result (the first attempt, or a split attempt that broke down later)
+        best = first if first is not None and first.t_reached > result.t_reached else None
+        for parts in covers:
+            if min(float(s.t_reached) for _, s, _ in parts if s is not None) <= float(
+                    (result if best is None else best).t_reached):
+                continue  # (a merge reaches no further than its earliest part)
+            cand = merged(parts)
+            if cand.t_reached > (result if best is None else best).t_reached:
+                best, pieces = cand, concatenate([b for b, _, _ in parts], axis=0)
+                piece_params = _stack_rows([(b.shape[0], p) for b, _, p in parts], pv)
+        if best is not None:
+            why = result.reason
+            result = best
+            result.reason = f"{best.reason} (later attempts: {why})"
+            give_up = give_up or result.status
+    if result.status == "breakdown" and give_up == "breakdown":
+        tried = ", ".join(dict.fromkeys(e["method"] for e in log))
+        result.reason = (f"{result.reason} (auto tried {tried} on up to {pieces_total} pieces; "
+                         f"see Solution.method_log)")
+    result.method_log = log
+    result.method = _summary(log)
+    # (per-piece params rows follow the pieces only without splitting of per-box params)
+    result.stats["auto_pieces"] = int(pieces.shape[0])
+    return result, pieces, piece_params
