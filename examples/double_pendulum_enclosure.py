@@ -11,7 +11,7 @@ import numpy as np
 
 from models import double_pendulum as dp
 from verified.graph import trace
-from verified.arith.interval import Interval
+from verified import Interval
 from verified.solver import solve
 
 argv = [a for a in sys.argv[1:] if a != "--short"]

@@ -9,7 +9,7 @@ from fractions import Fraction
 import numpy as np
 
 import verified.arith.interval as iv
-from verified.arith.interval import Interval
+from verified import Interval
 
 x = Interval(-1.0, 2.0)
 print("x * x      =", x * x, "  (the dependency problem)")

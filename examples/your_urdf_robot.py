@@ -22,7 +22,7 @@ from mbs.app.frame_figures import fig_frame_region
 from mbs.app.results import write_result
 from mbs.frames import default_frame
 from mbs.simulate import simulate
-from verified.arith.interval import Interval
+from verified import Interval
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 ap.add_argument("urdf", nargs="?", default=None, help="a URDF file (default: example-robot-data's double pendulum)")
