@@ -559,7 +559,11 @@ def _bounds(x):
 
 def _flat(arr, shape):
     if arr.shape != shape:
-        arr = np.broadcast_to(arr, shape)
+        # (a fresh array filled by broadcasting: cheaper than np.broadcast_to's read-only
+        # view and the copy the kernel then needs, on every operation with a scalar operand)
+        out = np.empty(shape)
+        out[...] = arr
+        return out.reshape(-1)
     return _k.kernel_array(arr).reshape(-1)
 
 
