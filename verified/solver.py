@@ -23,7 +23,7 @@ to the chunked execution (:mod:`verified.execution`: ``workers``, ``client``, ``
 the driver loop: per step it takes the hull of the sets, asks the step control
 (:mod:`verified.driver.control`) for a step size the stepper (a
 :class:`verified.steppers.protocol.Stepper` of the run's set kind, :mod:`verified.steppers.set_kinds`) can
-validate, advances the sets (:mod:`verified.sets.first_order`) to a
+validate, advances the sets (:mod:`verified.sets`) to a
 :class:`~verified.steppers.protocol.StepResult`, records it, and calls the hooks
 (:mod:`verified.driver.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow). See ``docs/architecture.md``.
@@ -282,7 +282,7 @@ def _method_settings(method, ode, start, flags: dict):
     if given or start is not None or isinstance(ode, VerifiedODE):
         # (checked by the method they describe: the methods own these settings' checks)
         try:
-            # (an error-basis policy object, verified.driver.control, is the driver's own: not a method field)
+            # (an error-basis policy object, verified.sets.bases, is the driver's own: not a method field)
             from_settings(**{k: v for k, v in given.items()
                              if not (k == "arithmetic" and isinstance(ode, VerifiedODE))
                              and not (k == "error_basis" and not isinstance(v, str))})

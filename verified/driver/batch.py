@@ -10,7 +10,7 @@ the batched QR-Lohner step of :mod:`verified.steppers.lohner`.
 The driver loop: per step it takes the hull of the sets, asks the step control
 (:mod:`verified.driver.control`) for a step size the stepper (a
 :class:`verified.steppers.protocol.Stepper` of the run's set kind, :mod:`verified.steppers.set_kinds`) can
-validate, advances the sets (:mod:`verified.sets.first_order`) to a
+validate, advances the sets (:mod:`verified.sets`) to a
 :class:`~verified.steppers.protocol.StepResult`, records it, and calls the hooks
 (:mod:`verified.driver.hooks`: progress, the consistency test, stop rules); adaptive splitting
 and merging follow. See ``docs/architecture.md``.

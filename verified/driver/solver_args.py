@@ -140,7 +140,7 @@ def check_settings(*, t_span, t_eval, order, tol, h_max, h_min, max_steps, max_w
     if isinstance(error_basis, str) and error_basis in ERROR_BASES:
         pass
     elif isinstance(error_basis, str) or not callable(getattr(error_basis, "update", None)):
-        # a policy object of verified.driver.control (BlockBasis, EnergyAlignedBasis) is accepted too
+        # a policy object of verified.sets.bases (BlockBasis, EnergyAlignedBasis) is accepted too
         raise ValueError(f"error_basis must be 'qr' or 'auto', got {error_basis!r}")
     if progress is not None and not callable(progress):
         raise ValueError(f"progress must be None or a callable(t, t_end), got {progress!r}")

@@ -85,7 +85,7 @@ class LohnerStepper:
     """Verified steps of order ``order`` for the ODE behind ``taylor`` (and its variational
     ODE), on :class:`~verified.sets.first_order.DoubletonSets` (implements
     :class:`verified.steppers.protocol.Stepper`). ``error_basis``: "qr", "auto" or a policy
-    object of :mod:`verified.driver.control` (the basis of the error part ``Q r``)."""
+    object of :mod:`verified.sets.bases` (the basis of the error part ``Q r``)."""
 
     #: absorb the error part into parameters once it is this fraction of the carried part
     ABSORB_RATIO = 0.1
@@ -94,7 +94,7 @@ class LohnerStepper:
 
     def __init__(self, taylor, variational, order: int, params=None, error_basis="qr", absorb: bool = False,
                  max_params: int | None = None):
-        self.basis = error_basis_policy(error_basis)  # QRBasis / AutoBasis (verified.driver.control)
+        self.basis = error_basis_policy(error_basis)  # QRBasis / AutoBasis (verified.sets.bases)
         self.error_basis = self.basis.name if hasattr(self.basis, "name") else error_basis
         self.taylor = taylor
         self.variational = variational
@@ -245,4 +245,4 @@ class LohnerStepper:
         new = sets.absorb_error()
         return new.recentred() if self.recentre and hasattr(new, "recentred") else new
 
-    _orthonormal_basis = staticmethod(orthonormal_basis)  # (its home is verified.driver.control)
+    _orthonormal_basis = staticmethod(orthonormal_basis)  # (its home is verified.sets.bases)
