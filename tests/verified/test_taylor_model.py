@@ -83,12 +83,14 @@ def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_sy
     coefficients' remainders move there, ``TaylorModelODE._run(fresh=True)``), whose
     values are unknown: their terms count as remainder. ``pool``: that many symbols
     before them for the remainders born inside the graph (``_run(pool=...)``), likewise.
-    ``product_orders``: ``_run``'s (None: the evaluator's default)."""
+    ``product_orders``: the evaluator's :attr:`TaylorModelODE.product_orders` (None: its default)."""
     from flint import arb
 
     c, r = np.asarray(c, float), np.asarray(r, float)
     n = m = c.size
     ev = TaylorModelODE(graph, quadratic_symbols, cubic_symbols, quartic_symbols, star_symbols)
+    if product_orders is not None:
+        ev.product_orders = product_orders
     mq, m3, m4, ms = ev.symbol_caps(m)
     ns = m - mq  # the star reaches the states' symbols, not the fresh ones
     mt = m + pool + (n * order if fresh else 0)
@@ -96,8 +98,7 @@ def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_sy
     X[:, 0, 0] = c
     X[np.arange(n), 0, 1 + np.arange(n)] = r
     out = ev._run(tm.forms_to_models(X, mq, m3, m4, ms, ns), np.zeros((0, 1, model_length(mt, mq, m3, m4, ms, ns))),
-                  order, mt, mq, m3, m4, ms, ns, fresh=fresh, pool=pool, pool_tol=pool_tol, pool_orders=pool_orders,
-                  product_orders=product_orders)
+                  order, mt, mq, m3, m4, ms, ns, fresh=fresh, pool=pool, pool_tol=pool_tol, pool_orders=pool_orders)
     pool_used = None
     if fresh or pool:
         # the fresh and pool symbols' coefficients join the remainder; the model without them

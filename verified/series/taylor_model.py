@@ -921,8 +921,7 @@ class TaylorModelODE:
         m3 = min(mq, self.cubic_symbols)
         return mq, m3, min(m3, self.quartic_symbols), min(mq, self.star_symbols)
 
-    def _run(self, X, P, order, m, mq, m3=0, m4=0, ms=0, ns=None, fresh=False, pool=0, pool_tol=1e-8, pool_orders=1,
-             product_orders=None):
+    def _run(self, X, P, order, m, mq, m3=0, m4=0, ms=0, ns=None, fresh=False, pool=0, pool_tol=1e-8, pool_orders=1):
         """The kernel on input models ``X`` (n, B, L) and parameter models ``P`` (p, B, L),
         ``L = model_length(m, mq, m3, m4, ms, ns)``: (n, order + 1, B, L).
 
@@ -945,8 +944,7 @@ class TaylorModelODE:
         instead of adding up as independent radii (docs/lab/code_notes.md). Sound for the
         same reason as ``fresh``: a slot's true value is its polynomial plus ``e delta``
         for some ``delta`` in ``[-1, 1]``, which every later operation treats as a symbol.
-
-        ``product_orders``: :attr:`product_orders` for this call (None: the evaluator's)."""
+        The orders without kept products: :attr:`product_orders`."""
         t = self._tape
         PA, PB, PC = product_table(m, mq, m3, m4, ms, ns)
         L = model_length(m, mq, m3, m4, ms, ns)
@@ -966,8 +964,7 @@ class TaylorModelODE:
         return _model_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs,
                              np.ascontiguousarray(X), np.ascontiguousarray(P), int(order), PA, PB, PC,
                              4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0, F, REC,
-                             pool0, int(pool), float(pool_tol), int(pool_orders),
-                             int(self.product_orders if product_orders is None else product_orders))
+                             pool0, int(pool), float(pool_tol), int(pool_orders), int(self.product_orders))
 
     def __getstate__(self):
         # the kernel's work memory is scratch (tens to hundreds of MB): not pickled
