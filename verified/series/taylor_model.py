@@ -823,12 +823,176 @@ def _diagonal_mask(mq: int, length: int) -> np.ndarray:
     return diag
 
 
+@functools.lru_cache(maxsize=64)
+def _diagonal_split(mq: int, length: int) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (int64, increasing) of the quadratic diagonal and of every other
+    coefficient among a model's ``length`` coefficients past the linear ones: the
+    elements ``Q[..., diag]`` and ``Q[..., ~diag]`` of :func:`_diagonal_mask`, in order."""
+    diag = _diagonal_mask(mq, length)
+    on, off = np.flatnonzero(diag), np.flatnonzero(~diag)
+    on.flags.writeable = False
+    off.flags.writeable = False
+    return on, off
+
+
+@njit(cache=True)
+def _pairwise_block(a, s, n):
+    """numpy's pairwise sum of ``a[s:s + n]`` for ``n <= 128`` (its leaf): below 8 terms
+    one by one from 0, else 8 running sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 +
+    r5) + (r6 + r7)), then the tail one by one."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[s + i]
+        return res
+    r0, r1, r2, r3 = a[s], a[s + 1], a[s + 2], a[s + 3]
+    r4, r5, r6, r7 = a[s + 4], a[s + 5], a[s + 6], a[s + 7]
+    stop = n - (n % 8)
+    i = 8
+    while i < stop:
+        r0 += a[s + i]
+        r1 += a[s + i + 1]
+        r2 += a[s + i + 2]
+        r3 += a[s + i + 3]
+        r4 += a[s + i + 4]
+        r5 += a[s + i + 5]
+        r6 += a[s + i + 6]
+        r7 += a[s + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[s + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a, n):
+    """``a[:n].sum()`` bit for bit as numpy sums a contiguous float64 row: 0 plus its
+    pairwise sum (a block of up to 128 by :func:`_pairwise_block`, a longer one as its
+    two halves, the first a multiple of 8 long, added). Without recursion (a recursive
+    function loaded from numba's cache crashed): the halves on an explicit stack."""
+    if n <= 128:
+        return 0.0 + _pairwise_block(a, np.int64(0), n)
+    st = np.empty(64, np.int64)   # block starts
+    ln = np.empty(64, np.int64)   # block lengths
+    ph = np.empty(64, np.int64)   # 0: left half next, 1: right half next, 2: add them
+    vals = np.empty(64)
+    top = 0
+    nv = 0
+    st[0], ln[0], ph[0] = 0, n, 0  # (stores, not calls: no literal typing)
+    while top >= 0:
+        s, k = st[top], ln[top]
+        if k <= 128:
+            vals[nv] = _pairwise_block(a, s, k)
+            nv += 1
+            top -= 1
+            continue
+        k2 = k // 2
+        k2 -= k2 % 8
+        if ph[top] == 0:
+            ph[top] = 1
+            top += 1
+            st[top], ln[top], ph[top] = s, k2, 0
+        elif ph[top] == 1:
+            ph[top] = 2
+            top += 1
+            st[top], ln[top], ph[top] = s + k2, k - k2, 0
+        else:
+            nv -= 1
+            vals[nv - 1] = vals[nv - 1] + vals[nv]
+            top -= 1
+    return 0.0 + vals[0]
+
+
+@njit(cache=True)
+def _models_to_interval_rows(F, m, on, off, pairwise_masked, lo, hi):
+    """:func:`_models_to_interval_np` on models ``F`` (R, L), C-contiguous, into ``lo``,
+    ``hi`` (R,): the same float operations in the same order. The sums over the
+    linear coefficients are numpy's pairwise sums of contiguous rows; those over the
+    diagonal and the other quadratic-and-higher coefficients are over numpy's masked
+    copies, whose memory puts the row index innermost: one term after the other from
+    0 when there is more than one row (``pairwise_masked`` False), pairwise for one row."""
+    R, L = F.shape
+    buf = np.empty(max(m, on.size, off.size, 1))
+    q0 = m + 1
+    for r in range(R):
+        for j in range(m):
+            buf[j] = abs(F[r, 1 + j])
+        s_lin = _pairwise_sum(buf, m)
+        if pairwise_masked:
+            for j in range(off.size):
+                buf[j] = abs(F[r, q0 + off[j]])
+            s_off = _pairwise_sum(buf, off.size)
+            for j in range(on.size):
+                x = F[r, q0 + on[j]]
+                buf[j] = x if (x > 0.0 or x != x) else 0.0
+            s_pos = _pairwise_sum(buf, on.size)
+            for j in range(on.size):
+                x = -F[r, q0 + on[j]]
+                buf[j] = x if (x > 0.0 or x != x) else 0.0
+            s_neg = _pairwise_sum(buf, on.size)
+        else:
+            s_off = 0.0
+            for j in range(off.size):
+                s_off += abs(F[r, q0 + off[j]])
+            s_pos = 0.0
+            s_neg = 0.0
+            for j in range(on.size):
+                x = F[r, q0 + on[j]]
+                s_pos += x if (x > 0.0 or x != x) else 0.0
+                x = -x
+                s_neg += x if (x > 0.0 or x != x) else 0.0
+        rr = (s_lin + s_off) * _UPF + _TINY
+        pos = s_pos * _UPF + _TINY
+        neg = s_neg * _UPF + _TINY
+        e = F[r, L - 1]
+        c = F[r, 0]
+        l = c - ((rr + neg + e) * _UPF + _TINY)
+        h = c + ((rr + pos + e) * _UPF + _TINY)
+        l = l - (abs(l) * _k.EPS + _k.ETA)
+        h = h + (abs(h) * _k.EPS + _k.ETA)
+        if l != l or h != h:
+            l = -INF
+            h = INF
+        lo[r] = l
+        hi[r] = h
+
+
 def models_to_interval(F: np.ndarray, m: int, mq: int) -> tuple[np.ndarray, np.ndarray]:
     """Interval ranges of models ``(..., L)`` (rounded outward); NaN gives ``[-inf, inf]``.
 
     ``eps_i^2`` lies in ``[0, 1]``, so a diagonal coefficient ``q_ii`` moves only one
     bound; every other monomial (cubic, quartic and star ones included, after the
-    quadratic ones) lies in ``[-1, 1]``."""
+    quadratic ones) lies in ``[-1, 1]``.
+
+    One compiled pass (:func:`_models_to_interval_rows`) that gives bit for bit what
+    the numpy expression :func:`_models_to_interval_np` gives (its sums in numpy's
+    order); that expression for models whose memory is not in row order (numpy's sums
+    follow the memory layout)."""
+    L = F.shape[-1]
+    lead = F.shape[:-1]
+    if (F.dtype != np.float64 or F.ndim < 1 or L < m + 2 or F.size == 0
+            or not _row_ordered(F)):
+        return _models_to_interval_np(F, m, mq)
+    on, off = _diagonal_split(mq, L - m - 2)
+    F2 = np.ascontiguousarray(F).reshape(-1, L)
+    lo = np.empty(F2.shape[0])
+    hi = np.empty(F2.shape[0])
+    _models_to_interval_rows(F2, int(m), on, off, F2.shape[0] == 1, lo, hi)
+    return lo.reshape(lead), hi.reshape(lead)
+
+
+def _row_ordered(F: np.ndarray) -> bool:
+    """Whether ``np.abs(F)`` is C-contiguous (numpy keeps the operand's layout): the
+    strides of the axes longer than 1 decrease (a C-contiguous array or a slice of one)."""
+    st = [s for s, d in zip(F.strides, F.shape) if d > 1]
+    return all(a > b > 0 for a, b in zip(st, st[1:])) and (not st or st[-1] > 0)
+
+
+def _models_to_interval_np(F: np.ndarray, m: int, mq: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`models_to_interval` as numpy expressions (the reference of the compiled pass,
+    and its fallback for models in another memory order)."""
     diag = _diagonal_mask(mq, F.shape[-1] - m - 2)
     c = F[..., 0]
     with np.errstate(invalid="ignore", over="ignore"):
@@ -844,7 +1008,6 @@ def models_to_interval(F: np.ndarray, m: int, mq: int) -> tuple[np.ndarray, np.n
         hi = hi + (np.abs(hi) * _k.EPS + _k.ETA)
     bad = np.isnan(lo) | np.isnan(hi)
     return np.where(bad, -np.inf, lo), np.where(bad, np.inf, hi)
-
 
 
 def _memory_bytes() -> float:
