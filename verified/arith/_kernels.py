@@ -594,6 +594,26 @@ def ipow_loop(a, b, n, lo, hi):
 
 # ----------------------------------------------------------------- matrix products
 @njit(cache=True)
+def matvec_bounds(alo, ahi, xlo, xhi):
+    """Bounds of the interval matrix-vector products ``a[b] @ x[b]`` of a batch: ``alo``,
+    ``ahi`` (nb, n, k), ``xlo``, ``xhi`` (nb, k) -> ``clo``, ``chi`` (nb, n): the same
+    ``mul`` and ``add`` in the same order as :func:`matmul_bounds` with one column."""
+    nb, n, k = alo.shape
+    clo = np.empty((nb, n))
+    chi = np.empty((nb, n))
+    for b in range(nb):
+        for i in range(n):
+            sl = 0.0
+            sh = 0.0
+            for t in range(k):
+                pl, ph = mul(alo[b, i, t], ahi[b, i, t], xlo[b, t], xhi[b, t])
+                sl, sh = add(sl, sh, pl, ph)
+            clo[b, i] = sl
+            chi[b, i] = sh
+    return clo, chi
+
+
+@njit(cache=True)
 def matmul_bounds(alo, ahi, blo, bhi):
     """Bounds of the interval matrix products ``a[b] @ b[b]`` of a batch: ``alo``,
     ``ahi`` (nb, n, k), ``blo``, ``bhi`` (nb, k, m) -> ``clo``, ``chi`` (nb, n, m)."""
