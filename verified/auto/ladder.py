@@ -27,12 +27,15 @@ __all__ = ["default_rungs", "COMPOSITION_MAX_STATES"]
 #: paper's pendulum, Laub-Loomis, x'' = -x - 2 x^2 x') it went further than first-order
 #: sets at a similar or lower cost; its Taylor models grow with the square of the states
 COMPOSITION_MAX_STATES = 24
-#: from this many states on (a 5-DOF robot and up) the composition runs at order
-#: LARGE_ORDER with LARGE_PARAMS_PER_STATE parameters per state: shorter Taylor series
-#: of a deep graph, more of the accumulated error carried exactly (the robots' best
-#: setting in benchmarks/bench_robots.py; docs/lab/auto.md)
+#: from this many states on (a 5-DOF robot and up) the composition carries
+#: LARGE_PARAMS_PER_STATE parameters per state: more of the accumulated error carried
+#: exactly (the robots' best setting in benchmarks/bench_robots.py; docs/lab/auto.md).
+#: Its order is the composition's own (12): since the recursion's orders from
+#: ``TaylorModelODE.product_orders`` on keep no products, a longer series costs little
+#: more per step and takes fewer, longer steps; order 8, the choice before, cost the UR5
+#: 1.3x and ended a Panda's payload piece earlier (docs/lab/robot_speed.md)
 LARGE_STATES = 10
-LARGE_ORDER = 8
+LARGE_ORDER = Composition.order
 LARGE_PARAMS_PER_STATE = 12
 #: split pieces must get further than their parent by this fraction of the time span, or
 #: splitting stops (what stops them is then not the width of the set)
