@@ -18,7 +18,6 @@ Generalized forces: ``tau = tau_ext - D qdot`` with the diagonal viscous damping
 from __future__ import annotations
 
 import hashlib
-import warnings
 from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Mapping
@@ -209,23 +208,19 @@ class Chain:
 
     # ------------------------------------------------------------------ constructors
     # The parsers are functions of their own modules, which import this one:
-    # mbs.chain_from_dh (mbs.dh) and mbs.chain_from_urdf (mbs.urdf). These two old
-    # spellings stay for a while; they are the only imports from here into the parsers.
+    # mbs.chain_from_dh (mbs.dh) and mbs.chain_from_urdf (mbs.urdf). The two old
+    # spellings, deprecated since b3cf910, are gone (calling a parser from here closed
+    # an import circle); they name the function to call instead.
     @classmethod
-    def from_dh(cls, rows, convention="standard", **kwargs) -> "Chain":
-        """Deprecated: use :func:`mbs.chain_from_dh` (same arguments)."""
-        warnings.warn("Chain.from_dh is deprecated: use mbs.chain_from_dh(rows, ...) (mbs.dh), "
-                      "same arguments", DeprecationWarning, stacklevel=2)
-        from .dh import chain_from_dh  # (import here: deprecated shim; mbs.dh imports this module)
-        return chain_from_dh(rows, convention=convention, **kwargs)
+    def from_dh(cls, *args, **kwargs) -> "Chain":
+        """Removed: use :func:`mbs.chain_from_dh` (same arguments)."""
+        raise AttributeError("Chain.from_dh was removed: use mbs.chain_from_dh(rows, ...), same arguments")
 
     @classmethod
-    def from_urdf(cls, path_or_xml, **kwargs) -> "Chain":
-        """Deprecated: use :func:`mbs.chain_from_urdf` (same arguments)."""
-        warnings.warn("Chain.from_urdf is deprecated: use mbs.chain_from_urdf(path_or_xml, ...) (mbs.urdf), "
-                      "same arguments", DeprecationWarning, stacklevel=2)
-        from .urdf import chain_from_urdf  # (import here: deprecated shim; mbs.urdf imports this module)
-        return chain_from_urdf(path_or_xml, **kwargs)
+    def from_urdf(cls, *args, **kwargs) -> "Chain":
+        """Removed: use :func:`mbs.chain_from_urdf` (same arguments)."""
+        raise AttributeError("Chain.from_urdf was removed: use mbs.chain_from_urdf(path_or_xml, ...), "
+                             "same arguments")
 
     # ------------------------------------------------------------------ identity
     def content(self) -> str:

@@ -307,13 +307,12 @@ def test_random_urdf_trees_match_pinocchio(xml):
     assert max_error(rep) <= 1e-9, rep
 
 
-def test_chain_constructors_are_deprecated_spellings_of_the_parser_functions():
-    """Issue 15: the parsers are functions (mbs.chain_from_dh, mbs.chain_from_urdf) and
-    mbs.chain does not import them; Chain.from_dh/from_urdf still work, with a warning."""
+def test_removed_chain_constructors_name_the_parser_functions():
+    """Issue 15 made the parsers functions (mbs.chain_from_dh, mbs.chain_from_urdf) and
+    deprecated Chain.from_dh/from_urdf; issue 44 removed them (they closed an import
+    circle): calling them is a one-line error naming the function to call."""
     rows = [dict(joint="R", a=1.0, mass=1.0)]
-    with pytest.warns(DeprecationWarning, match="mbs.chain_from_dh"):
-        old = Chain.from_dh(rows, convention="modified")
-    assert old.fingerprint() == mbs.chain_from_dh(rows, convention="modified").fingerprint()
-    with pytest.warns(DeprecationWarning, match="mbs.chain_from_urdf"):
-        old = Chain.from_urdf(TREE_URDF, lock={"left_shoulder": 0.4})
-    assert old.fingerprint() == mbs.chain_from_urdf(TREE_URDF, lock={"left_shoulder": 0.4}).fingerprint()
+    with pytest.raises(AttributeError, match=r"mbs\.chain_from_dh\(rows"):
+        Chain.from_dh(rows, convention="modified")
+    with pytest.raises(AttributeError, match=r"mbs\.chain_from_urdf\(path_or_xml"):
+        Chain.from_urdf(TREE_URDF, lock={"left_shoulder": 0.4})
