@@ -45,6 +45,11 @@ from fractions import Fraction
 import numpy as np
 
 from verified.arith import _kernels as _k
+
+try:
+    from numpy._core.umath import clip as _clip  # (the ufunc np.clip calls)
+except ImportError:  # numpy < 2
+    from numpy.core.umath import clip as _clip
 from verified.arith.exact import enclose_fraction
 
 __all__ = [
@@ -148,6 +153,11 @@ def _enclose(value, what):
 
 
 def _check_user_bounds(lo, hi, allow_unbounded):
+    if lo is hi:
+        # one array for both bounds (a float or float array given as ``lo`` alone): only
+        # NaN and infinities can be wrong, and finite values are the common case
+        if np.isfinite(lo).all():
+            return
     if np.isnan(lo).any() or np.isnan(hi).any():
         raise IntervalError("interval bounds contain NaN")
     bad = lo > hi
@@ -280,7 +290,8 @@ class Interval:
         with np.errstate(invalid="ignore", over="ignore"):
             m = 0.5 * self.lo + 0.5 * self.hi
         m = np.where(np.isnan(m), 0.0, m)  # [-inf, inf]
-        return np.clip(m, np.maximum(self.lo, -_k.MAXF), np.minimum(self.hi, _k.MAXF))
+        # (the clip ufunc itself: what np.clip calls, without its Python wrappers)
+        return _clip(m, np.maximum(self.lo, -_k.MAXF), np.minimum(self.hi, _k.MAXF))
 
     def rad(self):
         """Upper bound ``r`` such that ``[mid - r, mid + r]`` contains the interval."""
@@ -552,7 +563,7 @@ def _bounds(x):
     if isinstance(x, Interval):
         return x.lo, x.hi
     lo, hi = _enclose(x, "operand")
-    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+    if not (np.isfinite(lo).all() and (hi is lo or np.isfinite(hi).all())):
         raise IntervalError(f"non-finite value (NaN or inf) used in interval arithmetic: {x!r}")
     return lo, hi
 
@@ -568,10 +579,12 @@ def _flat(arr, shape):
 
 
 def _binary(loop, x, y):
-    xl, xh = _bounds(x)
-    yl, yh = _bounds(y)
+    xl, xh = (x.lo, x.hi) if type(x) is Interval else _bounds(x)
+    yl, yh = (y.lo, y.hi) if type(y) is Interval else _bounds(y)
+    xs, ys = xl.shape, yl.shape
     try:
-        shape = xl.shape if xl.shape == yl.shape else np.broadcast_shapes(xl.shape, yl.shape)
+        # (a scalar operand: the other's shape, as broadcasting gives it)
+        shape = xs if (xs == ys or not ys) else (ys if not xs else np.broadcast_shapes(xs, ys))
     except ValueError:
         raise ValueError(f"interval operands of shapes {xl.shape} and {yl.shape} do not broadcast") from None
     lo = np.empty(shape)
