@@ -718,3 +718,36 @@ def tube_box_bounds(xlo, xhi, vlo, vhi, clo, chi, taus, K):
             lo[b, i] = accl
             hi[b, i] = acch
     return lo, hi
+
+
+# ----------------------------------------------------------------- midpoint, radius, width
+@njit(cache=True)
+def _mid1(a, b):
+    """:meth:`verified.arith.interval.Interval.mid` of one interval: ``0.5 a + 0.5 b`` (0
+    for NaN), clipped as the ``clip`` ufunc does (``min(max(m, lower), upper)``, NaN
+    kept) into ``[np.maximum(a, -MAXF), np.minimum(b, MAXF)]``."""
+    m = 0.5 * a + 0.5 * b
+    if m != m:
+        m = 0.0
+    return _np_min(_np_max(m, _np_max(a, -MAXF)), _np_min(b, MAXF))
+
+
+@njit(cache=True)
+def mid_loop(lo, hi, out):
+    for i in range(lo.size):
+        out[i] = _mid1(lo[i], hi[i])
+
+
+@njit(cache=True)
+def rad_loop(lo, hi, out):
+    """``np.maximum(ru(m - lo), ru(hi - m))`` with ``m`` the midpoint (:func:`_mid1`)."""
+    for i in range(lo.size):
+        m = _mid1(lo[i], hi[i])
+        out[i] = _np_max(ru(m - lo[i]), ru(hi[i] - m))
+
+
+@njit(cache=True)
+def width_loop(lo, hi, out):
+    """``ru(hi - lo)``, 0 where ``lo > hi`` (empty)."""
+    for i in range(lo.size):
+        out[i] = 0.0 if lo[i] > hi[i] else ru(hi[i] - lo[i])
