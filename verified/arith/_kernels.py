@@ -632,3 +632,122 @@ def matmul_bounds(alo, ahi, blo, bhi):
                 clo[b, i, j] = sl
                 chi[b, i, j] = sh
     return clo, chi
+
+
+# ----------------------------------------------------------------- the step's tube box
+@njit(cache=True)
+def _np_max(a, b):
+    """``np.maximum(a, b)`` of two floats: NaN from either, else ``a if a > b else b``
+    (the second of two equal values: ``np.maximum(0.0, -0.0)`` is ``-0.0``)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a > b else b
+
+
+@njit(cache=True)
+def _np_min(a, b):
+    """``np.minimum(a, b)`` of two floats (see :func:`_np_max`)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a < b else b
+
+
+@njit(cache=True)
+def tube_box_bounds(xlo, xhi, vlo, vhi, clo, chi, taus, K):
+    """The box of :func:`verified.steppers.tm_flow.step_tube` from the ranges of
+    ``x(tau_j)`` and ``x'(tau_j)`` without their Lagrange terms, ``xlo``, ``xhi``, ``vlo``,
+    ``vhi`` (P, n, B), the coefficients over the a-priori enclosure ``clo``, ``chi`` (B,
+    K + 1, n) and the times ``taus`` (P,) (finite, non-negative, increasing): ``lo``, ``hi``
+    (B, n). The same scalar ``add``, ``sub``, ``mul`` and ``ipow`` with the same operands
+    in the same order as the interval expressions there (the arrays' fast loops give
+    the same bounds as these), and numpy's ``maximum``, ``minimum`` and its reduction
+    over the pieces (first to last)."""
+    P = taus.size
+    n = xlo.shape[1]
+    nb = xlo.shape[2]
+    lo = np.empty((nb, n))
+    hi = np.empty((nb, n))
+    fK = float(K)
+    Xl = np.empty(P)
+    Xh = np.empty(P)
+    Vl = np.empty(P)
+    Vh = np.empty(P)
+    for b in range(nb):
+        for i in range(n):
+            kl, kh = clo[b, K, i], chi[b, K, i]
+            c2l, c2h = clo[b, 2, i], chi[b, 2, i]
+            for j in range(P):
+                # X = x + cK * t ** K, V = x' + K * (cK * t ** (K - 1))
+                tl, th = ipow(taus[j], taus[j], K)
+                pl, ph = mul(kl, kh, tl, th)
+                Xl[j], Xh[j] = add(xlo[j, i, b], xhi[j, i, b], pl, ph)
+                tl, th = ipow(taus[j], taus[j], K - 1)
+                pl, ph = mul(kl, kh, tl, th)
+                pl, ph = mul(fK, fK, pl, ph)
+                Vl[j], Vh[j] = add(vlo[j, i, b], vhi[j, i, b], pl, ph)
+            accl = 0.0
+            acch = 0.0
+            for j in range(P - 1):
+                # d = [0, hi(tau_j+1 - tau_j)], bend = c2 * d ** 2
+                dh = sub(taus[j + 1], taus[j + 1], taus[j], taus[j])[1]
+                d2l, d2h = ipow(0.0, dh, np.int64(2))  # (not a literal: tests/verified/test_kernel_literals.py)
+                bl, bh = mul(c2l, c2h, d2l, d2h)
+                # left = X_j + V_j d + bend, right = X_j+1 - V_j+1 d + bend
+                pl, ph = mul(Vl[j], Vh[j], 0.0, dh)
+                sl, sh = add(Xl[j], Xh[j], pl, ph)
+                ll, lh = add(sl, sh, bl, bh)
+                pl, ph = mul(Vl[j + 1], Vh[j + 1], 0.0, dh)
+                sl, sh = sub(Xl[j + 1], Xh[j + 1], pl, ph)
+                rl, rh = add(sl, sh, bl, bh)
+                # their intersection (empty: [inf, -inf]); where empty, left alone
+                el = _np_max(ll, rl)
+                eh = _np_min(lh, rh)
+                if el > eh:
+                    el, eh = INF, -INF
+                if el > eh:
+                    el, eh = ll, lh
+                if j == 0:
+                    accl, acch = el, eh
+                else:
+                    accl = _np_min(accl, el)
+                    acch = _np_max(acch, eh)
+            lo[b, i] = accl
+            hi[b, i] = acch
+    return lo, hi
+
+
+# ----------------------------------------------------------------- midpoint, radius, width
+@njit(cache=True)
+def _mid1(a, b):
+    """:meth:`verified.arith.interval.Interval.mid` of one interval: ``0.5 a + 0.5 b`` (0
+    for NaN), clipped as the ``clip`` ufunc does (``min(max(m, lower), upper)``, NaN
+    kept) into ``[np.maximum(a, -MAXF), np.minimum(b, MAXF)]``."""
+    m = 0.5 * a + 0.5 * b
+    if m != m:
+        m = 0.0
+    return _np_min(_np_max(m, _np_max(a, -MAXF)), _np_min(b, MAXF))
+
+
+@njit(cache=True)
+def mid_loop(lo, hi, out):
+    for i in range(lo.size):
+        out[i] = _mid1(lo[i], hi[i])
+
+
+@njit(cache=True)
+def rad_loop(lo, hi, out):
+    """``np.maximum(ru(m - lo), ru(hi - m))`` with ``m`` the midpoint (:func:`_mid1`)."""
+    for i in range(lo.size):
+        m = _mid1(lo[i], hi[i])
+        out[i] = _np_max(ru(m - lo[i]), ru(hi[i] - m))
+
+
+@njit(cache=True)
+def width_loop(lo, hi, out):
+    """``ru(hi - lo)``, 0 where ``lo > hi`` (empty)."""
+    for i in range(lo.size):
+        out[i] = 0.0 if lo[i] > hi[i] else ru(hi[i] - lo[i])

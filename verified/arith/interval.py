@@ -45,6 +45,11 @@ from fractions import Fraction
 import numpy as np
 
 from verified.arith import _kernels as _k
+
+try:
+    from numpy._core.umath import clip as _clip  # (the ufunc np.clip calls)
+except ImportError:  # numpy < 2
+    from numpy.core.umath import clip as _clip
 from verified.arith.exact import enclose_fraction
 
 __all__ = [
@@ -148,6 +153,11 @@ def _enclose(value, what):
 
 
 def _check_user_bounds(lo, hi, allow_unbounded):
+    if lo is hi:
+        # one array for both bounds (a float or float array given as ``lo`` alone): only
+        # NaN and infinities can be wrong, and finite values are the common case
+        if np.isfinite(lo).all():
+            return
     if np.isnan(lo).any() or np.isnan(hi).any():
         raise IntervalError("interval bounds contain NaN")
     bad = lo > hi
@@ -277,23 +287,22 @@ class Interval:
     def mid(self):
         """A float inside each interval, near its midpoint (0 for ``[-inf, inf]``;
         the finite float nearest to an infinite end for half-unbounded intervals)."""
-        with np.errstate(invalid="ignore", over="ignore"):
-            m = 0.5 * self.lo + 0.5 * self.hi
-        m = np.where(np.isnan(m), 0.0, m)  # [-inf, inf]
-        return np.clip(m, np.maximum(self.lo, -_k.MAXF), np.minimum(self.hi, _k.MAXF))
+        out = _bound_loop(_k.mid_loop, self.lo, self.hi)
+        if out is None:
+            return _mid_np(self.lo, self.hi)
+        return out if out.ndim else out[()]
 
     def rad(self):
         """Upper bound ``r`` such that ``[mid - r, mid + r]`` contains the interval."""
-        m = self.mid()
-        with np.errstate(invalid="ignore", over="ignore"):
-            r = np.maximum(_k_round_up(m - self.lo), _k_round_up(self.hi - m))
-        return r
+        out = _bound_loop(_k.rad_loop, self.lo, self.hi)
+        if out is None:
+            return _rad_np(self.lo, self.hi)
+        return out if out.ndim else out[()]
 
     def width(self):
         """Upper bound of ``hi - lo`` (0 for empty intervals)."""
-        with np.errstate(invalid="ignore", over="ignore"):
-            w = _k_round_up(self.hi - self.lo)
-        return np.where(self.is_empty(), 0.0, w)
+        out = _bound_loop(_k.width_loop, self.lo, self.hi)
+        return _width_np(self.lo, self.hi) if out is None else out
 
     def mag(self):
         """``max |x|`` over the interval (exact)."""
@@ -546,13 +555,49 @@ def _k_round_up(x):
     return np.where(x == -np.inf, -_k.MAXF, x + (np.abs(x) * _k.EPS + _k.ETA))
 
 
+# ------------------------------------------------- midpoint, radius, width (compiled)
+def _bound_loop(loop, lo, hi):
+    """``loop`` (``_kernels.mid_loop``, ``rad_loop``, ``width_loop``: the expressions of
+    :func:`_mid_np`, :func:`_rad_np`, :func:`_width_np` element by element, bit for
+    bit) over float64 bounds of one shape; None for anything else (the numpy path)."""
+    if type(lo) is not np.ndarray or type(hi) is not np.ndarray or lo.shape != hi.shape \
+            or lo.dtype != np.float64 or hi.dtype != np.float64:
+        return None
+    out = np.empty(lo.shape)
+    loop(_k.kernel_array(lo).reshape(-1), _k.kernel_array(hi).reshape(-1), out.reshape(-1))
+    return out
+
+
+def _mid_np(lo, hi):
+    """:meth:`Interval.mid` in numpy (the reference of ``_kernels.mid_loop``)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        m = 0.5 * lo + 0.5 * hi
+    m = np.where(np.isnan(m), 0.0, m)  # [-inf, inf]
+    return np.clip(m, np.maximum(lo, -_k.MAXF), np.minimum(hi, _k.MAXF))
+
+
+def _rad_np(lo, hi):
+    """:meth:`Interval.rad` in numpy (the reference of ``_kernels.rad_loop``)."""
+    m = _mid_np(lo, hi)
+    with np.errstate(invalid="ignore", over="ignore"):
+        r = np.maximum(_k_round_up(m - lo), _k_round_up(hi - m))
+    return r
+
+
+def _width_np(lo, hi):
+    """:meth:`Interval.width` in numpy (the reference of ``_kernels.width_loop``)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        w = _k_round_up(hi - lo)
+    return np.where(lo > hi, 0.0, w)
+
+
 def _bounds(x):
     """(lo, hi) float arrays of an Interval, or enclosing exact values (floats are
     exact; big ints, Fractions and Decimals are enclosed, see :func:`_enclose`)."""
     if isinstance(x, Interval):
         return x.lo, x.hi
     lo, hi = _enclose(x, "operand")
-    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+    if not (np.isfinite(lo).all() and (hi is lo or np.isfinite(hi).all())):
         raise IntervalError(f"non-finite value (NaN or inf) used in interval arithmetic: {x!r}")
     return lo, hi
 
@@ -568,10 +613,12 @@ def _flat(arr, shape):
 
 
 def _binary(loop, x, y):
-    xl, xh = _bounds(x)
-    yl, yh = _bounds(y)
+    xl, xh = (x.lo, x.hi) if type(x) is Interval else _bounds(x)
+    yl, yh = (y.lo, y.hi) if type(y) is Interval else _bounds(y)
+    xs, ys = xl.shape, yl.shape
     try:
-        shape = xl.shape if xl.shape == yl.shape else np.broadcast_shapes(xl.shape, yl.shape)
+        # (a scalar operand: the other's shape, as broadcasting gives it)
+        shape = xs if (xs == ys or not ys) else (ys if not xs else np.broadcast_shapes(xs, ys))
     except ValueError:
         raise ValueError(f"interval operands of shapes {xl.shape} and {yl.shape} do not broadcast") from None
     lo = np.empty(shape)

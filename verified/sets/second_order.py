@@ -305,8 +305,19 @@ class QuadraticSets:
         return QuadraticSets(c=c, C=C, r0=r0, S=S, Q=Q, r=r)
 
     def linear_width(self) -> np.ndarray:
-        """Width of the part carried without wrapping, ``C r0 + q(r0)``, shape (B, n)."""
-        return (linalg.matvec(self.C, self.r0) + self.q_range()).width()
+        """Width of the part carried without wrapping, ``C r0 + q(r0)``, shape (B, n).
+
+        Kept for the same ``C``, ``S`` and ``r0`` objects (a step asks twice: the
+        absorption test and the wrapping control, on the same sets unless absorbed;
+        a field replaced, as :func:`verified.consistency.energy_state.assign` does, is
+        a new object and computes it again; the arrays are never changed in place).
+        The caller gets a copy."""
+        key = (self.C, self.S, self.r0.lo, self.r0.hi)
+        memo = self.__dict__.get("_linear_width_memo")
+        if memo is None or any(a is not b for a, b in zip(memo[0], key)):
+            memo = (key, (linalg.matvec(self.C, self.r0) + self.q_range()).width())
+            self.__dict__["_linear_width_memo"] = memo
+        return memo[1].copy()
 
     def split_widths(self) -> np.ndarray:
         """The width each parameter and each error component gives the set, summed over

@@ -78,6 +78,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from verified.arith import _kernels as _k
 from verified.arith import linalg
 from verified.series.affine_taylor import box_forms
 from verified.arith.interval import Interval, _k_round_up, point
@@ -420,12 +421,38 @@ def step_tube(out: np.ndarray, cE: Interval, h_top: float, M: int, mq: int, piec
     motion with the slack of its validation; this box is about the sets' own width plus
     the motion, which is what a bound checked on the tube (a spec, a frame) needs."""
     K = out.shape[1]
+    h_top = float(h_top)
+    if not (0.0 <= h_top < 1e300 and pieces >= 1 and cE.shape[1] > max(K, 2)):
+        return _step_tube_np(out, cE, h_top, M, mq, pieces)  # (and its errors)
     out = np.ascontiguousarray(out)
     taus = np.array([h_top * j / pieces for j in range(pieces)] + [h_top])
+    xlo, xhi = models_to_interval(_horner_at(out, taus), M, mq)  # (P, n, B)
+    vlo, vhi = models_to_interval(_horner_at(_derivative_models(out), taus), M, mq)
+    # the interval expressions of _step_tube_np in one compiled pass, bit for bit
+    lo, hi = _k.tube_box_bounds(_k.kernel_array(xlo), _k.kernel_array(xhi), _k.kernel_array(vlo),
+                                _k.kernel_array(vhi), _k.kernel_array(cE.lo), _k.kernel_array(cE.hi), taus, K)
+    return Interval._from_bounds(lo, hi)
+
+
+def _step_tube_np(out: np.ndarray, cE: Interval, h_top: float, M: int, mq: int, pieces: int = TUBE_PIECES) -> Interval:
+    """:func:`step_tube` in interval arithmetic on arrays: the reference its compiled pass
+    (``_kernels.tube_box_bounds``) is tested against, and its path for arguments that
+    the compiled pass does not take (a step of no finite length, no pieces)."""
+    K = out.shape[1]
+    out = np.ascontiguousarray(out)
+    taus = np.array([h_top * j / pieces for j in range(pieces)] + [h_top])
+    return _tube_box_np(_model_ranges(_horner_at(out, taus), M, mq),
+                        _model_ranges(_horner_at(_derivative_models(out), taus), M, mq), cE, taus, K)
+
+
+def _tube_box_np(Xr: Interval, Vr: Interval, cE: Interval, taus: np.ndarray, K: int) -> Interval:
+    """The interval part of :func:`_step_tube_np`: ``Xr``, ``Vr`` (P, B, n) the ranges of
+    the models of ``x(tau_j)`` and ``x'(tau_j)`` (without the Lagrange terms)."""
+    pieces = taus.size - 1
     t = Interval(taus)[:, None, None]                                    # (P, 1, 1)
     cK, c2 = cE[:, K][None], cE[:, 2][None]                               # (1, B, n)
-    X = _model_ranges(_horner_at(out, taus), M, mq) + cK * t ** K          # (P, B, n)
-    V = _model_ranges(_horner_at(_derivative_models(out), taus), M, mq) + K * (cK * t ** (K - 1))
+    X = Xr + cK * t ** K          # (P, B, n)
+    V = Vr + K * (cK * t ** (K - 1))
     d = Interval(np.zeros(pieces), (Interval(taus[1:]) - Interval(taus[:-1])).hi)[:, None, None]
     bend = c2 * d ** 2
     left = X[:-1] + V[:-1] * d + bend
