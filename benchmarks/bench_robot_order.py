@@ -1,11 +1,12 @@
 """The Taylor order of ``auto``'s composition on robots, side by side in one run (issue 45).
 
 ``auto`` advances systems of 10 states and more (a 5-DOF robot and up) with
-``Composition(params_per_state=12)`` at the composition's own order
-(``verified.auto.ladder.LARGE_ORDER``). This runs the robot cases with that rung at each
-order of ``--orders`` (``Auto(rungs=(Composition(order=K, params_per_state=12),))``: the
-public API, nothing patched), alternating the orders in one process, and prints per row
-the CPU seconds of the whole call, the steps, how far it got and the worst ratio of the
+``Composition(params_per_state=12, min_order=6)`` at the composition's own order
+(``verified.auto.ladder.LARGE_ORDER``, each step's order in [6, 12]). This runs the robot
+cases with that rung at each order of ``--orders``
+(``Auto(rungs=(Composition(order=K, params_per_state=12),))``, with ``min_order=k`` for
+"K/k": the public API, nothing patched), alternating the orders in one process, and
+prints per row the CPU seconds of the whole call, the steps, how far it got and the worst ratio of the
 final width to the sampled spread (16 samples, Pinocchio's ``aba`` with DOP853).
 
 Cases: ``ur5`` (UR5 from q0 +- 1e-3, T = 1, modes i and ii), ``quintic``
@@ -13,7 +14,7 @@ Cases: ``ur5`` (UR5 from q0 +- 1e-3, T = 1, modes i and ii), ``quintic``
 (the same with a 1 kg +- 10 % payload at the hand, T = 5, one piece: ``max_pieces=1``, so
 the row says where a single set breaks down).
 
-    python benchmarks/bench_robot_order.py                          # orders 8 and 12, every case
+    python benchmarks/bench_robot_order.py                          # 8, 12 and 12/6 (auto's), every case
     python benchmarks/bench_robot_order.py --orders 8,10,12 --only ur5,quintic --repeat 3
     python benchmarks/bench_robot_order.py --quick                  # short horizons, one run each
 """
@@ -37,11 +38,15 @@ SCENES = Path(__file__).resolve().parent.parent / "models" / "scenes"
 CASES = ("ur5", "quintic", "hold", "payload")
 
 
-def rung(order: int, max_pieces: int = 256) -> Auto:
-    return Auto(rungs=(Composition(order=order, params_per_state=12),), max_pieces=max_pieces)
+def rung(order: str, max_pieces: int = 256) -> Auto:
+    """``auto`` with one rung: ``order`` "K" (every step at K) or "K/k" (each step's
+    order in [k, K]: ``Composition.min_order``)."""
+    top, _, low = str(order).partition("/")
+    return Auto(rungs=(Composition(order=int(top), params_per_state=12, min_order=int(low) if low else None),),
+                max_pieces=max_pieces)
 
 
-def ur5_run(order: int, mode: str, T: float, cap: float):
+def ur5_run(order: str, mode: str, T: float, cap: float):
     chain = robots.load("ur5")
     q0 = np.array((0.0, -1.0, 1.0, -1.0, -1.0, 0.0))
     x0 = Interval(np.concatenate([q0 - 1e-3, np.zeros(6)]), np.concatenate([q0 + 1e-3, np.zeros(6)]))
@@ -49,7 +54,7 @@ def ur5_run(order: int, mode: str, T: float, cap: float):
     return sol, None
 
 
-def scene_run(name: str, order: int, T: float | None, cap: float, payload: bool = False):
+def scene_run(name: str, order: str, T: float | None, cap: float, payload: bool = False):
     path = SCENES / name
     if payload:  # (the shipped scene with a [parameters.payload] table, parsed as a file's)
         data = tomllib.loads(path.read_text())
@@ -65,7 +70,7 @@ def scene_run(name: str, order: int, T: float | None, cap: float, payload: bool 
     return rep["solution"], worst.get("ratio")
 
 
-def run(case: str, order: int, quick: bool, cap: float):
+def run(case: str, order: str, quick: bool, cap: float):
     if case.startswith("ur5"):
         return ur5_run(order, case.partition(":")[2] or "i", 0.1 if quick else 1.0, cap)
     if case == "quintic":
@@ -77,14 +82,15 @@ def run(case: str, order: int, quick: bool, cap: float):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--orders", default="8,12", help="comma-separated Taylor orders (default 8,12)")
+    ap.add_argument("--orders", default="8,12,12/6",
+                    help="comma-separated Taylor orders, K or K/k for a per-step order in [k, K] (default 8,12,12/6)")
     ap.add_argument("--only", default="ur5:i,ur5:ii,quintic,hold,payload",
                     help="comma-separated cases: ur5:i, ur5:ii, quintic, hold, payload")
     ap.add_argument("--repeat", type=int, default=2, help="runs per row; the least CPU is reported")
     ap.add_argument("--cap", type=float, default=300.0, help="wall-clock cap per run (s)")
     ap.add_argument("--quick", action="store_true", help="short horizons, one run each")
     a = ap.parse_args(argv)
-    orders = [int(k) for k in a.orders.split(",")]
+    orders = [k.strip() for k in a.orders.split(",")]
     cases = [c.strip() for c in a.only.split(",")]
     for c in cases:
         if c.partition(":")[0] not in CASES:

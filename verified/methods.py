@@ -38,7 +38,7 @@ CAPABILITIES = ("adaptive", "consistency", "params", "appended_states", "start")
 #: the keyword arguments of ``solve`` that a method owns (its fields, spread over the
 #: signature before methods were objects): given beside ``method=`` they are refused
 METHOD_FIELDS = ("order", "tol", "error_basis", "arithmetic", "set_order", "set_step", "model_degree",
-                 "model_caps", "absorb", "params_per_state")
+                 "model_caps", "absorb", "params_per_state", "min_order")
 
 
 def _int_in(name: str, value, lo: int, hi: int) -> int:
@@ -190,6 +190,11 @@ class Composition(Method):
         (``verified.steppers.tm_flow``; keys ``quadratic``, ``cubic``, ``quartic``, ``star``, ``pool``)
     error_basis, arithmetic : as for :class:`Lohner` (defaults "auto" and "taylor_model")
     params_per_state : parameters per state a set may carry (None: 4)
+    min_order : None (every step at ``order``) or an integer in [2, order]: each step
+        runs at an order in ``[min_order, order]`` chosen from the last step (lower
+        where the composition's growth cut, not the series' last term, sets the step;
+        ``verified.steppers.tm_flow.TaylorModelFlowStepper``). Every step is verified
+        at the order it runs.
     """
 
     name: ClassVar[str] = "composition"
@@ -200,11 +205,14 @@ class Composition(Method):
     model_degree: int = 3
     model_caps: dict | None = field(default=None, hash=False)
     params_per_state: int | None = None
+    min_order: int | None = None
 
     def __post_init__(self):
         super().__post_init__()
         _choice(f"{self.name}: error_basis", self.error_basis, ERROR_BASES)
         _choice(f"{self.name}: arithmetic", self.arithmetic, ARITHMETICS)
+        if self.min_order is not None:
+            _int_in(f"{self.name}: min_order", self.min_order, 2, self.order)
         if isinstance(self.model_degree, (bool, np.bool_)) or self.model_degree not in (2, 3, 4):
             raise ValueError(f"{self.name}: model_degree must be 2, 3 or 4, got {self.model_degree!r}")
         if self.model_caps is not None:
@@ -221,7 +229,7 @@ class Composition(Method):
         return dict(order=self.order, tol=self.tol, error_basis=self.error_basis, arithmetic=self.arithmetic,
                     set_order=2, set_step="composition", model_degree=self.model_degree,
                     model_caps=None if self.model_caps is None else dict(self.model_caps),
-                    params_per_state=self.params_per_state)
+                    params_per_state=self.params_per_state, min_order=self.min_order)
 
 
 @dataclass(frozen=True)

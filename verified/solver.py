@@ -102,7 +102,7 @@ def solve(
         ``Solution.method_log``).
     **method_settings : the settings of the signature before methods were objects
         (``order``, ``tol``, ``error_basis``, ``arithmetic``, ``set_order``,
-        ``set_step``, ``model_degree``, ``model_caps``, ``absorb``,
+        ``set_step``, ``model_degree``, ``model_caps``, ``min_order``, ``absorb``,
         ``params_per_state``: :data:`verified.methods.METHOD_FIELDS`). Still accepted
         without ``method=``: they select the method they describe
         (:func:`verified.methods.from_settings`) at the old defaults (order 12, tol
@@ -213,12 +213,13 @@ def solve(
     order, tol, error_basis, arithmetic = flags["order"], flags["tol"], flags["error_basis"], flags["arithmetic"]
     set_order, set_step, model_degree = flags["set_order"], flags["set_step"], flags["model_degree"]
     model_caps, absorb, params_per_state = flags["model_caps"], flags["absorb"], flags["params_per_state"]
+    min_order = flags["min_order"]
     sol = _solve_one_method(ode, x0, t_span, params=params, t_eval=t_eval, order=order, tol=tol,
                             subdivision=subdivision, h_max=h_max, h_min=h_min, max_steps=max_steps,
                             max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
                             wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis,
                             arithmetic=arithmetic, set_order=set_order, set_step=set_step,
-                            model_degree=model_degree, model_caps=model_caps, absorb=absorb,
+                            model_degree=model_degree, model_caps=model_caps, min_order=min_order, absorb=absorb,
                             params_per_state=params_per_state, consistency=consistency, hooks=hooks,
                             progress=progress, workers=workers, client=client, chunks=chunks, rechunk=rechunk,
                             start=start)
@@ -241,7 +242,7 @@ def _with_invariants(ode, invariants, hooks) -> list:
 #: the solver settings of the signature before methods were objects, at their old
 #: defaults (a call that names any of them runs that method, as before)
 _LEGACY_DEFAULTS = dict(order=12, tol=1e-10, error_basis="qr", arithmetic=None, set_order=1,
-                        set_step="mean_value", model_degree=None, model_caps=None, absorb=False,
+                        set_step="mean_value", model_degree=None, model_caps=None, min_order=None, absorb=False,
                         params_per_state=None)
 
 
@@ -255,6 +256,7 @@ def _legacy_name(flags: dict) -> str:
     if fl["set_step"] != "composition":
         fl.pop("model_degree", None)
         fl.pop("model_caps", None)
+        fl.pop("min_order", None)
     try:
         return from_settings(**fl).describe()
     except (TypeError, ValueError):  # (a combination the driver refuses with its own message)
@@ -298,7 +300,7 @@ def _method_settings(method, ode, start, flags: dict):
 
 def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivision, h_max, h_min, max_steps,
                       max_width, adaptive, split_ratio, max_boxes, wrap_target, merge_slack, error_basis,
-                      arithmetic, set_order, set_step, model_degree, model_caps, absorb, params_per_state,
+                      arithmetic, set_order, set_step, model_degree, model_caps, min_order, absorb, params_per_state,
                       consistency, hooks, progress, workers, client, chunks, rechunk, start) -> Solution:
     """One method's run: chunked (:mod:`verified.execution`) or one batch here."""
     asked_auto = isinstance(workers, str) and workers == "auto"
@@ -323,7 +325,7 @@ def _solve_one_method(ode, x0, t_span, *, params, t_eval, order, tol, subdivisio
                  max_width=max_width, adaptive=adaptive, split_ratio=split_ratio, max_boxes=max_boxes,
                  wrap_target=wrap_target, merge_slack=merge_slack, error_basis=error_basis, arithmetic=arithmetic,
                  set_order=set_order, set_step=set_step, model_degree=model_degree, model_caps=model_caps,
-                 absorb=absorb, params_per_state=params_per_state, progress=progress)
+                 min_order=min_order, absorb=absorb, params_per_state=params_per_state, progress=progress)
     if start is None and getattr(consistency, "can_suspend", None) is not None and (
             params is None or not isinstance(params, Interval) or params.ndim == 1):
         # an energy test that may be suspended while idle (verified.consistency.energy_cadence)

@@ -34,8 +34,12 @@ COMPOSITION_MAX_STATES = 24
 #: ``TaylorModelODE.product_orders`` on keep no products, a longer series costs little
 #: more per step and takes fewer, longer steps; order 8, the choice before, cost the UR5
 #: 1.3x and ended a Panda's payload piece earlier (docs/lab/robot_speed.md)
+#: Each step's order is chosen in [LARGE_MIN_ORDER, LARGE_ORDER] (``Composition.min_order``):
+#: on robots under a controller the composition's growth cut, not the series' last term,
+#: sets the steps, and there a lower order takes the same steps for less
 LARGE_STATES = 10
 LARGE_ORDER = Composition.order
+LARGE_MIN_ORDER = 6
 LARGE_PARAMS_PER_STATE = 12
 #: split pieces must get further than their parent by this fraction of the time span, or
 #: splitting stops (what stops them is then not the width of the set)
@@ -49,7 +53,8 @@ def default_rungs(graph, boxes: Interval, params=None) -> tuple[Method, ...]:
     p_wide = 0 if params is None else int(np.count_nonzero(np.any(np.atleast_2d(params.width()) > 0, axis=0)))
     if n + p_wide <= COMPOSITION_MAX_STATES:
         if n + p_wide >= LARGE_STATES:
-            return (Composition(order=LARGE_ORDER, params_per_state=LARGE_PARAMS_PER_STATE),)
+            return (Composition(order=LARGE_ORDER, params_per_state=LARGE_PARAMS_PER_STATE,
+                                min_order=LARGE_MIN_ORDER),)
         return (Composition(),)
     return (Lohner(arithmetic="affine"), Lohner(arithmetic="affine", error_basis="auto"))
 

@@ -180,6 +180,7 @@ def solve_batch(
     set_step: str = "mean_value",
     model_degree: int | None = None,
     model_caps: dict | None = None,
+    min_order: int | None = None,
     absorb: bool = False,
     params_per_state: int | None = None,
     consistency=None,
@@ -229,7 +230,7 @@ def solve_batch(
         raise ValueError("absorb=True needs set_order=1, adaptive=False, no consistency test and no "
                          "states appended by a hook")
     stepper = _stepper(kind, prob, order, setup.params, error_basis, bool(absorb), params_per_state, model_degree,
-                       model_caps)
+                       model_caps, min_order)
     stepper.steer = setup.n_steer
     control = StepControl(tol=tol, h_min=h_min, h_max=setup.h_max, steer=setup.n_steer)
     wrap = WrapControl(target=wrap_target, h_max=setup.h_max, steer=setup.n_steer)
@@ -315,6 +316,8 @@ def solve_batch(
     result = run.solution(setup.n_state, order, boxes.shape[0], steps, tuple(prob.graph.input_names[:setup.n_state]))
     result.stats["absorbed"] = stepper.absorbed
     result.stats["merged"] = stepper.merged
+    if getattr(stepper, "steps_by_order", None):  # (a per-step order: how many steps ran at each)
+        result.stats["steps_by_order"] = dict(sorted(stepper.steps_by_order.items()))
     result.stats["wall_s"] = time.perf_counter() - wall0
     for hook in hook_list:
         hook.after_run(result)  # records and statistics of the hooks
@@ -875,10 +878,10 @@ def _restricted(sol: Solution, alive: np.ndarray, out_pieces: list, tube_pieces:
 
 
 def _stepper(kind: SetKind, prob: VerifiedODE, order, params, error_basis, absorb=False,
-             params_per_state=None, model_degree=None, model_caps=None) -> LohnerStepper:
+             params_per_state=None, model_degree=None, model_caps=None, min_order=None) -> LohnerStepper:
     """The stepper of the run's set kind (:mod:`verified.steppers.set_kinds`) for ``prob``."""
     max_params = None if params_per_state is None else params_per_state * prob.n
-    return kind.stepper(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps)
+    return kind.stepper(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps, min_order)
 
 
 #: the keys of ``solve(model_caps=...)``: the symbols with quadratic, cubic, quartic and

@@ -66,6 +66,12 @@ def chain_in_time(parts: list) -> Solution:
     for key in ("order", "boxes"):
         if key in first.stats:
             stats[key] = first.stats[key]
+    by_order = {}  # (a per-step order: the parts' counts added)
+    for p in parts:
+        for k, v in (p.stats.get("steps_by_order") or {}).items():
+            by_order[k] = by_order.get(k, 0) + v
+    if by_order:
+        stats["steps_by_order"] = dict(sorted(by_order.items()))
     stats["final_boxes"] = last.stats.get("final_boxes")
     stats["max_boxes"] = max((p.stats.get("max_boxes") or 0) for p in parts)
     stats["wall_s"] = sum(float(p.stats.get("wall_s") or 0.0) for p in parts)

@@ -14,8 +14,9 @@ factory): neither the driver loop nor the run set-up change.
 
 A stepper factory takes the problem (:class:`verified.solver.VerifiedODE`: its
 evaluators), the Taylor order, the parameter box (or None), the error basis, the cap on
-a set's parameters (None: the stepper's default), ``absorb``, ``model_degree`` and
-``model_caps`` (the composition's monomial caps, a dict; None: the defaults).
+a set's parameters (None: the stepper's default), ``absorb``, ``model_degree``,
+``model_caps`` (the composition's monomial caps, a dict; None: the defaults) and
+``min_order`` (the composition's lowest order per step; None: every step at ``order``).
 """
 
 from __future__ import annotations
@@ -41,12 +42,13 @@ class SetKind:
     stepper: Callable
 
 
-def _lohner(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None):
+def _lohner(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None, min_order=None):
     return LohnerStepper(prob.taylor, prob.variational, order, params, error_basis, absorb=absorb,
                          max_params=max_params)
 
 
-def _mean_value_second_order(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None):
+def _mean_value_second_order(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None,
+                             min_order=None):
     return QuadraticStepper(prob.taylor, prob.variational, prob.second_variational, order, params, error_basis,
                             second_over_set=prob.second_variational_over_set,
                             second_directional=(None if prob.arithmetic == "interval"
@@ -54,10 +56,11 @@ def _mean_value_second_order(prob, order, params, error_basis, max_params, absor
                             max_params=max_params)
 
 
-def _composition(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None):
+def _composition(prob, order, params, error_basis, max_params, absorb, model_degree, model_caps=None, min_order=None):
     caps = {f"{k}_cap": int(v) for k, v in (model_caps or {}).items()}
     return TaylorModelFlowStepper(prob.taylor, prob.set_models, order, params, error_basis,
-                                  max_params=max_params, degree=3 if model_degree is None else model_degree, **caps)
+                                  max_params=max_params, degree=3 if model_degree is None else model_degree,
+                                  min_order=min_order, **caps)
 
 
 SET_KINDS: dict[tuple[int, str], SetKind] = {

@@ -483,6 +483,10 @@ class TaylorModelFlowStepper(LohnerStepper):
     ``star_cap``: the widest symbols that get star monomials (default ``STAR_CAP`` = 6;
     0: none); without them robots break down early (docs/lab/code_notes.md).
     ``fresh_symbols`` (None: ``FRESH_SYMBOLS``, True): see the module docstring.
+    ``min_order`` (None: every step at ``order``): each step's order in ``[min_order,
+    order]``, chosen from the last step (:meth:`_next_order`): on robots under a
+    controller the growth cut, not the series' last term, sets the steps, and a lower
+    order takes the same steps for less (docs/lab/robot_speed.md).
     ``pool_cap`` (None: ``POOL`` = 128; 0: off): the symbols the remainders born inside
     the model graph may claim (module docstring; needs ``fresh_symbols``).
 
@@ -496,7 +500,7 @@ class TaylorModelFlowStepper(LohnerStepper):
     def __init__(self, taylor, models, order: int, params=None, error_basis="qr", max_params: int | None = None,
                  quadratic_cap: int | None = None, degree: int = 3, cubic_cap: int | None = None,
                  absorb_ratio: float | None = None, quartic_cap: int = QUARTIC_CAP, star_cap: int = STAR_CAP,
-                 fresh_symbols: bool | None = None, pool_cap: int | None = None):
+                 fresh_symbols: bool | None = None, pool_cap: int | None = None, min_order: int | None = None):
         if absorb_ratio is None:
             absorb_ratio = 0.01 if taylor.n >= 6 else 0.1
         super().__init__(taylor, None, order, params, error_basis, absorb=bool(np.isfinite(absorb_ratio)),
@@ -520,6 +524,13 @@ class TaylorModelFlowStepper(LohnerStepper):
         if pool_cap is not None and int(pool_cap) < 0:
             raise ValueError(f"pool_cap must be >= 0, got {pool_cap!r}")
         self.pool_cap = self.POOL if pool_cap is None else int(pool_cap)
+        if min_order is not None and not 2 <= int(min_order) <= self.order:
+            raise ValueError(f"min_order must be None or an integer in [2, order = {self.order}], got {min_order!r}")
+        self.min_order = None if min_order is None else int(min_order)
+        self.max_order = self.order
+        self._pending_order = None
+        #: with ``min_order``: {order: steps taken at it} (``Solution.stats["steps_by_order"]``)
+        self.steps_by_order: dict[int, int] = {}
 
     def _param_models(self, nb, M, caps):
         p = self._params(nb)
@@ -585,6 +596,14 @@ class TaylorModelFlowStepper(LohnerStepper):
         return super().coefficients(x)
 
     def suggest_step(self, cX: Interval, tol: float, components: int | None = None) -> float:
+        """:meth:`_cut_step`; with ``min_order``, the next step's order chosen from it
+        (:meth:`_next_order`, applied once this step is taken)."""
+        h = self._cut_step(cX, tol, components)
+        if self.min_order is not None:
+            self._pending_order = self._next_order(cX, tol, components, h)
+        return h
+
+    def _cut_step(self, cX: Interval, tol: float, components: int | None = None) -> float:
         """The step of :meth:`LohnerStepper.suggest_step`, cut so that the remainder the
         composition adds per unit time stays within ``REMAINDER_GROWTH`` times its rate
         as ``h -> 0``: with ``e_k`` the remainders of the coefficient models (with fresh
@@ -635,6 +654,36 @@ class TaylorModelFlowStepper(LohnerStepper):
                 break
             h *= 0.8
         return h
+
+    #: with ``min_order``: the next step's order is the lowest whose Taylor step is this
+    #: many times the step the growth cut left (see _next_order)
+    ORDER_MARGIN = 1.3
+
+    def _next_order(self, cX: Interval, tol: float, components, h: float) -> int:
+        """The order of the next step, in ``[min_order, max_order]``, from this step's
+        coefficients ``cX`` (B, K + 1, N) and the step ``h`` :meth:`_cut_step` chose.
+        Where the growth cut (not the order-K term) set ``h``, a longer series only
+        costs (the recursion's work grows as K^2): the lowest order whose term at ``tol``
+        allows ``ORDER_MARGIN`` times ``h``. Where the order-K term set it, two orders
+        more (up to ``max_order``). A heuristic only: every step is verified at the order
+        it runs (its Taylor polynomial and the Lagrange remainder of that order over the
+        a-priori tube), whatever the order (docs/lab/robot_speed.md)."""
+        K = self.order
+        if not (np.isfinite(h) and h > 0):
+            return K
+        mags = cX[:, :, :components].mag()  # (B, K + 1, N')
+        widen = getattr(self, "_widen", None)
+        w = widen[None, :components] if widen is not None and widen.shape[0] == cX.shape[2] else 1.0
+
+        def taylor_step(k):
+            with np.errstate(over="ignore", divide="ignore"):
+                return float(0.9 * np.min((tol / np.maximum(mags[:, k] * w, 1e-300)) ** (1.0 / k)))
+        if h >= 0.95 * taylor_step(K):
+            return min(K + 2, self.max_order)
+        for k in range(self.min_order, K):
+            if taylor_step(k) >= self.ORDER_MARGIN * h:
+                return k
+        return K
 
     #: see suggest_step
     REMAINDER_GROWTH = 1.5
@@ -868,5 +917,11 @@ class TaylorModelFlowStepper(LohnerStepper):
         inside = E.intersect(Interval._from_bounds(np.where(ok, narrow.lo, E.lo), np.where(ok, narrow.hi, E.hi)))
         empty = inside.is_empty()
         tube_box = E if empty.any() else inside
+        if self.min_order is not None:
+            self.steps_by_order[K] = self.steps_by_order.get(K, 0) + 1
+        if self._pending_order is not None:
+            # the next step's order (suggest_step's choice), from here on: begin, the
+            # a-priori test and this step ran at one order
+            self.order, self._pending_order = self._pending_order, None
         return StepResult(sets=new, previous=sets, h=h, hull=X, tube=tube_box, nonlinear_width=nonlinear.width(),
                           tube_view=view)
