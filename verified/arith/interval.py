@@ -211,10 +211,12 @@ class Interval:
         else:
             lo = _enclose(lo, "lower bounds")[0]
             hi = _enclose(hi, "upper bounds")[1]
-        try:
-            lo, hi = np.broadcast_arrays(lo, hi)
-        except ValueError:
-            raise IntervalError(f"bounds of shapes {lo.shape} and {hi.shape} do not broadcast") from None
+        if lo is not hi:  # (one array for both bounds, from ``lo`` alone: nothing to broadcast,
+            # and _check_user_bounds then checks it once)
+            try:
+                lo, hi = np.broadcast_arrays(lo, hi)
+            except ValueError:
+                raise IntervalError(f"bounds of shapes {lo.shape} and {hi.shape} do not broadcast") from None
         _check_user_bounds(lo, hi, allow_unbounded)
         self.lo = np.array(lo, dtype=np.float64)
         self.hi = np.array(hi, dtype=np.float64)

@@ -92,10 +92,11 @@ def _linear_quadratic_range(C: np.ndarray, S: np.ndarray, u: Interval) -> Interv
     jj = np.arange(m)
     a = point(C)
     s = point(np.ascontiguousarray(S[:, :, jj, jj]))
-    lo = Interval._from_bounds(np.broadcast_to(u.lo[:, None, :], (B, n, m)).copy(),
-                               np.broadcast_to(u.lo[:, None, :], (B, n, m)).copy())
-    hi = Interval._from_bounds(np.broadcast_to(u.hi[:, None, :], (B, n, m)).copy(),
-                               np.broadcast_to(u.hi[:, None, :], (B, n, m)).copy())
+    # the ends as point intervals (B, 1, m): the operations with ``a`` and ``s`` broadcast
+    # them (their squares once per parameter, not once per state)
+    ul, uh = u.lo[:, None, :], u.hi[:, None, :]
+    lo = Interval._from_bounds(ul, ul)
+    hi = Interval._from_bounds(uh, uh)
     f_lo = a * lo + s * sqr(lo)
     f_hi = a * hi + s * sqr(hi)
     r_lo = np.minimum(f_lo.lo, f_hi.lo)
