@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from oracles.special_floats import special_floats
 from verified.arith import _kernels as _k
 from verified.arith.interval import Interval, _mid_np, _rad_np, _width_np
 
@@ -17,14 +18,7 @@ SHAPES = [(), (1,), (7,), (3, 5), (2, 3, 4), (0, 3), (600,)]
 
 
 def _values(rng, shape):
-    v = rng.standard_normal(shape) * 10.0 ** rng.integers(-320, 309, shape)
-    u = rng.random(shape)
-    v = np.where(u < 0.08, 0.0, v)
-    v = np.where((u >= 0.08) & (u < 0.14), -0.0, v)
-    v = np.where((u >= 0.14) & (u < 0.17), np.inf, v)
-    v = np.where((u >= 0.17) & (u < 0.2), -np.inf, v)
-    v = np.where((u >= 0.2) & (u < 0.22), np.nan, v)
-    return np.where((u >= 0.22) & (u < 0.25), _k.MAXF * np.sign(v + 0.5), v)
+    return special_floats(rng, shape, max_exponent=309, largest=True)
 
 
 def _cases(seed=0):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from oracles.special_floats import special_floats
 from verified.arith import _kernels as _k
 from verified.arith.interval import Interval
 from verified.series.taylor_model import model_length
@@ -24,14 +25,7 @@ def _same(r, s):
 
 
 def _values(rng, shape):
-    """Floats over many magnitudes, with zeros of both signs, infinities and NaN."""
-    v = rng.standard_normal(shape) * 10.0 ** rng.integers(-320, 300, shape)
-    u = rng.random(shape)
-    v = np.where(u < 0.08, 0.0, v)
-    v = np.where((u >= 0.08) & (u < 0.14), -0.0, v)
-    v = np.where((u >= 0.14) & (u < 0.16), np.inf, v)
-    v = np.where((u >= 0.16) & (u < 0.18), -np.inf, v)
-    return np.where((u >= 0.18) & (u < 0.2), np.nan, v)
+    return special_floats(rng, shape)
 
 
 def _bounds(rng, shape):

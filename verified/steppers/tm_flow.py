@@ -685,7 +685,7 @@ class TaylorModelFlowStepper(LohnerStepper):
                 return k
         return K
 
-    #: see suggest_step
+    #: see _cut_step
     REMAINDER_GROWTH = 1.5
 
     #: the growth cut of suggest_step stops once the remainder the step adds is at most
