@@ -20,16 +20,31 @@ Domains here:
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Protocol, Sequence
 
 import numpy as np
 
 from verified.arith import interval as _interval
 from verified.graph.forward_rules import RULES, Algebra
-from verified.graph.opcodes import Op
+from verified.graph.opcodes import Node, Op
 
-if TYPE_CHECKING:  # (annotations only: verified.graph.ir imports this module)
-    from verified.graph.ir import Graph
+
+class Graph(Protocol):
+    """What the evaluators read of a graph (:class:`verified.graph.Graph`, which calls
+    them from its methods: so this module names the shape, not that class, and the two
+    do not import each other)."""
+
+    nodes: Sequence[Node]
+    outputs: Sequence[int]
+    input_names: Sequence[str]
+    param_names: Sequence[str]
+    _release_plan: Any
+
+    @property
+    def n_inputs(self) -> int: ...
+
+    @property
+    def n_params(self) -> int: ...
 
 __all__ = [
     "Domain",
