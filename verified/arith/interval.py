@@ -45,11 +45,6 @@ from fractions import Fraction
 import numpy as np
 
 from verified.arith import _kernels as _k
-
-try:
-    from numpy._core.umath import clip as _clip  # (the ufunc np.clip calls)
-except ImportError:  # numpy < 2
-    from numpy.core.umath import clip as _clip
 from verified.arith.exact import enclose_fraction
 
 __all__ = [

@@ -81,6 +81,15 @@ def _inflate(x: Interval, factor=0.1, absolute=1e-14) -> Interval:
     return Interval._from_bounds(x.lo - r, x.hi + r)
 
 
+def taylor_step(mags: np.ndarray, tol: float, k: int) -> float:
+    """``0.9 min (tol / m)^(1/k)`` over the magnitudes ``mags`` of order-``k`` Taylor
+    coefficients (each at least 1e-300): the step whose order-``k`` term is about ``tol``
+    for every one. A huge tol over a tiny term overflows to inf: no bound from the
+    error, the step control's h_max then decides (not worth a RuntimeWarning)."""
+    with np.errstate(over="ignore"):
+        return float(0.9 * np.min((tol / np.maximum(mags, 1e-300)) ** (1.0 / k)))
+
+
 class LohnerStepper:
     """Verified steps of order ``order`` for the ODE behind ``taylor`` (and its variational
     ODE), on :class:`~verified.sets.first_order.DoubletonSets` (implements
@@ -157,11 +166,7 @@ class LohnerStepper:
     def suggest_step(self, cX: Interval, tol: float, components: int | None = None) -> float:
         """Step size that makes the order-K term of every box about ``tol`` (x 0.9),
         judged on the first ``components`` states (default: all)."""
-        mags = np.maximum(cX[:, self.order, :components].mag(), 1e-300)
-        # a huge tol over a tiny term overflows to inf: no bound from the error, the
-        # step control's h_max then decides (not worth a RuntimeWarning to the user)
-        with np.errstate(over="ignore"):
-            return float(0.9 * np.min((tol / mags) ** (1.0 / self.order)))
+        return taylor_step(cX[:, self.order, :components].mag(), tol, self.order)
 
     def set_jacobian(self, sets, X: Interval, h) -> Interval:
         """Enclosure (B, n, n) of the Jacobian of the Taylor polynomial map on every

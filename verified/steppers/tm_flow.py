@@ -82,7 +82,7 @@ from verified.arith import _kernels as _k
 from verified.arith import linalg
 from verified.series.affine_taylor import box_forms
 from verified.arith.interval import Interval, _k_round_up, point
-from verified.steppers.lohner import LohnerStepper, _inflate
+from verified.steppers.lohner import LohnerStepper, _inflate, taylor_step
 from verified.steppers.protocol import REMAINDER_SLACK
 from verified.sets.second_order import QuadraticSets
 from verified.sets.protocol import SetView
@@ -628,8 +628,8 @@ class TaylorModelFlowStepper(LohnerStepper):
             # the driver's remainder control takes x_[K] over the a-priori enclosure, not
             # over the set: ask for a step it accepts on the first try, from the last
             # step's ratio of the two (Panda: every step validated twice without it)
-            mags = np.maximum(cX[:, self.order, :components].mag() * widen[None, :components], 1e-300)
-            h = min(h, float(0.9 * np.min((REMAINDER_SLACK * tol / mags) ** (1.0 / self.order))))
+            h = min(h, taylor_step(cX[:, self.order, :components].mag() * widen[None, :components],
+                                   REMAINDER_SLACK * tol, self.order))
         co = cur["out"][:components, 1:]  # (N', K, B, L): models of x_[1..K]
         e = cur["bounded"][:components, 1:]  # their remainders (with the fresh symbols')
         if not np.isfinite(e).all():
@@ -674,14 +674,10 @@ class TaylorModelFlowStepper(LohnerStepper):
         mags = cX[:, :, :components].mag()  # (B, K + 1, N')
         widen = getattr(self, "_widen", None)
         w = widen[None, :components] if widen is not None and widen.shape[0] == cX.shape[2] else 1.0
-
-        def taylor_step(k):
-            with np.errstate(over="ignore", divide="ignore"):
-                return float(0.9 * np.min((tol / np.maximum(mags[:, k] * w, 1e-300)) ** (1.0 / k)))
-        if h >= 0.95 * taylor_step(K):
+        if h >= 0.95 * taylor_step(mags[:, K] * w, tol, K):
             return min(K + 2, self.max_order)
         for k in range(self.min_order, K):
-            if taylor_step(k) >= self.ORDER_MARGIN * h:
+            if taylor_step(mags[:, k] * w, tol, k) >= self.ORDER_MARGIN * h:
                 return k
         return K
 
