@@ -245,7 +245,13 @@ class Auto(Method):
 
     rungs : None (chosen from the problem: :func:`verified.auto.ladder.default_rungs`) or a
         sequence of methods (objects or names), weakest first
-    max_pieces : the most pieces splitting may make of the initial set (>= 1)
+    max_pieces : the most pieces splitting may make of the initial set (>= 1). Each split
+        is first judged by one of its parts run alone (a probe, reused as part of the
+        split attempt): where that part gets no further than the piece it was split from,
+        or where reaching ``t1`` would need more than ``max_pieces`` pieces even if every
+        further split gained twice what the last one gained
+        (:func:`verified.auto.ladder.projected_pieces`), ``auto`` stops splitting there
+        and says so in ``method_log``
     target_ratio : None (default) or a number > 1: after the run reaches ``t1``, the
         width of its final enclosure is compared with the spread of sampled true states
         (float trajectories from the corners and random points of the initial boxes;

@@ -328,13 +328,68 @@ def test_a_stop_while_splitting_keeps_the_first_attempts_further_enclosure():
 
 @pytest.mark.slow  # (default-run budget)
 def test_a_stop_while_splitting_keeps_the_furthest_cover_of_the_whole_set():
-    """From [-0.7, 0.7]^2: one box breaks down at 1.07 s, its 4 pieces at 2.11 s, and the
-    16-piece attempt is stopped at once. The result is the 4-piece attempt's enclosure of
-    the whole initial set to 2.11 s (before: the first attempt's, to 1.07 s), and every
-    sampled true state at its last step lies inside."""
+    """From [-0.7, 0.7]^2: one box breaks down at 1.07 s, its 4 pieces at 2.11 s (the
+    first of them run alone first, as the split's probe, then the other 3), and the
+    16-piece attempt (after its probe) is stopped at once. The result is the 4-piece
+    attempt's enclosure of the whole initial set to 2.11 s (before: the first attempt's,
+    to 1.07 s), and every sampled true state at its last step lies inside."""
     box = Interval([-0.7, -0.7], [0.7, 0.7])
-    sol = solve(_vdp_like(), box, (0.0, 3.0), hooks=[_StopAttempt(3)])
-    assert [e["pieces"] for e in sol.method_log] == [1, 4, 16] and sol.method_log[2]["status"] == "stopped"
-    assert sol.t_reached == pytest.approx(sol.method_log[1]["t_span"][1]) and sol.t_reached > 2.0
+    sol = solve(_vdp_like(), box, (0.0, 3.0), hooks=[_StopAttempt(5)])
+    assert [e["pieces"] for e in sol.method_log] == [1, 1, 4, 1, 16] and sol.method_log[4]["status"] == "stopped"
+    assert [bool(e.get("probe")) for e in sol.method_log] == [False, True, False, True, False]
+    assert sol.t_reached == pytest.approx(sol.method_log[2]["t_span"][1]) and sol.t_reached > 2.0
     assert "stopped by the test" in sol.reason
     assert _last_step_holds_samples(sol, box, 80, seed=2)
+
+
+def _blow_up():
+    """x' = 1 + x^2 (x = tan(t + atan x0): a blow-up at pi/2 - atan x0 whatever the set's
+    width) beside three constant states: a split goes along the wide constants, and no
+    part of it gets further."""
+    return trace(lambda x, p: [1 + x[0] * x[0], 0 * x[1], 0 * x[2], 0 * x[3]], 4)
+
+
+def test_a_split_that_gains_nothing_is_given_up_after_its_probe():
+    """The one box breaks down before the blow-up at ~1.57 s; its split (8 parts along
+    the three wide constants) is judged by one part run alone (the probe): it gets no
+    further, so the other 7 are not run. The result is the first attempt's enclosure,
+    which holds the closed-form solution at its last output."""
+    box = Interval([0.0, -1.0, -1.0, -1.0], [1e-3, 1.0, 1.0, 1.0])
+    runs = _StopAttempt(0)  # (counts the runs; stops none)
+    sol = solve(_blow_up(), box, (0.0, 2.0), t_eval=np.linspace(0, 2, 41), hooks=[runs])
+    assert sol.status == "breakdown" and 1.2 < sol.t_reached < np.pi / 2
+    assert [e["pieces"] for e in sol.method_log] == [1, 1] and runs.runs == 2
+    assert sol.method_log[1]["probe"] == "part 1 of the 8 run first"
+    assert "gave up: a probe" in sol.method_log[0]["next"]
+    t = sol.t[-1]
+    x0 = np.linspace(0.0, 1e-3, 11)
+    states = np.stack([np.tan(t + np.arctan(x0)), np.zeros_like(x0), np.zeros_like(x0), np.zeros_like(x0)], 1)
+    assert _inside_union(states, sol.boxes[-1], slack=1e-12).all()
+
+
+def test_projected_pieces_is_optimistic_and_monotone():
+    """The guess that stops splitting: each further split gaining twice the one before."""
+    from verified.auto.ladder import projected_pieces
+    assert projected_pieces(8, 8, 0.1, 0.0) == 8  # (already there)
+    assert projected_pieces(8, 8, 0.1, 0.2) == 64  # one more split gains 0.2
+    assert projected_pieces(8, 8, 0.1, 0.21) == 512  # two: 0.2 + 0.4
+    assert projected_pieces(2, 2, 0.3, 3.7) == 16  # 0.6 + 1.2 + 2.4 >= 3.7
+    assert projected_pieces(8, 8, 0.0, 0.1) == np.inf and projected_pieces(8, 8, 1e-30, 1.0) == np.inf
+    last = 0
+    for rem in np.linspace(0.01, 3, 50):
+        now = projected_pieces(4, 4, 0.05, rem)
+        assert now >= last
+        last = now
+
+
+def test_a_split_projected_to_need_more_than_max_pieces_stops_after_its_probe():
+    """From [-0.7, 0.7]^2 the one box breaks down at 1.07 s; the probe of its 4 parts
+    reaches 2.66 s, so reaching t = 3 would take one more split, 16 pieces: with
+    max_pieces = 8 auto stops there instead of running the other 3 parts to 2.11 s and
+    then giving up at the 16-piece split. The result is the first attempt's enclosure and
+    holds the samples at its last step."""
+    box = Interval([-0.7, -0.7], [0.7, 0.7])
+    sol = solve(_vdp_like(), box, (0.0, 3.0), method=Auto(max_pieces=8))
+    assert sol.status == "breakdown" and [e["pieces"] for e in sol.method_log] == [1, 1]
+    assert "would take about 16 pieces, more than max_pieces = 8" in sol.method_log[0]["next"]
+    assert _last_step_holds_samples(sol, box, 60, seed=4)

@@ -7,6 +7,7 @@ stall handed down early (:class:`StallGuard`), and failing pieces split and run 
 from __future__ import annotations
 
 import copy
+import math
 import time
 from dataclasses import dataclass
 
@@ -67,6 +68,7 @@ class _Task:
     splits: int = 0          # how often these pieces were split
     parent_t: float = -np.inf  # where the pieces they were split from broke down
     failure: Failure | None = None  # a continuation: the failed attempt's record and sets to go on from
+    probe: Solution | None = None  # the run of boxes[0] alone (a split's probe), reused: only boxes[1:] run
 
 
 def switch_start(failure: Failure, method: Method) -> Start:
@@ -144,6 +146,31 @@ def _carried(params) -> int:
     return int(params.shape[-1])
 
 
+def projected_pieces(pieces: int, factor: float, gain: float, remaining: float) -> float:
+    """How many pieces splitting would need to cover ``remaining`` more time, now at
+    ``pieces`` pieces whose last split (``factor`` times as many) gained ``gain``: an
+    optimistic guess (each further split gaining twice what the one before gained), so
+    that ``auto`` stops splitting only where even that would exceed its ``max_pieces``.
+    It guides the work, never an enclosure."""
+    if remaining <= 0:
+        return float(pieces)
+    if not gain > 0:
+        return math.inf
+    levels, reach, step = 0, 0.0, gain
+    while reach < remaining:
+        step *= 2.0
+        reach += step
+        levels += 1
+        if levels > 64:
+            return math.inf
+    return pieces * factor ** levels
+
+
+def _failure_time(sol: Solution) -> float:
+    """Where a run's first piece broke down (its end where none did)."""
+    return min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=float(sol.t_reached))
+
+
 def _summary(log) -> str:
     return "auto: " + "; ".join(f"{e['method']} on {e['pieces']} piece(s) {e['status']} to t = {e['t_span'][1]:g}"
                                 + (" (spec: split)" if "split into" in e.get("spec", "") else
@@ -192,12 +219,22 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
     hooks = list(hooks)
 
     todo = [_Task(boxes, pv, 0)]
+    later = None  # the reason of a probe stopped or interrupted, for the result's
     first = None
     covers = []  # [(boxes, Solution, params), ...] of failed attempts that, with the pieces done, covered everything
     done: list[tuple[Interval, Solution, object]] = []  # (pieces, their Solution, their params)
     log: list[dict] = []
     pieces_total = boxes.shape[0]
     give_up = None
+    names = tuple(graph.input_names[:n])
+
+    def attempt(pieces, params, r):
+        """Rung ``r`` on ``pieces`` from t0."""
+        guard = [] if r == fallback else [StallGuard(t0, t1)]
+        return solve(ode, pieces, (t0, t1), method=rungs[r], params=params, t_eval=t_eval,
+                     consistency=None if consistency is None else copy.deepcopy(consistency),
+                     hooks=caps_from(hooks, started) + guard, progress=progress, **common)
+
     while todo:
         task = todo.pop(0)
         rung = rungs[task.rung]
@@ -205,10 +242,18 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         cont = task.failure
         t_from = float(t0) if cont is None else float(cont.t)
         guard = [] if task.rung == fallback else [StallGuard(t_from, t1)]
-        if cont is None:
-            sol = solve(ode, task.boxes, (t0, t1), method=rung, params=task.params, t_eval=t_eval,
-                        consistency=None if consistency is None else copy.deepcopy(consistency),
-                        hooks=caps_from(hooks, started) + guard, progress=progress, **common)
+        if cont is None and task.probe is not None:
+            # a split whose first part ran alone as its probe: the others, then both as one attempt
+            k = task.boxes.shape[0]
+            rest = attempt(task.boxes[1:], _rows(task.params, range(1, k)), task.rung)
+            sol = merge_solutions([task.probe, rest], [(0, 1), (1, k)], task.boxes, outs, t0, names,
+                                  interrupted=rest.status == "interrupted")
+            sol.chunks = None
+            if rest.status not in ("completed", "breakdown"):
+                # (stopped or interrupted: nothing more is tried, whatever the probe did)
+                sol.status, sol.reason = rest.status, rest.reason
+        elif cont is None:
+            sol = attempt(task.boxes, task.params, task.rung)
         else:
             # continued from the failed attempt's sets at exactly their time (switch_start)
             start = switch_start(cont, rung)
@@ -279,7 +324,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         if cont is not None:
             t_fail = float(sol.t_reached)
         else:
-            t_fail = min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=sol.t_reached)
+            t_fail = _failure_time(sol)
         parts, part_params = split_pieces(graph, fb, fp, float(t_fail) - float(t0))
         why = None
         if parts.shape[0] == fb.shape[0]:
@@ -295,6 +340,39 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             # this attempt's pieces and the finished ones cover every initial piece: their
             # enclosure, verified to where this attempt got, stands if later attempts end earlier
             covers.append(list(done) + [(task.boxes, sol, task.params)])
+        probe = None
+        if why is None and parts.shape[0] > 1:
+            # one part runs first: where it gets no further than the piece it was split from,
+            # neither will its siblings (the give-up below takes the earliest part's time), and
+            # the others are not run for nothing (a passive robot whose break-down is not the
+            # sets' width paid 2^d full runs for it; docs/lab/auto.md)
+            p_start = time.perf_counter()
+            probe = attempt(parts[:1], _rows(part_params, [0]), last)
+            t_p = _failure_time(probe)
+            log.append(dict(method=rungs[last].describe(), pieces=1, splits=task.splits + 1,
+                            t_span=(float(t0), float(probe.t_reached)), status=probe.status, reason=probe.reason,
+                            wall_s=time.perf_counter() - p_start,
+                            probe=f"part 1 of the {parts.shape[0]} run first"))
+            if probe.status == "breakdown" and t_p <= t_fail + MIN_GAIN * (t1 - t0):
+                why = (f"a probe (part 1 of the {parts.shape[0]} the pieces split into) broke down at "
+                       f"t = {t_p:g}, no later than the piece(s) it was split from (t = {t_fail:g})")
+            elif probe.status == "breakdown":
+                need = projected_pieces(pieces_total - fb.shape[0] + parts.shape[0], parts.shape[0] / fb.shape[0],
+                                        t_p - t_fail, float(t1) - t_p)
+                if need > method.max_pieces:
+                    why = (f"a probe (part 1 of the {parts.shape[0]} the pieces split into) got from t = "
+                           f"{t_fail:g} to {t_p:g}: even if every further split gained twice as much as "
+                           f"the one before, reaching t = {float(t1):g} would take about {need:.3g} pieces, "
+                           f"more than max_pieces = {method.max_pieces}")
+            elif probe.status not in ("breakdown", "completed"):
+                # stopped or interrupted while probing: nothing more is tried
+                log[-1]["next"] = f"{probe.status}: the other parts were not run"
+                done.append((task.boxes, sol, task.params))
+                give_up, later = probe.status, probe.reason
+                for rest in todo:
+                    done.append((rest.boxes, None, rest.params))
+                todo = []
+                continue
         if why is not None:
             entry["next"] = f"gave up: {why}"
             done.append((task.boxes, sol, task.params))  # (the failed attempt encloses all its pieces up to its end)
@@ -303,8 +381,9 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         if kept:
             done.append((task.boxes[np.asarray(kept)], sol.surviving, _rows(task.params, kept)))
         pieces_total += parts.shape[0] - fb.shape[0]
-        todo.append(_Task(parts, part_params, last, task.splits + 1, t_fail))
-        entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[last].describe()}"
+        todo.append(_Task(parts, part_params, last, task.splits + 1, t_fail, probe=probe))
+        entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[last].describe()}" + (
+            ", part 1 run first as a probe" if probe is not None else "")
 
     pieces = concatenate([b for b, _, _ in done], axis=0)
     piece_params = _stack_rows([(b.shape[0], p) for b, _, p in done], pv)
@@ -321,6 +400,8 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         return out
 
     result = merged(done)
+    if later is not None:
+        result.reason = f"{result.reason} (later attempts: {later})"
     if result.status != "completed":
         # the later attempts ended earlier than an earlier one that, with the pieces done
         # by then, covered every initial piece (a wall-clock cap striking while auto
