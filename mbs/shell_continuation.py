@@ -35,20 +35,26 @@ def _bounds(chain):
     return _BOUNDS[key]
 
 
-def carry_on(sol, masses, hooks, box, t_eval, t_end: float):
+def carry_on(sol, masses, hooks, box, t_eval, t_end: float, *, quiet: bool = False):
     """``sol`` carried on to ``t_end`` with the energy shell's boxes when it broke down
     (module docstring); ``masses``: the run's chain record (``.chain``, ``.cparams``),
-    ``hooks``: the run's hooks (one :class:`~verified.consistency.energy_shell.EnergyShellHook`),
-    ``box``: the initial box. Anything else (completed, stopped, no shell hook) is
-    returned unchanged."""
+    ``hooks``: the run's hooks (with ``simulate(energy_shell=True)`` one
+    :class:`~verified.consistency.energy_shell.EnergyShellHook`; without one the shell is
+    the chain's numeric model's, over ``box``), ``box``: the initial box. Anything else
+    (completed, stopped, no chain) is returned unchanged. ``quiet`` (the default
+    ``energy_shell=None``, which nobody asked for): only a run whose every piece broke
+    down is carried on, and where the shell cannot carry it on, its reason is not
+    appended to ``sol.reason``."""
     if sol.status != "breakdown" or masses is None:
         return sol
     hook = next((h for h in hooks if isinstance(h, EnergyShellHook)), None)
-    if hook is None:
-        return sol
     chain = masses.chain
     why = None
-    if getattr(masses, "cparams", None) is not None and masses.cparams.n:
+    if quiet and sol.surviving is not None:
+        # (some pieces went on: their enclosures and the per-piece record are worth more
+        # than the shell's boxes over the hull of them all)
+        why = "pieces survived"
+    elif getattr(masses, "cparams", None) is not None and masses.cparams.n:
         why = "uncertain parameters (no bound of M(q)^-1 over the parameter box)"
     elif any(b.joint.kind != "revolute" for b in chain.bodies):
         why = "a prismatic joint (its position has no period)"
@@ -59,7 +65,18 @@ def carry_on(sol, masses, hooks, box, t_eval, t_end: float):
         if not np.all(np.isfinite(c)):
             why = "no proven bound of (M(q)^-1)_ii for q" + ", q".join(str(i + 1) for i in np.flatnonzero(~np.isfinite(c)))
     if why is not None:
-        sol.reason += f"; the energy shell cannot carry the run on: {why}"
+        if not quiet:
+            sol.reason += f"; the energy shell cannot carry the run on: {why}"
         return sol
-    return continue_in_shell(sol, hook.shell, hook.hmax, c, t_eval, t_end, start=box,
-                             periods=np.full(chain.n, 2.0 * np.pi))
+    try:
+        if hook is None:
+            from .simulate.hooks import energy_shell_of
+            hook = EnergyShellHook(*energy_shell_of(masses.num, box))
+        return continue_in_shell(sol, hook.shell, hook.hmax, c, t_eval, t_end, start=box,
+                                 periods=np.full(chain.n, 2.0 * np.pi))
+    except ValueError as e:
+        if not quiet:
+            raise
+        # (no finite speed bound: the break-down stands, as without the shell)
+        sol.stats["shell_refused"] = str(e)
+        return sol

@@ -63,7 +63,7 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
              split_strategy: str = "gradient", refine: str = "pruned", min_gain: float = 0.1,
              backward_depth: int = 0, contract: str = "step", prune: bool = True,
              constraints=(), progress=None, max_wall: float | None = None, control=None,
-             param_subdivision: dict | None = None, energy_shell: bool = False,
+             param_subdivision: dict | None = None, energy_shell: bool | None = None,
              invariant_after: float | None = None, **solver_kwargs) -> Solution:
     """Verified enclosure of ``model`` from the initial box ``x0`` in simulation ``mode``.
 
@@ -138,8 +138,8 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         (``stats["invariant_from"]``). While a set's box cannot be verified the
         integration goes on. Runs in one process (the default ``workers=None`` becomes
         ``workers=1`` here; other ``workers``, ``client``, ``chunks`` are refused).
-    energy_shell : bool
-        Hold the enclosure inside the energy shell ``H(q, qd) <= hmax``
+    energy_shell : None (default), True or False
+        ``True``: hold the enclosure inside the energy shell ``H(q, qd) <= hmax``
         (:class:`verified.consistency.energy_shell.EnergyShellHook`; ``hmax`` the interval bound of
         ``H`` over the initial box): a set the shell cuts by more than 10 % in some
         component is replaced by its contracted box. Sound for a chain without control
@@ -150,13 +150,19 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
         else non-increasing, checked on every step (the declared rate graph, proven equal to
         ``grad H . f``, or ``grad H . f`` itself; :mod:`verified.consistency.conservation`). A
         controller, or a bare System without energy, is a ValueError. It keeps wide enclosures (the pendulum over
-        the top) from breaking down (docs/lab/code_notes.md). Where a chain's sets still
-        break down (a chaotic free fall), the run is carried on to ``t_end`` with boxes
-        from the energy bound alone (:mod:`mbs.shell_continuation`; revolute joints, no
-        uncertain parameters): every joint rate bounded by the energy, the positions grown
-        by it; crude but sound. ``status`` is then "completed", while ``reason``,
-        ``method`` and ``stats["shell_from"]`` say where the sets gave up. Default False:
-        on enclosures that stay narrow it only costs time.
+        the top) from breaking down (docs/lab/code_notes.md).
+        Where a passive chain's sets still break down (a chaotic free fall), the run is
+        carried on to ``t_end`` with boxes from the energy bound alone
+        (:mod:`mbs.shell_continuation`; revolute joints, no uncertain parameters): every
+        joint rate bounded by the energy, the positions grown by it; crude but sound.
+        ``status`` is then "completed", while ``reason``, ``method`` and
+        ``stats["shell_from"]`` say where the sets gave up.
+        ``None`` (default): no shell while the sets hold (on enclosures that stay narrow
+        it only costs time), and that carrying on after a break-down wherever it applies
+        (a chain without controller or uncertain parameters, revolute joints, every
+        piece broken down, and none of the limits ``max_steps``, ``max_width``,
+        ``h_min`` passed); elsewhere the break-down is returned as it is. ``False``:
+        neither.
     solver_kwargs : passed on to :func:`verified.solver.solve` (h_max, max_boxes, hooks, ...);
         an unknown keyword raises ``TypeError`` naming ``simulate()``. ``workers``: as in
         ``solve``, default None: every core of this machine when worthwhile (>= 128
@@ -194,8 +200,12 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
                      progress, mode, ctrl_c, solver_kwargs)
     if run.masses is not None:
         apply_proof(run.masses, sol)  # (may cut the run back: the one edit of solve's result)
-    if energy_shell:  # a passive chain's break-down carried on by the shell's boxes (mbs.shell_continuation)
-        sol = carry_on(sol, run.masses, hooks, box, t_eval, t_end)
+    # (by default not where the caller's own limits ended the run: max_steps, max_width, h_min)
+    limited = any(solver_kwargs.get(k) is not None for k in ("max_steps", "max_width", "h_min"))
+    if energy_shell or (energy_shell is None and run.loop is None and not limited):
+        # a passive chain's break-down carried on by the shell's boxes (mbs.shell_continuation);
+        # by default only where it applies, and silently not elsewhere
+        sol = carry_on(sol, run.masses, hooks, box, t_eval, t_end, quiet=energy_shell is None)
     return as_simulation(sol, mode.name, run, params_record(run.system, ode_params))
 
 

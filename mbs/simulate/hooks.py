@@ -43,9 +43,10 @@ def energy_test(system: System, mode, constraints, *, test_interval, test_splits
 def shell_hooks(energy_shell, run, model, box: Interval, params) -> list:
     """``[the energy shell's hook]`` with ``energy_shell=True``, else ``[]`` (``run``: a
     :class:`mbs.simulate.model.Resolved`; ``model`` as given to ``simulate``; ``box`` and
-    ``params`` what ``solve`` gets)."""
-    if not isinstance(energy_shell, (bool, np.bool_)):
-        raise ValueError(f"energy_shell must be True or False, got {energy_shell!r}")
+    ``params`` what ``solve`` gets). ``None`` (the default) holds no shell during the run
+    (only :func:`mbs.shell_continuation.carry_on` after a break-down)."""
+    if energy_shell is not None and not isinstance(energy_shell, (bool, np.bool_)):
+        raise ValueError(f"energy_shell must be True, False or None, got {energy_shell!r}")
     if not energy_shell:
         return []
     return [_energy_shell_hook(run.masses, run.loop, box, model if isinstance(model, System) else run.system, params)]

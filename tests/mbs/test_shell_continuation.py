@@ -81,6 +81,39 @@ def test_a_too_small_speed_bound_is_caught_by_the_pinocchio_samples(paper_run, m
     assert count_outside(run(), ens, 200)[0] > 0
 
 
+def test_by_default_a_passive_chain_is_carried_on_and_false_turns_it_off(paper_run):
+    """With no ``energy_shell`` setting (None) a passive chain's break-down is carried on
+    by the shell's boxes, which no sample leaves; ``energy_shell=False`` keeps the
+    break-down; no shell is held during the run, so the sets up to the break-down are
+    those of the run without it."""
+    chain = dp_paper.dh_chain()
+    lo, hi = dp_paper.initial_box()
+    _, ens = paper_run
+    kw = dict(mode="i", method="lohner", output_dt=0.1, progress=False, workers=1)
+    off = simulate(chain, Interval(lo, hi), 1.5, energy_shell=False, **kw)
+    sol = simulate(chain, Interval(lo, hi), 1.5, **kw)
+    assert off.status == "breakdown" and "energy shell" not in off.reason
+    assert sol.status == "completed" and sol.stats["shell_from"] == off.t_reached
+    assert "energy-shell boxes" in sol.method and "broke down" in sol.reason
+    k = len(off.t)
+    assert np.array_equal(np.asarray(sol.hull.lo)[:k], np.asarray(off.hull.lo)[:k])
+    assert count_outside(sol, ens, 200) == (0, 1200)
+
+
+def test_by_default_what_the_shell_cannot_carry_stays_a_quiet_breakdown():
+    """The default fallback applies only where it is sound and possible: uncertain
+    parameters (no bound of M(q)^-1 over them) and a controller (which can add energy)
+    keep their break-down, without a note about a shell nobody asked for."""
+    from mbs.control import PD
+    chain = double_pendulum()
+    lo, hi = _dp_box()
+    kw = dict(mode="i", method="lohner", progress=False, workers=1)
+    sol = simulate(chain, Interval(lo, hi), 1.0, params={"mass_scale": [0.95, 1.05]}, **kw)
+    assert sol.status == "breakdown" and "shell" not in sol.reason and "shell_from" not in sol.stats
+    sol = simulate(chain, Interval(lo, hi), 1.0, control=PD(1.0, 0.1), **kw)
+    assert sol.status == "breakdown" and "shell" not in sol.reason and "shell_from" not in sol.stats
+
+
 def test_uncertain_parameters_are_not_carried_on():
     chain = double_pendulum()
     lo, hi = _dp_box()
