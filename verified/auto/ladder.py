@@ -353,7 +353,12 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
                             t_span=(float(t0), float(probe.t_reached)), status=probe.status, reason=probe.reason,
                             wall_s=time.perf_counter() - p_start,
                             probe=f"part 1 of the {parts.shape[0]} run first"))
-            if probe.status == "breakdown" and t_p <= t_fail + MIN_GAIN * (t1 - t0):
+            if probe.status == "breakdown" and probe.reason.startswith(STALLED):
+                # (a stall says nothing of the split's gain: the split attempt runs whole and
+                # hands its stalled pieces on, as without a probe)
+                log[-1]["next"] = "stalled: not judged; the split runs whole"
+                probe = None
+            elif probe.status == "breakdown" and t_p <= t_fail + MIN_GAIN * (t1 - t0):
                 why = (f"a probe (part 1 of the {parts.shape[0]} the pieces split into) broke down at "
                        f"t = {t_p:g}, no later than the piece(s) it was split from (t = {t_fail:g})")
             elif probe.status == "breakdown":
