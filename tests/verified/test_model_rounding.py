@@ -145,6 +145,88 @@ def test_the_oracle_bites_a_product_without_its_rounding():
     assert caught > 0
 
 
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 6), lo=st.integers(1, 6), kind=st.integers(0, 3),
+       fresh=st.booleans(), cancel=st.booleans(), scale=st.sampled_from([1e-3, 1.0, 1e3]))
+def test_linear_order_convolution_contains_the_exact_sum(seed, k, lo, kind, fresh, cancel, scale):
+    """``_conv_pre`` (a linear order's convolution, TaylorModelODE.linear_orders)
+    against the exact sum of its products: the lower orders' models (j < lo) are whole,
+    the others prefix-only; every product's pairs and the lower orders' quadratic parts
+    times the centres are bounded into the remainder, and the rounding of the fused
+    loops too, on inputs that cancel to rounding level."""
+    rng = np.random.default_rng(seed)
+    lo = min(lo, k)
+    wa, wb, j0 = [(1.0, 0.0, 0), (-1.0, 0.0, 1), (0.0, 1.0, 1), (0.0, -1.0, 1)][kind]
+    q0 = M + 1
+    F = np.zeros((2, k + 1, 1, L))
+    for s in range(2):
+        for j in range(k + 1):
+            F[s, j, 0, : M + 1] = rng.uniform(-1, 1, M + 1) * scale / 3.0
+            if j < lo:  # a whole model: a quadratic block too
+                F[s, j, 0, q0:E] = rng.uniform(-1, 1, E - q0) * scale / 7.0
+            F[s, j, 0, E] = abs(rng.uniform(0, 1)) * scale * 1e-6
+    LV = np.full(k + 1, q0, np.int64)
+    HV = np.array([1 if j < lo else 0 for j in range(k + 1)], np.int64)
+    C = np.full((2, k + 1, 1, 2), -1.0)
+    terms = []
+    for j in range(j0, k + 1):
+        w = wa + wb * j
+        x, y = F[0, j, 0], F[1, k - j, 0]
+        terms.append((w, x, y))
+    T0 = np.zeros(L)
+    if cancel and not fresh:
+        for w, x, y in terms:
+            T0[: M + 1] -= w * x[0] * y[: M + 1] + w * y[0] * x[: M + 1]
+            T0[0] += w * x[0] * y[0]
+        T0[: M + 1] *= 1.0 + rng.uniform(-1e-9, 1e-9, M + 1)
+    elif not fresh:
+        T0[: M + 1] = rng.uniform(-1, 1, M + 1) * scale
+    exact = [Fraction(v) for v in T0[:E]]
+    for w, x, y in terms:
+        # x y with both quadratic blocks: each block times the other's centre, the rest of
+        # the products as pairs (their exact values; _excess counts what the model lacks)
+        fw = Fraction(w)
+        for a in list(range(M + 1)) + list(range(q0, E)):
+            for b in list(range(M + 1)) + list(range(q0, E)):
+                if x[a] == 0.0 or y[b] == 0.0:
+                    continue
+                p = fw * Fraction(x[a]) * Fraction(y[b])
+                if a == 0:
+                    exact[b] += p
+                elif b == 0:
+                    exact[a] += p
+                else:  # a monomial of degree 2 or more: none kept, put in a slot the model has zero in
+                    exact.append(p)
+    T = T0.copy()
+    tm._conv_pre(T, F, C, 0, 1, k, j0, k + 1, wa, wb, 0, LV, HV, q0, 1 if fresh else 0)
+    dev = sum(abs(Fraction(T[i]) - exact[i]) for i in range(E)) + sum(abs(v) for v in exact[E:])
+    assert dev - (Fraction(T[E]) - Fraction(T0[E])) <= 0
+
+
+def test_the_convolution_oracle_bites_a_lost_block():
+    """The convolution with the lower orders' blocks times the centres left out of the
+    remainder is caught by the same check (a block-heavy, cancelling input)."""
+    import inspect
+    from numba import njit
+
+    src = inspect.getsource(tm._conv_pre.py_func).split("\n", 1)[1]
+    ns = dict(vars(tm))
+    exec(src.replace("nl = _pm(sx, sy) * _UPF + swept + ", "nl = _pm(sx, sy) * _UPF + 0.0 + "), ns)
+    broken = njit(ns["_conv_pre"])
+    q0, k = M + 1, 3
+    F = np.zeros((2, k + 1, 1, L))
+    F[0, 0, 0, 0] = 1.0
+    F[0, 0, 0, q0:E] = 0.5  # x_0: a centre and a quadratic block, no linear part
+    F[1, k, 0, 0] = 4.0      # y_k: a large centre, nothing else
+    LV = np.full(k + 1, q0, np.int64)
+    HV = np.array([1, 0, 0, 0], np.int64)
+    exact_dev = Fraction(4) * Fraction(0.5) * (E - q0)  # y_k0 x_0's block, all in the remainder
+    for f, ok in ((tm._conv_pre, True), (broken, False)):
+        T = np.zeros(L)
+        f(T, F, np.full((2, k + 1, 1, 2), -1.0), 0, 1, k, 0, 1, 1.0, 0.0, 0, LV, HV, q0, 1)
+        assert (Fraction(T[E]) >= exact_dev) == ok
+
+
 def test_product_table_refuses_more_hits_than_the_rounding_bound_allows(monkeypatch):
     # every table the models use lands at most 14 pairs on one monomial (a quartic one)
     PA4, PB4, PC4 = tm.product_table(8, 8, 8, 8)

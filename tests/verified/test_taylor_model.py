@@ -75,7 +75,7 @@ def _pointwise_ode():
 
 def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_symbols=0, quartic_symbols=0,
                            star_symbols=0, fresh=False, pool=0, pool_tol=0.0, pool_orders=1, n_points=12, seed=0,
-                           product_orders=None):
+                           product_orders=None, linear_orders=None):
     """The models themselves, not only their ranges: inputs ``c + r eps`` (one symbol per
     state, ``c`` and ``r`` dyadic), and at dyadic points ``eps`` (corners included) the exact
     coefficients (arb) must lie within the model's polynomial at ``eps`` (evaluated in arb)
@@ -83,7 +83,8 @@ def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_sy
     coefficients' remainders move there, ``TaylorModelODE._run(fresh=True)``), whose
     values are unknown: their terms count as remainder. ``pool``: that many symbols
     before them for the remainders born inside the graph (``_run(pool=...)``), likewise.
-    ``product_orders``: the evaluator's :attr:`TaylorModelODE.product_orders` (None: its default)."""
+    ``product_orders``: the evaluator's :attr:`TaylorModelODE.product_orders` (None: its default);
+    ``linear_orders`` likewise."""
     from flint import arb
 
     c, r = np.asarray(c, float), np.asarray(r, float)
@@ -91,6 +92,8 @@ def check_models_pointwise(graph, c, r, order, *, quadratic_symbols=12, cubic_sy
     ev = TaylorModelODE(graph, quadratic_symbols, cubic_symbols, quartic_symbols, star_symbols)
     if product_orders is not None:
         ev.product_orders = product_orders
+    if linear_orders is not None:
+        ev.linear_orders = linear_orders
     mq, m3, m4, ms = ev.symbol_caps(m)
     ns = m - mq  # the star reaches the states' symbols, not the fresh ones
     mt = m + pool + (n * order if fresh else 0)
@@ -336,7 +339,8 @@ def _mutant_kernel(monkeypatch, func, cut, replacement):
     namespace = dict(vars(tm))
     exec(src.replace(cut, replacement), namespace)
     monkeypatch.setattr(tm, func, njit(namespace[func]))
-    for caller in ("_unary_into", "_model_kernel"):
+    for caller in ("_unary_into", "_sqrconv", "_quotient_step", "_conv_pre", "_sqrconv_pre", "_quotient_step_pre",
+                   "_linear_order_slot", "_model_kernel"):  # (in the order they call each other)
         if caller == func:
             continue
         ns = dict(vars(tm))
@@ -396,6 +400,71 @@ def test_models_without_products_at_high_orders_contain_exact_coefficients_point
     check_models_pointwise(_pointwise_ode(), [0.375, -0.25], [0.125, 0.25], 5, quadratic_symbols=quad,
                            cubic_symbols=cubic, quartic_symbols=quartic, star_symbols=star, fresh=fresh,
                            product_orders=product_orders)
+
+
+def _pointwise_ode_more():
+    """Two states through the operations :func:`_pointwise_ode` leaves out (log, tan,
+    atan, squares, negation, a quotient of two states)."""
+    return trace(lambda x, p: [np.log(2.0 + x[0] * x[1]) - x[1] ** 2 + np.tan(0.25 * x[0]),
+                               -np.arctan(x[0]) + x[1] / (2.0 + x[0] ** 2)], 2)
+
+
+@pytest.mark.parametrize("quad, cubic, quartic, star", [(2, 0, 0, 0), (2, 2, 0, 0), (1, 1, 1, 1), (2, 2, 2, 0)])
+@pytest.mark.parametrize("product_orders", [1, 3])
+@pytest.mark.parametrize("fresh, pool", [(False, 0), (True, 0), (True, 12)])
+@pytest.mark.parametrize("ode", [_pointwise_ode, _pointwise_ode_more])
+def test_linear_orders_contain_exact_coefficients_pointwise(quad, cubic, quartic, star, product_orders, fresh,
+                                                                 pool, ode):
+    """``TaylorModelODE.linear_orders``: the orders from ``product_orders`` on carry
+    centre, linear part and remainder only (the lower orders' nonlinear blocks times the
+    centres bounded into the remainder, ``x_[product_orders]``'s own block swept into it;
+    with fresh symbols only the prefix of the orders so far is read), at order 6, with a
+    pool handed out over the first 4 orders (past ``product_orders`` = 3 too)."""
+    check_models_pointwise(ode(), [0.375, -0.25], [0.125, 0.25], 6, quadratic_symbols=quad, cubic_symbols=cubic,
+                           quartic_symbols=quartic, star_symbols=star, fresh=fresh, pool=pool, pool_tol=0.0,
+                           pool_orders=4 if pool else 1, product_orders=product_orders, linear_orders=product_orders)
+
+
+@pytest.mark.parametrize("ode", [_pointwise_ode, _pointwise_ode_more])
+def test_default_linear_orders_contain_exact_coefficients_pointwise(ode):
+    """The shipped settings (products to order 5, linear from 6) at order 8 with fresh
+    and pool symbols."""
+    ev = TaylorModelODE(ode(), 2, 2)
+    assert 0 <= ev.product_orders < ev.linear_orders < 8
+    check_models_pointwise(ode(), [0.375, -0.25], [0.125, 0.25], 8, quadratic_symbols=2, cubic_symbols=2,
+                           fresh=True, pool=12, pool_tol=0.0, pool_orders=3)
+
+
+def _pointwise_ode_big_centres():
+    """States whose high-order coefficients have large centres and no spread (x2' = 4
+    x2 from a point) times models with nonlinear blocks (x0^2, 1 / (2 + x3^2), x3
+    constant): the products' centre-times-block terms are not covered by any other
+    bound, so a linear order that loses them fails."""
+    return trace(lambda x, p: [-x[1], x[0] * x[0] * x[2], 4.0 * x[2], 0.0 * x[3], x[2] / (2.0 + x[3] * x[3])], 5)
+
+
+@pytest.mark.parametrize("func, cut, replacement", [
+    # the lower orders' blocks times the centres, lost in a convolution
+    ("_conv_pre", "nl = _pm(sx, sy) * _UPF + swept + ", "nl = _pm(sx, sy) * _UPF + 0.0 + "),
+    # ... in a product with the order-0 reciprocal (div, sqrt, log, atan)
+    ("_acc_mul_pre", "nl = dropped + swept + ", "nl = dropped + 0.0 + "),
+    # x_[product_orders]'s own block dropped, not swept into its remainder
+    ("_sweep_nonlinear", "Y[E] = _up(Y[E] + s)", "Y[E] = _up(Y[E] + 0.0)"),
+    # a prefix one order short: the newest fresh symbols' terms ignored
+    ("_model_kernel", "min(q0, 1 + fresh0 + k * n)", "min(q0, 1 + fresh0 + (k - 1) * n)"),
+])
+def test_oracle_catches_linear_orders_that_lose_terms(monkeypatch, func, cut, replacement):
+    """Each shortcut of the linear orders, broken so that a term is dropped without its
+    bound in the remainder, must fail the pointwise check (the unbroken kernel passes),
+    from product_orders 1 and 3."""
+    args = (_pointwise_ode_big_centres(), [0.5, 0.25, 1.0, 0.5, 0.0], [0.25, 0.25, 0.0, 0.25, 0.0], 6)
+    kw = dict(quadratic_symbols=5, cubic_symbols=2, fresh=True, linear_orders=0)
+    for po in (1, 3):
+        check_models_pointwise(*args, **kw, product_orders=po)
+    _mutant_kernel(monkeypatch, func, cut, replacement)
+    for po in (1, 3):
+        with pytest.raises(AssertionError, match="outside its model"):
+            check_models_pointwise(*args, **kw, product_orders=po)
 
 
 def test_oracle_catches_high_orders_that_drop_products_without_their_bound(monkeypatch):

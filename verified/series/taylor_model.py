@@ -364,6 +364,143 @@ def _div_int_into(Z, x, kf):
     Z[E] = _up(x[E] / kf + _abs_sum(Z, 0, E) * _U)
 
 
+# --------------------------------------------------------------------------
+# Linear orders (TaylorModelODE.linear_orders): from the order ``linear_orders`` on,
+# the kernel's models are centre, linear part and remainder only, and only the prefix
+# [0, l) of the linear part can be nonzero (the fresh symbols of the orders above are exact
+# zeros): these operations read and write that prefix and the remainder, nothing else
+# (the rest of the work arrays is left over from earlier calls). An operand of a lower
+# order keeps its nonlinear block [q0, E) (``h`` 1, its prefix the whole linear part): a
+# result takes the centre times that block into its remainder.
+# --------------------------------------------------------------------------
+@njit(cache=True)
+def _abs_sum_from(x, lo, hi):
+    """:func:`_abs_sum` of ``x[lo:hi]`` for a start ``lo`` known only at run time: over the
+    slice from a literal 0 (a loop from a variable start keeps numba's check for negative
+    indices, which keeps LLVM from vectorizing it: 7x slower)."""
+    return _abs_sum(x[lo:hi], 0, hi - lo)
+
+
+@njit(cache=True)
+def _clear_pre(T, l):
+    """Zero the prefix [0, l) and the remainder."""
+    for i in range(l):
+        T[i] = 0.0
+    T[T.size - 1] = 0.0
+
+
+@njit(cache=True)
+def _copy_pre(Z, x, l):
+    """Z = x on the prefix [0, l) and the remainder (x without a nonlinear block)."""
+    for i in range(l):
+        Z[i] = x[i]
+    Z[Z.size - 1] = x[x.size - 1]
+
+
+@njit(cache=True)
+def _neg_pre(Z, x, l):
+    """Z = -x on the prefix (exact), the same remainder."""
+    for i in range(l):
+        Z[i] = -x[i]
+    Z[Z.size - 1] = x[x.size - 1]
+
+
+@njit(cache=True)
+def _acc_add_pre(T, x, sign, lt, lx):
+    """:func:`_acc_add` on prefixes (``lx <= lt``; x without a nonlinear block)."""
+    E = T.size - 1
+    for i in range(lx):
+        T[i] = T[i] + sign * x[i]
+    T[E] = _up(T[E] + x[E] + _abs_sum(T, 0, lt) * _U)
+
+
+@njit(cache=True)
+def _add_pre(Z, x, y, sign, l):
+    """Z = x + sign * y on the prefix (sign = +1 or -1; x, y without nonlinear blocks):
+    one rounding per coefficient, at most u |result|."""
+    E = Z.size - 1
+    for i in range(l):
+        Z[i] = x[i] + sign * y[i]
+    Z[E] = _up(x[E] + y[E] + _abs_sum(Z, 0, l) * _U)
+
+
+@njit(cache=True)
+def _div_int_pre(Z, x, kf, l):
+    """:func:`_div_int_into` on the prefix (x without a nonlinear block)."""
+    E = Z.size - 1
+    for i in range(l):
+        Z[i] = x[i] / kf
+    Z[E] = _up(x[E] / kf + _abs_sum(Z, 0, l) * _U)
+
+
+@njit(cache=True)
+def _sweep_nonlinear(Y, q0):
+    """Y's nonlinear coefficients (the block [q0, E)) into its remainder: each monomial
+    lies in [-1, 1], so their sum of |.|, rounded up, bounds them; the block is zeroed."""
+    E = Y.size - 1
+    if q0 >= E:
+        return
+    s = _abs_sum_from(Y, q0, E)
+    Yq = Y[q0:E]
+    for i in range(Yq.size):
+        Yq[i] = 0.0
+    Y[E] = _up(Y[E] + s)
+
+
+@njit(cache=True)
+def _acc_mul_pre(T, x, y, w, lt, lx, hx, ly, hy, q0):
+    """T += w * x * y into a result without nonlinear coefficients (prefix ``lt``):
+    :func:`_acc_mul` with an empty product table, on the operands' prefixes ``lx, ly <= lt``
+    (past one operand's prefix its terms are exact zeros). An operand with its nonlinear
+    block (``hx``/``hy`` 1, a lower order's model: prefix ``q0``) has that block's
+    products with the other's centre, ``|y0| sum |x_nl|``, bounded into the remainder
+    (every monomial lies in [-1, 1]); every pair of non-constant monomials is bounded by
+    ``Sx Sy`` (``dropped``), the remainders as in :func:`_acc_mul`, and the rounding
+    likewise (the centre terms' bound over the operands' whole spreads)."""
+    E = T.size - 1
+    x0 = x[0]
+    y0 = y[0]
+    t0 = w * (x0 * y0)
+    c = T[0] + t0
+    rnd = 2.0 * abs(t0) + abs(c)
+    T[0] = c
+    lx = min(lx, lt)  # (a lower order's model is zero past lt: no fresh symbols above its order)
+    ly = min(ly, lt)
+    lc = min(lx, ly)
+    for i in range(1, lc):
+        T[i] = T[i] + (w * (x0 * y[i]) + w * (y0 * x[i]))
+    # (the tails start where the other prefix ends: slices from 0, see _abs_sum_from)
+    if ly > lc:
+        Tl = T[lc:ly]
+        yl = y[lc:ly]
+        for i in range(Tl.size):
+            Tl[i] = Tl[i] + w * (x0 * yl[i])
+    if lx > lc:
+        Tl = T[lc:lx]
+        xl = x[lc:lx]
+        for i in range(Tl.size):
+            Tl[i] = Tl[i] + w * (y0 * xl[i])
+    swept = 0.0
+    sx = _abs_sum(x, 1, lx)
+    if hx:
+        nx = _abs_sum_from(x, q0, E)
+        swept += _pm(abs(y0), nx)
+        sx = _up(sx + nx)
+    sy = _abs_sum(y, 1, ly)
+    if hy:
+        ny = _abs_sum_from(y, q0, E)
+        swept += _pm(abs(x0), ny)
+        sy = _up(sy + ny)
+    tc = _abs_sum(T, 1, lt)
+    aw = abs(w)
+    rnd += 2.0 * _up(_pm(aw, _pm(abs(x0), sy) + _pm(abs(y0), sx)) * (1.0 + 2.0**-48)) + tc
+    dropped = _pm(sx, sy) * _UPF
+    ex = x[E]
+    ey = y[E]
+    nl = dropped + swept + _pm(abs(x0) + sx, ey) + _pm(abs(y0) + sy, ex) + _pm(ex, ey)
+    T[E] = _up(T[E] + _pm(aw, _up(nl)) + _up(rnd) * _U)
+
+
 @njit(cache=True)
 def _frozen_point_into(Z, x):
     """Z = the graph op ``mid``: the model's centre as an exact point (unknown stays unknown)."""
@@ -595,6 +732,116 @@ def _sqrconv(Z, F, u, k, j0, b, PA, PB, PC):
 
 
 @njit(cache=True)
+def _model_sums(F, C, s, j, b, LV, HV, q0):
+    """The spread of the model F[s, j, b] (returned) and its nonlinear block's sum of |.|,
+    both rounded up, into ``C[s, j, b]`` (the
+    spread over its prefix ``LV[j]`` and, if ``HV[j]``, its block; the block's sum 0
+    without one): computed at its first use in a kernel call and kept in ``C[s, j, b]``
+    (-1: not yet; the pool's change of a model marks it so again). A convolution reads
+    each model at every later order: its sums cost one pass, not one per use."""
+    sp = C[s, j, b, 0]
+    if sp < 0.0:
+        x = F[s, j, b]
+        E = x.size - 1
+        if HV[j]:
+            sp = _abs_sum(x, 1, E)
+            C[s, j, b, 1] = _abs_sum_from(x, q0, E)
+        else:
+            sp = _abs_sum(x, 1, LV[j])
+            C[s, j, b, 1] = 0.0
+        C[s, j, b, 0] = sp
+    return sp
+
+
+@njit(cache=True)
+def _conv_pre(T, F, C, u, v, k, j0, j1, wa, wb, b, LV, HV, q0, fresh=0):
+    """T += sum_{j0 <= j < j1} (wa + wb j) F[u, j, b] F[v, k - j, b] (``fresh``: T = that
+    sum, T's contents ignored) into a result at the
+    linear order k (prefix ``LV[k]``): :func:`_acc_mul_pre` for each term, in one call,
+    with the operands' sums from :func:`_model_sums`. Each term's centre loop is
+    :func:`_acc_mul_pre`'s (the same float operations on T); its rounding bound sums
+    theirs, the sum of ``|T_i|`` after each term taken as at most the number of terms
+    times ``sum |T_i|`` before the first plus every term's centre products' bound (the
+    partial sums' magnitudes, with their roundings inside the factor ``1 + 2^-40``)."""
+    E = T.size - 1
+    lt = LV[k]
+    if fresh:
+        _clear_pre(T, lt)
+        tc0 = 0.0
+    else:
+        tc0 = _abs_sum(T, 1, lt)
+    rnd = 0.0
+    cen = 0.0
+    acc = T[E]
+    for j in range(j0, j1):
+        w = wa + wb * j
+        x = F[u, j, b]
+        y = F[v, k - j, b]
+        lx = min(LV[j], lt)  # (a lower order's model is zero past lt: no fresh symbols above its order)
+        ly = min(LV[k - j], lt)
+        sx = C[u, j, b, 0]  # (the cache read here: a call per operand costs as much as its loop)
+        if sx < 0.0:
+            sx = _model_sums(F, C, u, j, b, LV, HV, q0)
+        nx = C[u, j, b, 1]
+        sy = C[v, k - j, b, 0]
+        if sy < 0.0:
+            sy = _model_sums(F, C, v, k - j, b, LV, HV, q0)
+        ny = C[v, k - j, b, 1]
+        x0 = x[0]
+        y0 = y[0]
+        t0 = w * (x0 * y0)
+        c = T[0] + t0
+        rnd += 2.0 * abs(t0) + abs(c)
+        T[0] = c
+        lc = min(lx, ly)
+        for i in range(1, lc):
+            T[i] = T[i] + (w * (x0 * y[i]) + w * (y0 * x[i]))
+        if ly > lc:
+            Tl = T[lc:ly]
+            yl = y[lc:ly]
+            for i in range(Tl.size):
+                Tl[i] = Tl[i] + w * (x0 * yl[i])
+        if lx > lc:
+            Tl = T[lc:lx]
+            xl = x[lc:lx]
+            for i in range(Tl.size):
+                Tl[i] = Tl[i] + w * (y0 * xl[i])
+        aw = abs(w)
+        ct = _up(_pm(aw, _pm(abs(x0), sy) + _pm(abs(y0), sx)) * (1.0 + 2.0**-48))
+        cen += ct
+        rnd += 2.0 * ct
+        swept = _pm(abs(y0), nx) + _pm(abs(x0), ny)  # (the lower orders' blocks times the centres)
+        ex = x[E]
+        ey = y[E]
+        nl = _pm(sx, sy) * _UPF + swept + _pm(abs(x0) + sx, ey) + _pm(abs(y0) + sy, ex) + _pm(ex, ey)
+        acc = _up(acc + _pm(aw, _up(nl)))
+    # the centre loops' partial sums: sum_i |T_i| after each term <= tc0 + the terms' bound
+    rnd += (j1 - j0) * _up(_up(tc0 + cen) * _UPF)
+    T[E] = _up(acc + _up(rnd) * _U)
+
+
+@njit(cache=True)
+def _sqrconv_pre(Z, F, C, u, k, j0, b, LV, HV, q0, fresh=0):
+    """:func:`_sqrconv` at a linear order (:func:`_conv_pre`; the order-j models'
+    prefixes and blocks ``LV[j], HV[j]``; ``fresh``: Z = the sum)."""
+    _conv_pre(Z, F, C, u, u, k, j0, (k + 1) // 2, 2.0, 0.0, b, LV, HV, q0, fresh)
+    if k % 2 == 0 and k // 2 >= j0:
+        h = k // 2
+        _conv_pre(Z, F, C, u, u, k, h, h + 1, 1.0, 0.0, b, LV, HV, q0)
+
+
+@njit(cache=True)
+def _quotient_step_pre(Z, F, C, s, u, v, k, b, rec, T, S, LV, HV, q0):
+    """:func:`_quotient_step` at a linear order (``rec``: an order-0 model)."""
+    lk = LV[k]
+    _conv_pre(S, F, C, s, v, k, np.int64(1), k, 0.0, 1.0, b, LV, HV, q0, np.int64(1))
+    _div_int_pre(T, S, float(k), lk)
+    _add_pre(S, F[u, k, b], T, -1.0, lk)
+    _clear_pre(Z, lk)
+    _acc_mul_pre(Z, S, rec, 1.0, lk, lk, np.int64(0), LV[0], HV[0], q0)
+
+
+@njit(cache=True)
 def _quotient_step(Z, F, s, u, v, k, b, PA, PB, PC, rec, T, S):
     """Z = (F[u, k] - (1/k) sum_{j=1}^{k-1} j F[s, j] F[v, k-j]) * rec (log, atan)."""
     _clear(S)
@@ -609,8 +856,72 @@ def _quotient_step(Z, F, s, u, v, k, b, PA, PB, PC, rec, T, S):
 
 
 @njit(cache=True)
+def _linear_order_slot(F, C, REC, out, T, S, o, s, u, v, a, ix, cu, cv, k, LV, HV, q0):
+    """Slot s's models at order ``k >= linear_orders`` (:func:`_model_kernel`), every box:
+    the recursion of the kernel's loop with the prefix operations (:func:`_acc_mul_pre`).
+    ``a``, ``ix``: the slot's aux and index; ``cu``, ``cv``: whether its operands are
+    constant. The orders k >= 1 only (constants, parameters and ``mid`` are done at 0)."""
+    nb = F.shape[2]
+    lk = LV[k]
+    l0 = LV[0]
+    h0 = HV[0]
+    z = np.int64(0)
+    fk = float(k)
+    for b in range(nb):
+        Z = F[s, k, b]
+        if o == T_INPUT:
+            _copy_pre(Z, out[ix, k, b], lk)
+        elif o == T_ADD or o == T_SUB:
+            _add_pre(Z, F[u, k, b], F[v, k, b], 1.0 if o == T_ADD else -1.0, lk)
+        elif o == T_NEG:
+            _neg_pre(Z, F[u, k, b], lk)
+        elif o == T_MUL:
+            if cu:
+                _conv_pre(Z, F, C, u, v, k, z, np.int64(1), 1.0, 0.0, b, LV, HV, q0, np.int64(1))
+            elif cv:
+                _conv_pre(Z, F, C, u, v, k, k, k + 1, 1.0, 0.0, b, LV, HV, q0, np.int64(1))
+            else:
+                _conv_pre(Z, F, C, u, v, k, z, k + 1, 1.0, 0.0, b, LV, HV, q0, np.int64(1))
+        elif o == T_SQR:
+            _sqrconv_pre(Z, F, C, u, k, z, b, LV, HV, q0, np.int64(1))
+        elif o == T_DIV:
+            _clear_pre(T, lk)
+            _acc_add_pre(T, F[u, k, b], 1.0, lk, lk)
+            if not cv:
+                _conv_pre(T, F, C, v, s, k, np.int64(1), k + 1, -1.0, 0.0, b, LV, HV, q0)
+            _clear_pre(Z, lk)
+            _acc_mul_pre(Z, T, REC[s, b], 1.0, lk, lk, z, l0, h0, q0)
+        elif o == T_SQRT:
+            _sqrconv_pre(S, F, C, s, k, np.int64(1), b, LV, HV, q0, np.int64(1))
+            _add_pre(T, F[u, k, b], S, -1.0, lk)
+            _clear_pre(Z, lk)
+            _acc_mul_pre(Z, T, REC[s, b], 1.0, lk, lk, z, l0, h0, q0)
+        elif o == T_EXP:
+            _conv_pre(T, F, C, u, s, k, np.int64(1), k + 1, 0.0, 1.0, b, LV, HV, q0, np.int64(1))
+            _div_int_pre(Z, T, fk, lk)
+        elif o == T_LOG:
+            _quotient_step_pre(Z, F, C, s, u, u, k, b, REC[s, b], T, S, LV, HV, q0)
+        elif o == T_SIN or o == T_COS:
+            ss = s if o == T_SIN else a
+            cs = a if o == T_SIN else s
+            _conv_pre(T, F, C, u, cs, k, np.int64(1), k + 1, 0.0, 1.0, b, LV, HV, q0, np.int64(1))
+            _div_int_pre(F[ss, k, b], T, fk, lk)
+            _conv_pre(T, F, C, u, ss, k, np.int64(1), k + 1, 0.0, -1.0, b, LV, HV, q0, np.int64(1))
+            _div_int_pre(F[cs, k, b], T, fk, lk)
+        elif o == T_TAN:
+            _conv_pre(T, F, C, u, a, k, np.int64(1), k + 1, 0.0, 1.0, b, LV, HV, q0, np.int64(1))
+            _div_int_pre(Z, T, fk, lk)
+            V = F[a, k, b]
+            _sqrconv_pre(V, F, C, s, k, z, b, LV, HV, q0, np.int64(1))
+        elif o == T_ATAN:
+            V = F[a, k, b]
+            _sqrconv_pre(V, F, C, u, k, z, b, LV, HV, q0, np.int64(1))
+            _quotient_step_pre(Z, F, C, s, u, a, k, b, REC[s, b], T, S, LV, HV, q0)
+
+
+@njit(cache=True)
 def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA, PB, PC, deg, fresh0, F, REC,
-                  pool0=-1, pool_n=0, pool_tol=0.0, pool_orders=1, product_orders=-1):
+                  pool0=-1, pool_n=0, pool_tol=0.0, pool_orders=1, product_orders=-1, q0=-1, linear_orders=-1):
     """Taylor models of x_[0..order]; X (n, B, L) and P (p, B, L) are the input models.
 
     ``F`` (slots, order + 1, B, L) and ``REC`` (slots, B, L) are the caller's work
@@ -622,16 +933,36 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
     :func:`verified.series.affine_taylor._affine_kernel_reference`, with model operations.
     ``fresh0 >= 0``: the remainder of ``x_[k]_i`` (k >= 1) moves into the linear
     coefficient of symbol ``fresh0 + (k - 1) n + i`` (zero in the inputs; see
-    :meth:`TaylorModelODE._run`)."""
+    :meth:`TaylorModelODE._run`).
+
+    ``linear_orders >= 1`` (with ``q0``, the storage index of the first nonlinear
+    coefficient): the orders ``k >= linear_orders`` keep no nonlinear coefficients
+    (:attr:`TaylorModelODE.linear_orders`; their products must keep no pairs,
+    ``product_orders <= linear_orders``, which the caller checks): their models are
+    nonzero only in the prefix ``LV[k]`` of the linear part (with ``fresh0 >= 0`` the
+    fresh symbols of the orders above k are exact zeros) and the remainder, their
+    operations read and write only those (:func:`_acc_mul_pre`), and ``x_[linear_orders]``
+    has its nonlinear block swept into its remainder before its fresh symbol takes it.
+    The lower orders' models are whole (``LV`` = q0, ``HV`` = 1)."""
     nslots = op.size
     n, nb, L = X.shape
     E = L - 1
+    LV = np.empty(order + 1, np.int64)
+    HV = np.empty(order + 1, np.int64)
+    for k in range(order + 1):
+        lin = linear_orders >= 1 and k >= linear_orders and q0 >= 0
+        LV[k] = (min(q0, 1 + fresh0 + k * n) if fresh0 >= 0 else q0) if lin else max(q0, 0)
+        HV[k] = 0 if lin else 1
+    C = np.full((nslots, order + 1, nb, 2), -1.0)  # the models' sums (_model_sums)
     # (REC[s, b], the reciprocal of slot s's order-0 divisor, is written before it is read)
     for s in range(nslots):
         if cst[s]:  # a constant's coefficients >= 1 are read as exact zeros
             for k in range(1, order + 1):
                 for b in range(nb):
-                    _clear(F[s, k, b])
+                    if HV[k]:
+                        _clear(F[s, k, b])
+                    else:
+                        _clear_pre(F[s, k, b], LV[k])
     out = np.zeros((n, order + 1, nb, L))
     out[:, 0, :, :] = X
     T = np.zeros(L)
@@ -656,7 +987,9 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
             v = a1[s]
             if o == T_AUX or (k > 0 and cst[s]):
                 continue  # a constant's coefficients >= 1 stay exactly 0
-            for b in range(nb):
+            if not HV[k]:
+                _linear_order_slot(F, C, REC, out, T, S, o, s, u, v, aux[s], idx[s], cst[u], cst[v], k, LV, HV, q0)
+            for b in range(nb if HV[k] else 0):
                 Z = F[s, k, b]
                 if o == T_CONST:
                     if k == 0:
@@ -781,16 +1114,23 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                 for b in range(nb):
                     if used[b] < pool_n:
                         Z = F[s, k, b]
-                        if Z[E] > pool_tol * (np.abs(Z[1:E]).sum() + abs(Z[0])) and Z[E] < np.inf:
+                        mag = np.abs(Z[1:E]).sum() if HV[k] else _abs_sum(Z, 1, LV[k])
+                        if Z[E] > pool_tol * (mag + abs(Z[0])) and Z[E] < np.inf:
                             Z[1 + pool0 + used[b]] = Z[E]
                             Z[E] = 0.0
+                            C[s, k, b, 0] = -1.0  # (its sums change)
                             used[b] += 1
         # x_[k+1] = f_[k] / (k + 1)
         for i in range(n):
             o = outputs[i]
             for b in range(nb):
                 Y = out[i, k + 1, b]
-                _div_int_into(Y, F[o, k, b], fk + 1.0)
+                if HV[k]:
+                    _div_int_into(Y, F[o, k, b], fk + 1.0)
+                    if not HV[k + 1]:
+                        _sweep_nonlinear(Y, q0)  # (x_[linear_orders]: its block into the remainder)
+                else:
+                    _div_int_pre(Y, F[o, k, b], fk + 1.0, LV[k])
                 if fresh0 >= 0:
                     # e [-1, 1] = e delta: exact, and later orders carry delta linearly
                     Y[1 + fresh0 + k * n + i] = Y[E]
@@ -1048,6 +1388,18 @@ class TaylorModelODE:
     #: hardly matter, while the kept products' gather and scatter are a large share of a
     #: product's cost (measured in docs/lab/robot_speed.md)
     product_orders = 5
+    #: the recursion's orders ``k >= linear_orders`` (and ``>= product_orders``, ``>= 1``)
+    #: drop their models' nonlinear coefficients: centre, linear part and remainder only
+    #: (-1: never; so too with ``product_orders`` -1). With no pair kept those coefficients
+    #: are only the centres' multiples of the lower orders' blocks; instead every
+    #: product's centre times an operand's block goes into the remainder, and
+    #: ``x_[linear_orders]``'s own block too (its fresh symbol then takes it), while the
+    #: loops skip the blocks and the later orders' fresh symbols, one fused pass per
+    #: convolution (:func:`_conv_pre`). One order past ``product_orders``: on the UR5 the
+    #: kernel costs 14-19 % less a call, and the widths at T = 1 are those of whole models
+    #: to 0.3 % (at ``product_orders`` itself: 0.5 % wider, 3 steps more; measured in
+    #: docs/lab/robot_speed.md)
+    linear_orders = 6
 
     def __init__(self, graph, quadratic_symbols: int = QUADRATIC_SYMBOLS, cubic_symbols: int = 0,
                  quartic_symbols: int = 0, star_symbols: int = 0):
@@ -1124,10 +1476,14 @@ class TaylorModelODE:
         if pool and pool0 < linear_only:
             raise ValueError(f"{int(pool)} pool symbols among {m} overlap the {mq} quadratic ones or the star's")
         F, REC = self._work(t.op.size, int(order), X.shape[1], L)
+        po = int(self.product_orders)
+        # (the linear orders keep no products: product_orders <= linear_orders)
+        lo = int(self.linear_orders)
+        linear_orders = max(lo, po, 1) if (lo >= 0 and po >= 0) else -1
         return _model_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs,
                              np.ascontiguousarray(X), np.ascontiguousarray(P), int(order), PA, PB, PC,
                              4 if m4 > 0 else (3 if m3 > 0 else 2), fresh0, F, REC,
-                             pool0, int(pool), float(pool_tol), int(pool_orders), int(self.product_orders))
+                             pool0, int(pool), float(pool_tol), int(pool_orders), po, int(m) + 1, linear_orders)
 
     def __getstate__(self):
         # the kernel's work memory is scratch (tens to hundreds of MB): not pickled
