@@ -754,9 +754,9 @@ def _model_sums(F, C, s, j, b, LV, HV, q0):
 
 
 @njit(cache=True)
-def _conv_pre(T, F, C, u, v, k, j0, j1, wa, wb, b, LV, HV, q0, fresh=0):
-    """T += sum_{j0 <= j < j1} (wa + wb j) F[u, j, b] F[v, k - j, b] (``fresh``: T = that
-    sum, T's contents ignored) into a result at the
+def _conv_pre(T, F, C, u, v, k, j0, j1, wa, wb, b, LV, HV, q0, fresh):
+    """T += sum_{j0 <= j < j1} (wa + wb j) F[u, j, b] F[v, k - j, b] (``fresh`` 1: T = that
+    sum, T's contents ignored; an int64, not a literal, as every flag here) into a result at the
     linear order k (prefix ``LV[k]``): :func:`_acc_mul_pre` for each term, in one call,
     with the operands' sums from :func:`_model_sums`. Each term's centre loop is
     :func:`_acc_mul_pre`'s (the same float operations on T); its rounding bound sums
@@ -821,13 +821,13 @@ def _conv_pre(T, F, C, u, v, k, j0, j1, wa, wb, b, LV, HV, q0, fresh=0):
 
 
 @njit(cache=True)
-def _sqrconv_pre(Z, F, C, u, k, j0, b, LV, HV, q0, fresh=0):
+def _sqrconv_pre(Z, F, C, u, k, j0, b, LV, HV, q0, fresh):
     """:func:`_sqrconv` at a linear order (:func:`_conv_pre`; the order-j models'
     prefixes and blocks ``LV[j], HV[j]``; ``fresh``: Z = the sum)."""
     _conv_pre(Z, F, C, u, u, k, j0, (k + 1) // 2, 2.0, 0.0, b, LV, HV, q0, fresh)
     if k % 2 == 0 and k // 2 >= j0:
         h = k // 2
-        _conv_pre(Z, F, C, u, u, k, h, h + 1, 1.0, 0.0, b, LV, HV, q0)
+        _conv_pre(Z, F, C, u, u, k, h, h + 1, 1.0, 0.0, b, LV, HV, q0, np.int64(0))
 
 
 @njit(cache=True)
@@ -888,7 +888,7 @@ def _linear_order_slot(F, C, REC, out, T, S, o, s, u, v, a, ix, cu, cv, k, LV, H
             _clear_pre(T, lk)
             _acc_add_pre(T, F[u, k, b], 1.0, lk, lk)
             if not cv:
-                _conv_pre(T, F, C, v, s, k, np.int64(1), k + 1, -1.0, 0.0, b, LV, HV, q0)
+                _conv_pre(T, F, C, v, s, k, np.int64(1), k + 1, -1.0, 0.0, b, LV, HV, q0, np.int64(0))
             _clear_pre(Z, lk)
             _acc_mul_pre(Z, T, REC[s, b], 1.0, lk, lk, z, l0, h0, q0)
         elif o == T_SQRT:
