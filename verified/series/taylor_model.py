@@ -447,6 +447,30 @@ def _sweep_nonlinear(Y, q0):
     Y[E] = _up(Y[E] + s)
 
 
+@njit(cache=True, inline="always")
+def _centre_terms_pre(T, x, y, w, lx, ly):
+    """T_i += w x0 y_i + w y0 x_i for the linear coefficients 1 <= i < max(lx, ly) of the
+    operands' prefixes (past one prefix its terms are exact zeros). Inlined by numba: a
+    call per product term cost as much as its loop (docs/lab/robot_speed.md); it has no
+    ``fastmath``, so inlining changes no float operation."""
+    x0 = x[0]
+    y0 = y[0]
+    lc = min(lx, ly)
+    for i in range(1, lc):
+        T[i] = T[i] + (w * (x0 * y[i]) + w * (y0 * x[i]))
+    # (the tails start where the other prefix ends: slices from 0, see _abs_sum_from)
+    if ly > lc:
+        Tl = T[lc:ly]
+        yl = y[lc:ly]
+        for i in range(Tl.size):
+            Tl[i] = Tl[i] + w * (x0 * yl[i])
+    if lx > lc:
+        Tl = T[lc:lx]
+        xl = x[lc:lx]
+        for i in range(Tl.size):
+            Tl[i] = Tl[i] + w * (y0 * xl[i])
+
+
 @njit(cache=True)
 def _acc_mul_pre(T, x, y, w, lt, lx, hx, ly, hy, q0):
     """T += w * x * y into a result without nonlinear coefficients (prefix ``lt``):
@@ -466,20 +490,7 @@ def _acc_mul_pre(T, x, y, w, lt, lx, hx, ly, hy, q0):
     T[0] = c
     lx = min(lx, lt)  # (a lower order's model is zero past lt: no fresh symbols above its order)
     ly = min(ly, lt)
-    lc = min(lx, ly)
-    for i in range(1, lc):
-        T[i] = T[i] + (w * (x0 * y[i]) + w * (y0 * x[i]))
-    # (the tails start where the other prefix ends: slices from 0, see _abs_sum_from)
-    if ly > lc:
-        Tl = T[lc:ly]
-        yl = y[lc:ly]
-        for i in range(Tl.size):
-            Tl[i] = Tl[i] + w * (x0 * yl[i])
-    if lx > lc:
-        Tl = T[lc:lx]
-        xl = x[lc:lx]
-        for i in range(Tl.size):
-            Tl[i] = Tl[i] + w * (y0 * xl[i])
+    _centre_terms_pre(T, x, y, w, lx, ly)
     swept = 0.0
     sx = _abs_sum(x, 1, lx)
     if hx:
@@ -793,19 +804,7 @@ def _conv_pre(T, F, C, u, v, k, j0, j1, wa, wb, b, LV, HV, q0, fresh):
         c = T[0] + t0
         rnd += 2.0 * abs(t0) + abs(c)
         T[0] = c
-        lc = min(lx, ly)
-        for i in range(1, lc):
-            T[i] = T[i] + (w * (x0 * y[i]) + w * (y0 * x[i]))
-        if ly > lc:
-            Tl = T[lc:ly]
-            yl = y[lc:ly]
-            for i in range(Tl.size):
-                Tl[i] = Tl[i] + w * (x0 * yl[i])
-        if lx > lc:
-            Tl = T[lc:lx]
-            xl = x[lc:lx]
-            for i in range(Tl.size):
-                Tl[i] = Tl[i] + w * (y0 * xl[i])
+        _centre_terms_pre(T, x, y, w, lx, ly)
         aw = abs(w)
         ct = _up(_pm(aw, _pm(abs(x0), sy) + _pm(abs(y0), sx)) * (1.0 + 2.0**-48))
         cen += ct
