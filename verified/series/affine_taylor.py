@@ -102,16 +102,25 @@ def _poison(T, m):
     T[m + 1] = INF
 
 
+@njit(cache=True, inline="always")
+def _centre_product(T, x0, y0, w):
+    """T[0] += w (x0 y0) for the centres of a product's operands, and the bound of its two
+    roundings in units of ``u = 2^-53``: ``2 |w x0 y0| + |T[0]|``. Inlined by numba (the
+    same float operations as written out in the caller); the Taylor-model products use it
+    too."""
+    t0 = w * (x0 * y0)
+    c = T[0] + t0
+    T[0] = c
+    return 2.0 * abs(t0) + abs(c)
+
+
 @njit(cache=True)
 def _acc_mul(T, x, y, m, w):
     """T += w * x * y for forms x, y (1-D arrays of m + 2) and an exact small weight w."""
     e = T[m + 1]
     x0 = x[0]
     y0 = y[0]
-    t0 = w * (x0 * y0)
-    c = T[0] + t0
-    rnd = 2.0 * abs(t0) + abs(c)
-    T[0] = c
+    rnd = _centre_product(T, x0, y0, w)
     rx = 0.0
     ry = 0.0
     for i in range(1, m + 1):

@@ -72,7 +72,9 @@ import numpy as np
 from numba import njit
 
 from verified.arith import _kernels as _k
-from verified.series.affine_taylor import _U, _UPF, _TINY, _deriv, _pm, _up, _value, _wide_symbol_forms, box_forms
+from verified.series.affine_taylor import (
+    _U, _UPF, _TINY, _centre_product, _deriv, _pm, _up, _value, _wide_symbol_forms, box_forms
+)
 from verified.arith.interval import Interval, _as_interval
 from verified.arith.linalg import upper_pairs
 from verified.series.taylor import (
@@ -309,10 +311,7 @@ def _acc_mul(T, x, y, PA, PB, PC, w):
     E = T.size - 1
     x0 = x[0]
     y0 = y[0]
-    t0 = w * (x0 * y0)
-    c = T[0] + t0
-    rnd = 2.0 * abs(t0) + abs(c)
-    T[0] = c
+    rnd = _centre_product(T, x0, y0, w)
     for i in range(1, E):
         T[i] = T[i] + (w * (x0 * y[i]) + w * (y0 * x[i]))
     sx = _spread(x)
@@ -484,10 +483,7 @@ def _acc_mul_pre(T, x, y, w, lt, lx, hx, ly, hy, q0):
     E = T.size - 1
     x0 = x[0]
     y0 = y[0]
-    t0 = w * (x0 * y0)
-    c = T[0] + t0
-    rnd = 2.0 * abs(t0) + abs(c)
-    T[0] = c
+    rnd = _centre_product(T, x0, y0, w)
     lx = min(lx, lt)  # (a lower order's model is zero past lt: no fresh symbols above its order)
     ly = min(ly, lt)
     _centre_terms_pre(T, x, y, w, lx, ly)
@@ -800,10 +796,7 @@ def _conv_pre(T, F, C, u, v, k, j0, j1, wa, wb, b, LV, HV, q0, fresh):
         ny = C[v, k - j, b, 1]
         x0 = x[0]
         y0 = y[0]
-        t0 = w * (x0 * y0)
-        c = T[0] + t0
-        rnd += 2.0 * abs(t0) + abs(c)
-        T[0] = c
+        rnd += _centre_product(T, x0, y0, w)
         _centre_terms_pre(T, x, y, w, lx, ly)
         aw = abs(w)
         ct = _up(_pm(aw, _pm(abs(x0), sy) + _pm(abs(y0), sx)) * (1.0 + 2.0**-48))
