@@ -393,3 +393,22 @@ def test_a_split_projected_to_need_more_than_max_pieces_stops_after_its_probe():
     assert sol.status == "breakdown" and [e["pieces"] for e in sol.method_log] == [1, 1]
     assert "would take about 16 pieces, more than max_pieces = 8" in sol.method_log[0]["next"]
     assert _last_step_holds_samples(sol, box, 60, seed=4)
+
+
+def test_probe_verdicts():
+    """What a split's probe says, for each way it can end (the ladder acts on these)."""
+    from types import SimpleNamespace
+    from verified.auto.ladder import STALLED, _probe_verdict
+
+    def probe(status, t, reason="x"):
+        return SimpleNamespace(status=status, t_reached=t, reason=reason, piece_results=None)
+    args = dict(parts=8, t_fail=1.0, span=3.0, t1=3.0, pieces=8, factor=8, max_pieces=256)
+    assert _probe_verdict(probe("breakdown", 0.5, f"{STALLED}: 1000 steps"), **args) == ("stalled", None)
+    assert _probe_verdict(probe("stopped", 0.1), **args) == ("stopped", None)
+    assert _probe_verdict(probe("interrupted", 0.1), **args) == ("stopped", None)
+    assert _probe_verdict(probe("completed", 3.0), **args) == ("go", None)
+    verdict, why = _probe_verdict(probe("breakdown", 1.02), **args)  # (gain < MIN_GAIN * span = 0.03)
+    assert verdict == "give up" and "no later than" in why
+    verdict, why = _probe_verdict(probe("breakdown", 1.1), **args)  # (0.2 + 0.4 + 0.8 + 1.6 > 1.9: 8 * 8^4)
+    assert verdict == "give up" and "more than max_pieces = 256" in why
+    assert _probe_verdict(probe("breakdown", 2.0), **args) == ("go", None)  # (one more split: 64 pieces)

@@ -166,6 +166,32 @@ def projected_pieces(pieces: int, factor: float, gain: float, remaining: float) 
     return pieces * factor ** levels
 
 
+def _probe_verdict(probe: Solution, parts: int, t_fail: float, span: float, t1: float, pieces: int,
+                   factor: float, max_pieces: int) -> tuple[str, str | None]:
+    """What a split's probe (part 1 of ``parts``, split from pieces that broke down at
+    ``t_fail``) says: ``("stalled", None)`` (not judged), ``("stopped", None)`` (stopped or
+    interrupted: nothing more is tried), ``("give up", why)`` (no further than its parent
+    by MIN_GAIN of the ``span``, or :func:`projected_pieces` from ``pieces`` pieces, each
+    split ``factor`` times as many, beyond ``max_pieces``), else ``("go", None)``."""
+    if probe.status == "breakdown" and probe.reason.startswith(STALLED):
+        return "stalled", None
+    if probe.status not in ("breakdown", "completed"):
+        return "stopped", None
+    if probe.status == "completed":
+        return "go", None
+    t_p = _failure_time(probe)
+    if t_p <= t_fail + MIN_GAIN * span:
+        return "give up", (f"a probe (part 1 of the {parts} the pieces split into) broke down at t = {t_p:g}, "
+                           f"no later than the piece(s) it was split from (t = {t_fail:g})")
+    need = projected_pieces(pieces, factor, t_p - t_fail, t1 - t_p)
+    if need > max_pieces:
+        return "give up", (f"a probe (part 1 of the {parts} the pieces split into) got from t = {t_fail:g} to "
+                           f"{t_p:g}: even if every further split gained twice as much as the one before, "
+                           f"reaching t = {t1:g} would take about {need:.3g} pieces, more than "
+                           f"max_pieces = {max_pieces}")
+    return "go", None
+
+
 def _failure_time(sol: Solution) -> float:
     """Where a run's first piece broke down (its end where none did)."""
     return min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=float(sol.t_reached))
@@ -348,29 +374,19 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             # sets' width paid 2^d full runs for it; docs/lab/auto.md)
             p_start = time.perf_counter()
             probe = attempt(parts[:1], _rows(part_params, [0]), last)
-            t_p = _failure_time(probe)
             log.append(dict(method=rungs[last].describe(), pieces=1, splits=task.splits + 1,
                             t_span=(float(t0), float(probe.t_reached)), status=probe.status, reason=probe.reason,
                             wall_s=time.perf_counter() - p_start,
                             probe=f"part 1 of the {parts.shape[0]} run first"))
-            if probe.status == "breakdown" and probe.reason.startswith(STALLED):
+            verdict, why = _probe_verdict(probe, parts.shape[0], t_fail, float(t1) - float(t0), float(t1),
+                                          pieces_total - fb.shape[0] + parts.shape[0],
+                                          parts.shape[0] / fb.shape[0], method.max_pieces)
+            if verdict == "stalled":
                 # (a stall says nothing of the split's gain: the split attempt runs whole and
                 # hands its stalled pieces on, as without a probe)
                 log[-1]["next"] = "stalled: not judged; the split runs whole"
                 probe = None
-            elif probe.status == "breakdown" and t_p <= t_fail + MIN_GAIN * (t1 - t0):
-                why = (f"a probe (part 1 of the {parts.shape[0]} the pieces split into) broke down at "
-                       f"t = {t_p:g}, no later than the piece(s) it was split from (t = {t_fail:g})")
-            elif probe.status == "breakdown":
-                need = projected_pieces(pieces_total - fb.shape[0] + parts.shape[0], parts.shape[0] / fb.shape[0],
-                                        t_p - t_fail, float(t1) - t_p)
-                if need > method.max_pieces:
-                    why = (f"a probe (part 1 of the {parts.shape[0]} the pieces split into) got from t = "
-                           f"{t_fail:g} to {t_p:g}: even if every further split gained twice as much as "
-                           f"the one before, reaching t = {float(t1):g} would take about {need:.3g} pieces, "
-                           f"more than max_pieces = {method.max_pieces}")
-            elif probe.status not in ("breakdown", "completed"):
-                # stopped or interrupted while probing: nothing more is tried
+            elif verdict == "stopped":  # (stopped or interrupted while probing: nothing more is tried)
                 log[-1]["next"] = f"{probe.status}: the other parts were not run"
                 done.append((task.boxes, sol, task.params))
                 give_up, later = probe.status, probe.reason
