@@ -192,6 +192,12 @@ def _probe_verdict(probe: Solution, parts: int, t_fail: float, span: float, t1: 
     return "go", None
 
 
+def _log_entry(method: Method, pieces: int, splits: int, t_from: float, sol: Solution, t_start: float) -> dict:
+    """``method_log``'s record of one attempt (``t_start``: its ``time.perf_counter()``)."""
+    return dict(method=method.describe(), pieces=int(pieces), splits=splits, t_span=(t_from, float(sol.t_reached)),
+                status=sol.status, reason=sol.reason, wall_s=time.perf_counter() - t_start)
+
+
 def _failure_time(sol: Solution) -> float:
     """Where a run's first piece broke down (its end where none did)."""
     return min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=float(sol.t_reached))
@@ -254,12 +260,15 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
     give_up = None
     names = tuple(graph.input_names[:n])
 
+    def run_hooks(r, t_from):
+        """The caller's hooks (with what is left of their caps), and a stall guard but on the fallback."""
+        return caps_from(hooks, started) + ([] if r == fallback else [StallGuard(t_from, t1)])
+
     def attempt(pieces, params, r):
         """Rung ``r`` on ``pieces`` from t0."""
-        guard = [] if r == fallback else [StallGuard(t0, t1)]
         return solve(ode, pieces, (t0, t1), method=rungs[r], params=params, t_eval=t_eval,
                      consistency=None if consistency is None else copy.deepcopy(consistency),
-                     hooks=caps_from(hooks, started) + guard, progress=progress, **common)
+                     hooks=run_hooks(r, t0), progress=progress, **common)
 
     while todo:
         task = todo.pop(0)
@@ -267,7 +276,6 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         t_start = time.perf_counter()
         cont = task.failure
         t_from = float(t0) if cont is None else float(cont.t)
-        guard = [] if task.rung == fallback else [StallGuard(t_from, t1)]
         if cont is None and task.probe is not None:
             # a split whose first part ran alone as its probe: the others, then both as one attempt
             k = task.boxes.shape[0]
@@ -284,11 +292,9 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             # continued from the failed attempt's sets at exactly their time (switch_start)
             start = switch_start(cont, rung)
             sol = solve(ode, start.sets.hull()[:, :n], (t0, t1), method=rung, params=task.params, t_eval=t_eval,
-                        start=start, hooks=caps_from(hooks, started) + guard, progress=progress,
+                        start=start, hooks=run_hooks(task.rung, t_from), progress=progress,
                         **_one_batch(common))
-        entry = dict(method=rung.describe(), pieces=int(task.boxes.shape[0]), splits=task.splits,
-                     t_span=(t_from, float(sol.t_reached)), status=sol.status, reason=sol.reason,
-                     wall_s=time.perf_counter() - t_start)
+        entry = _log_entry(rung, task.boxes.shape[0], task.splits, t_from, sol, t_start)
         if cont is not None:
             entry["continued"] = f"from the sets of {task.boxes.shape[0]} piece(s) at t = {t_from:g}"
         log.append(entry)
@@ -374,9 +380,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             # sets' width paid 2^d full runs for it; docs/lab/auto.md)
             p_start = time.perf_counter()
             probe = attempt(parts[:1], _rows(part_params, [0]), last)
-            log.append(dict(method=rungs[last].describe(), pieces=1, splits=task.splits + 1,
-                            t_span=(float(t0), float(probe.t_reached)), status=probe.status, reason=probe.reason,
-                            wall_s=time.perf_counter() - p_start,
+            log.append(dict(_log_entry(rungs[last], 1, task.splits + 1, float(t0), probe, p_start),
                             probe=f"part 1 of the {parts.shape[0]} run first"))
             verdict, why = _probe_verdict(probe, parts.shape[0], t_fail, float(t1) - float(t0), float(t1),
                                           pieces_total - fb.shape[0] + parts.shape[0],
@@ -416,7 +420,7 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
         ends = np.cumsum([b.shape[0] for b, _, _ in parts])
         ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
         out = merge_solutions([s for _, s, _ in parts], ranges, initial, outs, t0,
-                              tuple(graph.input_names[:n]), interrupted=give_up == "interrupted")
+                              names, interrupted=give_up == "interrupted")
         out.chunks = None  # (the attempts are in method_log)
         return out
 
