@@ -229,94 +229,133 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
     """One pass of the ladder from ``boxes`` (module docstring): (the Solution, the
     pieces it ended with (k, n), their parameters: ``pv`` as given, or rows (k, p)
     where splitting gave the parts their own)."""
-    from verified.execution.merge import merge_solutions
-    from verified.driver.solver_args import check_settings
+    return _Ladder(solve, ode, graph, boxes, pv, t_span, method=method, t_eval=t_eval, consistency=consistency,
+                   hooks=hooks, progress=progress, started=started, common=common).run()
 
-    n = graph.n_inputs
-    t0, t1, outs, _ = check_settings(
-        t_span=t_span, t_eval=t_eval, order=method.order, tol=method.tol, h_max=common.get("h_max"),
-        h_min=common.get("h_min", 1e-9), max_steps=common.get("max_steps", 100_000),
-        max_width=common.get("max_width", 1e3), adaptive=common.get("adaptive", False),
-        split_ratio=common.get("split_ratio", 0.01), max_boxes=common.get("max_boxes", 4096),
-        wrap_target=common.get("wrap_target", 0.03), merge_slack=common.get("merge_slack"),
-        error_basis="qr", progress=progress)
-    rungs = list(method.rungs or default_rungs(graph, boxes, pv))
-    # the method a stalled attempt's pieces go to: first-order sets take long steps where
-    # the composition's remainders keep its steps tiny (docs/lab/code_notes.md)
-    rungs.append(FALLBACK)
-    fallback = len(rungs) - 1
-    for r in rungs:
-        r.refuse(adaptive=bool(common.get("adaptive")), consistency=consistency is not None,
-                 params=pv is not None and bool(np.any(pv.width() > 0)))
-    hooks = list(hooks)
 
-    todo = [_Task(boxes, pv, 0)]
-    later = None  # the reason of a probe stopped or interrupted, for the result's
-    first = None
-    covers = []  # [(boxes, Solution, params), ...] of failed attempts that, with the pieces done, covered everything
-    done: list[tuple[Interval, Solution, object]] = []  # (pieces, their Solution, their params)
-    log: list[dict] = []
-    pieces_total = boxes.shape[0]
-    give_up = None
-    names = tuple(graph.input_names[:n])
+class _Ladder:
+    """The state one pass of the ladder shares between its attempts: the tasks to run
+    (``todo``), the pieces finished with their Solutions (``done``), ``method_log``'s
+    records (``log``), the failed attempts that covered every initial piece (``covers``),
+    and why the pass ended early (``give_up``; ``later``: a stopped probe's reason).
 
-    def run_hooks(r, t_from):
+    :meth:`run` takes one task at a time (:meth:`_take`): its attempt
+    (:meth:`_attempt_task`), then, on a break-down, its failed pieces go to the next
+    rung (:meth:`_hand_down`) or are split (:meth:`_split`); :meth:`_result` merges
+    what is done."""
+
+    def __init__(self, solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_eval, consistency,
+                 hooks, progress, started: float, common: dict):
+        from verified.driver.solver_args import check_settings
+
+        self.solve, self.ode, self.graph, self.boxes, self.pv = solve, ode, graph, boxes, pv
+        self.method, self.t_eval, self.consistency, self.progress = method, t_eval, consistency, progress
+        self.hooks, self.started, self.common = list(hooks), started, common
+        self.n = graph.n_inputs
+        self.t0, self.t1, self.outs, _ = check_settings(
+            t_span=t_span, t_eval=t_eval, order=method.order, tol=method.tol, h_max=common.get("h_max"),
+            h_min=common.get("h_min", 1e-9), max_steps=common.get("max_steps", 100_000),
+            max_width=common.get("max_width", 1e3), adaptive=common.get("adaptive", False),
+            split_ratio=common.get("split_ratio", 0.01), max_boxes=common.get("max_boxes", 4096),
+            wrap_target=common.get("wrap_target", 0.03), merge_slack=common.get("merge_slack"),
+            error_basis="qr", progress=progress)
+        self.rungs = list(method.rungs or default_rungs(graph, boxes, pv))
+        # the method a stalled attempt's pieces go to: first-order sets take long steps where
+        # the composition's remainders keep its steps tiny (docs/lab/code_notes.md)
+        self.rungs.append(FALLBACK)
+        self.fallback = len(self.rungs) - 1
+        for r in self.rungs:
+            r.refuse(adaptive=bool(common.get("adaptive")), consistency=consistency is not None,
+                     params=pv is not None and bool(np.any(pv.width() > 0)))
+        self.todo = [_Task(boxes, pv, 0)]
+        self.later = None  # the reason of a probe stopped or interrupted, for the result's
+        self.first = None
+        self.covers = []  # [(boxes, Solution, params), ...] of failed attempts that, with the pieces done, covered everything
+        self.done: list[tuple[Interval, Solution, object]] = []  # (pieces, their Solution, their params)
+        self.log: list[dict] = []
+        self.pieces_total = boxes.shape[0]
+        self.give_up = None
+        self.names = tuple(graph.input_names[:self.n])
+
+    def run(self):
+        while self.todo:
+            self._take(self.todo.pop(0))
+        return self._result()
+
+    # ------------------------------------------------------------------ attempts
+    def _run_hooks(self, r, t_from):
         """The caller's hooks (with what is left of their caps), and a stall guard but on the fallback."""
-        return caps_from(hooks, started) + ([] if r == fallback else [StallGuard(t_from, t1)])
+        return caps_from(self.hooks, self.started) + ([] if r == self.fallback else [StallGuard(t_from, self.t1)])
 
-    def attempt(pieces, params, r):
+    def _attempt(self, pieces, params, r):
         """Rung ``r`` on ``pieces`` from t0."""
-        return solve(ode, pieces, (t0, t1), method=rungs[r], params=params, t_eval=t_eval,
-                     consistency=None if consistency is None else copy.deepcopy(consistency),
-                     hooks=run_hooks(r, t0), progress=progress, **common)
+        consistency = None if self.consistency is None else copy.deepcopy(self.consistency)
+        return self.solve(self.ode, pieces, (self.t0, self.t1), method=self.rungs[r], params=params,
+                          t_eval=self.t_eval, consistency=consistency, hooks=self._run_hooks(r, self.t0),
+                          progress=self.progress, **self.common)
 
-    while todo:
-        task = todo.pop(0)
-        rung = rungs[task.rung]
-        t_start = time.perf_counter()
+    def _attempt_task(self, task, t_from):
+        """The Solution of ``task``: the rest of a probed split merged with its probe, the
+        pieces from t0, or a continuation from the failed attempt's sets."""
+        from verified.execution.merge import merge_solutions
+
         cont = task.failure
-        t_from = float(t0) if cont is None else float(cont.t)
         if cont is None and task.probe is not None:
             # a split whose first part ran alone as its probe: the others, then both as one attempt
             k = task.boxes.shape[0]
-            rest = attempt(task.boxes[1:], _rows(task.params, range(1, k)), task.rung)
-            sol = merge_solutions([task.probe, rest], [(0, 1), (1, k)], task.boxes, outs, t0, names,
+            rest = self._attempt(task.boxes[1:], _rows(task.params, range(1, k)), task.rung)
+            sol = merge_solutions([task.probe, rest], [(0, 1), (1, k)], task.boxes, self.outs, self.t0, self.names,
                                   interrupted=rest.status == "interrupted")
             sol.chunks = None
             if rest.status not in ("completed", "breakdown"):
                 # (stopped or interrupted: nothing more is tried, whatever the probe did)
                 sol.status, sol.reason = rest.status, rest.reason
-        elif cont is None:
-            sol = attempt(task.boxes, task.params, task.rung)
-        else:
-            # continued from the failed attempt's sets at exactly their time (switch_start)
-            start = switch_start(cont, rung)
-            sol = solve(ode, start.sets.hull()[:, :n], (t0, t1), method=rung, params=task.params, t_eval=t_eval,
-                        start=start, hooks=run_hooks(task.rung, t_from), progress=progress,
-                        **_one_batch(common))
+            return sol
+        if cont is None:
+            return self._attempt(task.boxes, task.params, task.rung)
+        # continued from the failed attempt's sets at exactly their time (switch_start)
+        rung = self.rungs[task.rung]
+        start = switch_start(cont, rung)
+        return self.solve(self.ode, start.sets.hull()[:, :self.n], (self.t0, self.t1), method=rung,
+                          params=task.params, t_eval=self.t_eval, start=start,
+                          hooks=self._run_hooks(task.rung, t_from), progress=self.progress,
+                          **_one_batch(self.common))
+
+    def _stop(self, status):
+        """Nothing more is tried: the tasks not run keep their pieces verified at t0 only."""
+        self.give_up = status
+        for rest in self.todo:
+            self.done.append((rest.boxes, None, rest.params))
+        self.todo = []
+
+    # ------------------------------------------------------------------ one task
+    def _take(self, task):
+        """Run ``task`` and decide what becomes of its pieces."""
+        rung = self.rungs[task.rung]
+        t_start = time.perf_counter()
+        cont = task.failure
+        t_from = float(self.t0) if cont is None else float(cont.t)
+        sol = self._attempt_task(task, t_from)
         entry = _log_entry(rung, task.boxes.shape[0], task.splits, t_from, sol, t_start)
         if cont is not None:
             entry["continued"] = f"from the sets of {task.boxes.shape[0]} piece(s) at t = {t_from:g}"
-        log.append(entry)
-        if first is None and cont is None and task.boxes.shape[0] == boxes.shape[0] and task.rung == 0 \
+        self.log.append(entry)
+        if self.first is None and cont is None and task.boxes.shape[0] == self.boxes.shape[0] and task.rung == 0 \
                 and task.splits == 0:
-            first = sol  # (the first attempt, on every initial piece)
+            self.first = sol  # (the first attempt, on every initial piece)
         if cont is not None and sol.status != "breakdown":
             sol = chain_in_time([cont.record, sol])
         if sol.status != "breakdown":  # completed, or stopped / interrupted: nothing more is tried
-            done.append((task.boxes, sol, task.params))
+            self.done.append((task.boxes, sol, task.params))
             if sol.status != "completed":
-                give_up = sol.status
-                for rest in todo:  # (not run: their pieces are verified at t0 only)
-                    done.append((rest.boxes, None, rest.params))
-                todo = []
-            continue
-        if cont is not None and float(sol.t_reached) <= t_from + MIN_GAIN * (t1 - t0):
+                self._stop(sol.status)
+            return
+        if cont is not None and float(sol.t_reached) <= t_from + MIN_GAIN * (self.t1 - self.t0):
             # the sets where the weaker method stopped were too far gone for this one too
             # (an enclosure already too wide, say): this method takes the pieces from t0
-            todo.append(_Task(task.boxes, task.params, task.rung, task.splits, task.parent_t))
+            self.todo.append(_Task(task.boxes, task.params, task.rung, task.splits, task.parent_t))
             entry["next"] = f"the continuation got no further: {rung.describe()} from t0"
-            continue
+            return
         if cont is not None:
             # a continuation that broke down: its sets mix its pieces, which go back to t0
             # and are split there (below); the failed attempt's record stands for them
@@ -326,132 +365,154 @@ def _ladder(solve, ode, graph, boxes: Interval, pv, t_span, *, method: Auto, t_e
             failed = [p.index for p in (sol.piece_results or ()) if p.failed]
             if not failed or sol.surviving is None:
                 failed = list(range(task.boxes.shape[0]))
-            failures = [f for f in (sol.failures or ()) if _continuable(f, task.params, n + _carried(pv))]
+            failures = [f for f in (sol.failures or ()) if _continuable(f, task.params, self.n + _carried(self.pv))]
         kept = [i for i in range(task.boxes.shape[0]) if i not in set(failed)]
-        last = fallback if task.rung == fallback else fallback - 1  # (the rung splitting continues with)
-        stalled = sol.reason.startswith(STALLED) and task.rung != fallback
-        if stalled or (task.rung + 1 < fallback and cont is None):
-            # the next rung takes the failed pieces over: from where their sets stopped
-            # (Solution.failures), else (sets that cannot be continued) from t0
-            to = fallback if stalled else task.rung + 1
-            why = " (stalled)" if stalled else ""
-            covered = set()
-            for f in failures:
-                idx = [int(i) for i in f.pieces]
-                covered |= set(idx)
-                todo.append(_Task(task.boxes[np.asarray(idx)], task.params, to, task.splits, task.parent_t,
-                                  failure=f))
-            rest = [i for i in failed if i not in covered]
-            if rest:
-                todo.append(_Task(task.boxes[np.asarray(rest)], _rows(task.params, rest), to, task.splits,
-                                  task.parent_t))
-            if kept:
-                done.append((task.boxes[np.asarray(kept)], sol.surviving, _rows(task.params, kept)))
-            entry["next"] = f"{len(failed)} piece(s) to {rungs[to].describe()}{why}" + (
-                f", continued from their sets at t = {min(f.t for f in failures):g}" if failures else "")
-            continue
-        fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
-        # splitting: the failed pieces' initial boxes, split, from t0 (splitting the sets
-        # where they failed gained less: docs/lab, issue 40)
-        if cont is not None:
-            t_fail = float(sol.t_reached)
+        stalled = sol.reason.startswith(STALLED) and task.rung != self.fallback
+        if stalled or (task.rung + 1 < self.fallback and cont is None):
+            self._hand_down(task, sol, entry, failed, failures, kept, stalled)
         else:
-            t_fail = _failure_time(sol)
-        parts, part_params = split_pieces(graph, fb, fp, float(t_fail) - float(t0))
+            self._split(task, sol, entry, failed, kept)
+
+    def _hand_down(self, task, sol, entry, failed, failures, kept, stalled):
+        """The next rung (the fallback after a stall) takes the failed pieces over: from
+        where their sets stopped (Solution.failures), else (sets that cannot be
+        continued) from t0."""
+        to = self.fallback if stalled else task.rung + 1
+        why = " (stalled)" if stalled else ""
+        covered = set()
+        for f in failures:
+            idx = [int(i) for i in f.pieces]
+            covered |= set(idx)
+            self.todo.append(_Task(task.boxes[np.asarray(idx)], task.params, to, task.splits, task.parent_t,
+                                   failure=f))
+        rest = [i for i in failed if i not in covered]
+        if rest:
+            self.todo.append(_Task(task.boxes[np.asarray(rest)], _rows(task.params, rest), to, task.splits,
+                                   task.parent_t))
+        if kept:
+            self.done.append((task.boxes[np.asarray(kept)], sol.surviving, _rows(task.params, kept)))
+        entry["next"] = f"{len(failed)} piece(s) to {self.rungs[to].describe()}{why}" + (
+            f", continued from their sets at t = {min(f.t for f in failures):g}" if failures else "")
+
+    def _split(self, task, sol, entry, failed, kept):
+        """Split the failed pieces' initial boxes and run them from t0 (splitting the
+        sets where they failed gained less: docs/lab, issue 40), part 1 first as a
+        probe; or give up, saying why."""
+        last = self.fallback if task.rung == self.fallback else self.fallback - 1  # (the rung splitting continues with)
+        fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
+        t_fail = float(sol.t_reached) if task.failure is not None else _failure_time(sol)
+        parts, part_params = split_pieces(self.graph, fb, fp, float(t_fail) - float(self.t0))
+        n_after = self.pieces_total - fb.shape[0] + parts.shape[0]
         why = None
         if parts.shape[0] == fb.shape[0]:
             why = "the pieces cannot be split (no state or parameter of finite, nonzero width)"
-        elif pieces_total - fb.shape[0] + parts.shape[0] > method.max_pieces:
-            why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {method.max_pieces}"
-        elif t_fail <= task.parent_t + MIN_GAIN * (t1 - t0):
+        elif n_after > self.method.max_pieces:
+            why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {self.method.max_pieces}"
+        elif t_fail <= task.parent_t + MIN_GAIN * (self.t1 - self.t0):
             # splitting did not take the pieces further: the cause is not the sets' width
             # (a blow-up, a singularity, a step-size limit), and more pieces will not help
             why = (f"the split pieces broke down at t = {t_fail:g}, no later than the piece they were "
                    f"split from (t = {task.parent_t:g})")
-        if not todo:
+        if not self.todo:
             # this attempt's pieces and the finished ones cover every initial piece: their
             # enclosure, verified to where this attempt got, stands if later attempts end earlier
-            covers.append(list(done) + [(task.boxes, sol, task.params)])
+            self.covers.append(list(self.done) + [(task.boxes, sol, task.params)])
         probe = None
         if why is None and parts.shape[0] > 1:
-            # one part runs first: where it gets no further than the piece it was split from,
-            # neither will its siblings (the give-up below takes the earliest part's time), and
-            # the others are not run for nothing (a passive robot whose break-down is not the
-            # sets' width paid 2^d full runs for it; docs/lab/auto.md)
-            p_start = time.perf_counter()
-            probe = attempt(parts[:1], _rows(part_params, [0]), last)
-            log.append(dict(_log_entry(rungs[last], 1, task.splits + 1, float(t0), probe, p_start),
-                            probe=f"part 1 of the {parts.shape[0]} run first"))
-            verdict, why = _probe_verdict(probe, parts.shape[0], t_fail, float(t1) - float(t0), float(t1),
-                                          pieces_total - fb.shape[0] + parts.shape[0],
-                                          parts.shape[0] / fb.shape[0], method.max_pieces)
-            if verdict == "stalled":
-                # (a stall says nothing of the split's gain: the split attempt runs whole and
-                # hands its stalled pieces on, as without a probe)
-                log[-1]["next"] = "stalled: not judged; the split runs whole"
-                probe = None
-            elif verdict == "stopped":  # (stopped or interrupted while probing: nothing more is tried)
-                log[-1]["next"] = f"{probe.status}: the other parts were not run"
-                done.append((task.boxes, sol, task.params))
-                give_up, later = probe.status, probe.reason
-                for rest in todo:
-                    done.append((rest.boxes, None, rest.params))
-                todo = []
-                continue
+            probe, why = self._probe(task, sol, parts, part_params, last, t_fail, n_after, fb.shape[0])
+            if probe is _STOPPED:
+                return
         if why is not None:
             entry["next"] = f"gave up: {why}"
-            done.append((task.boxes, sol, task.params))  # (the failed attempt encloses all its pieces up to its end)
-            give_up = "breakdown"
-            continue
+            self.done.append((task.boxes, sol, task.params))  # (the failed attempt encloses all its pieces up to its end)
+            self.give_up = "breakdown"
+            return
         if kept:
-            done.append((task.boxes[np.asarray(kept)], sol.surviving, _rows(task.params, kept)))
-        pieces_total += parts.shape[0] - fb.shape[0]
-        todo.append(_Task(parts, part_params, last, task.splits + 1, t_fail, probe=probe))
-        entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {rungs[last].describe()}" + (
+            self.done.append((task.boxes[np.asarray(kept)], sol.surviving, _rows(task.params, kept)))
+        self.pieces_total = n_after
+        self.todo.append(_Task(parts, part_params, last, task.splits + 1, t_fail, probe=probe))
+        entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {self.rungs[last].describe()}" + (
             ", part 1 run first as a probe" if probe is not None else "")
 
-    pieces = concatenate([b for b, _, _ in done], axis=0)
-    piece_params = _stack_rows([(b.shape[0], p) for b, _, p in done], pv)
+    def _probe(self, task, sol, parts, part_params, last, t_fail, n_after, n_failed):
+        """Run part 1 of a split first: where it gets no further than the piece it was
+        split from, neither will its siblings (a give-up takes the earliest part's time),
+        and the others are not run for nothing (a passive robot whose break-down is not
+        the sets' width paid 2^d full runs for it; docs/lab/auto.md). Returns (the probe
+        to reuse or None, why to give up or None), or (:data:`_STOPPED`, None) where the
+        probe was stopped or interrupted and the pass ends."""
+        p_start = time.perf_counter()
+        probe = self._attempt(parts[:1], _rows(part_params, [0]), last)
+        self.log.append(dict(_log_entry(self.rungs[last], 1, task.splits + 1, float(self.t0), probe, p_start),
+                             probe=f"part 1 of the {parts.shape[0]} run first"))
+        verdict, why = _probe_verdict(probe, parts.shape[0], t_fail, float(self.t1) - float(self.t0),
+                                      float(self.t1), n_after, parts.shape[0] / n_failed, self.method.max_pieces)
+        if verdict == "stalled":
+            # (a stall says nothing of the split's gain: the split attempt runs whole and
+            # hands its stalled pieces on, as without a probe)
+            self.log[-1]["next"] = "stalled: not judged; the split runs whole"
+            return None, why
+        if verdict == "stopped":  # (stopped or interrupted while probing: nothing more is tried)
+            self.log[-1]["next"] = f"{probe.status}: the other parts were not run"
+            self.done.append((task.boxes, sol, task.params))
+            self.later = probe.reason
+            self._stop(probe.status)
+            return _STOPPED, None
+        return probe, why
 
-    def merged(parts):
+    # ------------------------------------------------------------------ the result
+    def _merged(self, parts):
+        from verified.execution.merge import merge_solutions
+
         if len(parts) == 1 and parts[0][1] is not None:
             return parts[0][1]
         initial = concatenate([b for b, _, _ in parts], axis=0)
         ends = np.cumsum([b.shape[0] for b, _, _ in parts])
         ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
-        out = merge_solutions([s for _, s, _ in parts], ranges, initial, outs, t0,
-                              names, interrupted=give_up == "interrupted")
+        out = merge_solutions([s for _, s, _ in parts], ranges, initial, self.outs, self.t0,
+                              self.names, interrupted=self.give_up == "interrupted")
         out.chunks = None  # (the attempts are in method_log)
         return out
 
-    result = merged(done)
-    if later is not None:
-        result.reason = f"{result.reason} (later attempts: {later})"
-    if result.status != "completed":
-        # the later attempts ended earlier than an earlier one that, with the pieces done
-        # by then, covered every initial piece (a wall-clock cap striking while auto
-        # splits, say): that enclosure of the whole initial set, verified further, is the
-        # result (the first attempt, or a split attempt that broke down later)
-        best = first if first is not None and first.t_reached > result.t_reached else None
-        for parts in covers:
-            if min(float(s.t_reached) for _, s, _ in parts if s is not None) <= float(
-                    (result if best is None else best).t_reached):
-                continue  # (a merge reaches no further than its earliest part)
-            cand = merged(parts)
-            if cand.t_reached > (result if best is None else best).t_reached:
-                best, pieces = cand, concatenate([b for b, _, _ in parts], axis=0)
-                piece_params = _stack_rows([(b.shape[0], p) for b, _, p in parts], pv)
-        if best is not None:
-            why = result.reason
-            result = best
-            result.reason = f"{best.reason} (later attempts: {why})"
-            give_up = give_up or result.status
-    if result.status == "breakdown" and give_up == "breakdown":
-        tried = ", ".join(dict.fromkeys(e["method"] for e in log))
-        result.reason = (f"{result.reason} (auto tried {tried} on up to {pieces_total} pieces; "
-                         f"see Solution.method_log)")
-    result.method_log = log
-    result.method = _summary(log)
-    # (per-piece params rows follow the pieces only without splitting of per-box params)
-    result.stats["auto_pieces"] = int(pieces.shape[0])
-    return result, pieces, piece_params
+    def _result(self):
+        """The done pieces merged into one Solution (or a cover that got further), with
+        the log: (Solution, pieces, their parameters)."""
+        pv = self.pv
+        pieces = concatenate([b for b, _, _ in self.done], axis=0)
+        piece_params = _stack_rows([(b.shape[0], p) for b, _, p in self.done], pv)
+        result = self._merged(self.done)
+        if self.later is not None:
+            result.reason = f"{result.reason} (later attempts: {self.later})"
+        if result.status != "completed":
+            # the later attempts ended earlier than an earlier one that, with the pieces done
+            # by then, covered every initial piece (a wall-clock cap striking while auto
+            # splits, say): that enclosure of the whole initial set, verified further, is the
+            # result (the first attempt, or a split attempt that broke down later)
+            first = self.first
+            best = first if first is not None and first.t_reached > result.t_reached else None
+            for parts in self.covers:
+                if min(float(s.t_reached) for _, s, _ in parts if s is not None) <= float(
+                        (result if best is None else best).t_reached):
+                    continue  # (a merge reaches no further than its earliest part)
+                cand = self._merged(parts)
+                if cand.t_reached > (result if best is None else best).t_reached:
+                    best, pieces = cand, concatenate([b for b, _, _ in parts], axis=0)
+                    piece_params = _stack_rows([(b.shape[0], p) for b, _, p in parts], pv)
+            if best is not None:
+                why = result.reason
+                result = best
+                result.reason = f"{best.reason} (later attempts: {why})"
+                self.give_up = self.give_up or result.status
+        if result.status == "breakdown" and self.give_up == "breakdown":
+            tried = ", ".join(dict.fromkeys(e["method"] for e in self.log))
+            result.reason = (f"{result.reason} (auto tried {tried} on up to {self.pieces_total} pieces; "
+                             f"see Solution.method_log)")
+        result.method_log = self.log
+        result.method = _summary(self.log)
+        # (per-piece params rows follow the pieces only without splitting of per-box params)
+        result.stats["auto_pieces"] = int(pieces.shape[0])
+        return result, pieces, piece_params
+
+
+#: :meth:`_Ladder._probe`'s mark for a probe that was stopped or interrupted
+_STOPPED = object()
