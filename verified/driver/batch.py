@@ -255,61 +255,18 @@ def solve_batch(
             X = run.hull_for_step(param_boxes, setup.n_state, setup.n_steer, max_width)
             if X is None:
                 break
-            stepper.begin(run.sets)
-            cX = stepper.coefficients(X)
-            run.evaluations += 1
-            bounded = np.isfinite(cX.lo).all(axis=(1, 2)) & np.isfinite(cX.hi).all(axis=(1, 2))
-            if not bounded.all():
-                # those sets' pieces break down; the others take this step without them
-                if run.fail(~bounded, "Taylor coefficients are unbounded (an operation left its domain over the "
-                                      "sets, e.g. a division by an interval containing zero, or overflowed)") is None:
-                    break
-                continue
-            gap_lo, gap_hi = run.gap()
-            found = control.validate(stepper, X, cX, control.propose(stepper, cX, wrap.h_limit, gap_lo, gap_hi))
-            run.evaluations += found.evaluations
-            run.rejected += found.rejected
-            if found.enclosure is None:
-                why = f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}"
-                bad, tries = _unvalidated(stepper, run.sets, X, found.h)
-                run.evaluations += tries
-                if bad is None:
-                    run.stop(why, "breakdown")
-                    break
-                if run.fail(bad, why) is None:  # (the sets that fail alone; the others go on)
-                    break
-                continue
-            try:
-                step = run.advance(stepper, X, found, gap_lo, gap_hi)
-            except SingularMatrixError as exc:
-                # a set so wide that its basis or its recentring cannot be inverted any
-                # more (non-finite or singular enclosures): everything up to here stands
-                run.stop(f"set update failed at t = {run.t:g}: {exc}", "breakdown")
+            step = _try_step(run, stepper, control, wrap, X, h_min)
+            if step is _END:
                 break
+            if step is _RETRY:
+                continue
             steps += 1
             wrap.update(step)
             run.call_hooks(hook_list, step)
             if step.landed and run.sets.n_sets:
                 run.record_output()
-            if run.status:
+            if run.status or not _split_and_merge(run, split, merge, step):
                 break
-            if split is not None:
-                before = run.sets
-                run.sets, n_split, reason = split.apply(step, run.sets)
-                if reason:
-                    # over the budget of sets: the pieces whose sets ask to be split now
-                    # break down (all of them when they are all of them)
-                    if run.fail(split.select(step), reason) is None:
-                        break
-                if n_split:
-                    run.pieces.split(split.select(step), before, run.sets)
-                run.splits += n_split
-                run.max_sets = max(run.max_sets, run.sets.n_sets)
-            if merge is not None:
-                run.sets, merged = merge.apply(run.sets)
-                if merged:
-                    run.pieces.replaced(run.sets.n_sets, run.t)  # (which sets merged: not told)
-                run.merges += merged
     except KeyboardInterrupt:
         # Ctrl-C: everything recorded so far is verified; return it
         run.stop(f"interrupted (KeyboardInterrupt) after t = {run.tube_t[-1]:g}", "interrupted")
@@ -324,6 +281,73 @@ def solve_batch(
     result = run.by_pieces(result, continuable=consistency is None)
     result.stats["wall_s"] = time.perf_counter() - wall0
     return result
+
+
+#: :func:`_try_step`'s answers other than a step: the run ends / the loop tries again
+#: (some sets failed and were dropped; the others take the step without them)
+_END = object()
+_RETRY = object()
+
+
+def _try_step(run, stepper, control: StepControl, wrap: WrapControl, X: Interval, h_min: float):
+    """One step of every set of ``run`` from their hull boxes ``X``: the Taylor
+    coefficients, an a-priori enclosure validated by ``control``, then the sets advanced.
+    Returns the step, or :data:`_RETRY` where the sets that broke down were dropped (the
+    others try again), or :data:`_END` where the run stops (its reason set)."""
+    stepper.begin(run.sets)
+    cX = stepper.coefficients(X)
+    run.evaluations += 1
+    bounded = np.isfinite(cX.lo).all(axis=(1, 2)) & np.isfinite(cX.hi).all(axis=(1, 2))
+    if not bounded.all():
+        # those sets' pieces break down; the others take this step without them
+        if run.fail(~bounded, "Taylor coefficients are unbounded (an operation left its domain over the "
+                              "sets, e.g. a division by an interval containing zero, or overflowed)") is None:
+            return _END
+        return _RETRY
+    gap_lo, gap_hi = run.gap()
+    found = control.validate(stepper, X, cX, control.propose(stepper, cX, wrap.h_limit, gap_lo, gap_hi))
+    run.evaluations += found.evaluations
+    run.rejected += found.rejected
+    if found.enclosure is None:
+        why = f"step size underflow: no a-priori enclosure validated with h >= {h_min:g}"
+        bad, tries = _unvalidated(stepper, run.sets, X, found.h)
+        run.evaluations += tries
+        if bad is None:
+            run.stop(why, "breakdown")
+            return _END
+        if run.fail(bad, why) is None:  # (the sets that fail alone; the others go on)
+            return _END
+        return _RETRY
+    try:
+        return run.advance(stepper, X, found, gap_lo, gap_hi)
+    except SingularMatrixError as exc:
+        # a set so wide that its basis or its recentring cannot be inverted any
+        # more (non-finite or singular enclosures): everything up to here stands
+        run.stop(f"set update failed at t = {run.t:g}: {exc}", "breakdown")
+        return _END
+
+
+def _split_and_merge(run, split: SplitPolicy | None, merge: MergePolicy | None, step) -> bool:
+    """Adaptive splitting and merging of ``run``'s sets after ``step`` (each where its
+    policy is given); False where the run ends (every piece over the sets' budget)."""
+    if split is not None:
+        before = run.sets
+        run.sets, n_split, reason = split.apply(step, run.sets)
+        if reason:
+            # over the budget of sets: the pieces whose sets ask to be split now
+            # break down (all of them when they are all of them)
+            if run.fail(split.select(step), reason) is None:
+                return False
+        if n_split:
+            run.pieces.split(split.select(step), before, run.sets)
+        run.splits += n_split
+        run.max_sets = max(run.max_sets, run.sets.n_sets)
+    if merge is not None:
+        run.sets, merged = merge.apply(run.sets)
+        if merged:
+            run.pieces.replaced(run.sets.n_sets, run.t)  # (which sets merged: not told)
+        run.merges += merged
+    return True
 
 
 def _unvalidated(stepper, sets, X: Interval, h: float):
