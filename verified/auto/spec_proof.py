@@ -188,8 +188,7 @@ def _prove_spec(solve, ode, graph, boxes, pv, t_span, method: Auto, kw: dict, so
     union of the groups of pieces (:func:`verified.execution.merge.merge_solutions`), its spec
     judged on its own tube (:func:`verified.spec.check_tube`). Sampled trajectories that
     leave the bounds (:func:`sampled_violation`) make the spec "false" and stop it."""
-    from verified.execution.merge import merge_solutions
-    from verified.spec import FALSE, check_tube, describe, tube_excess
+    from verified.spec import FALSE, check_tube, describe
 
     n = graph.n_inputs
     names = tuple(graph.input_names[:n])
@@ -213,99 +212,145 @@ def _prove_spec(solve, ode, graph, boxes, pv, t_span, method: Auto, kw: dict, so
         check.status, check.witness, check.sampled = FALSE, (found[1], found[2]), found[0]
         check.detail = f"{text}: false (a sampled trajectory reaches {_point(found, names)}); not refined"
         return _with_spec(sol, check, log, 0)
-    sampled = None if found is None else found[0]
+    refine = _Refinement(solve, ode, graph, t_span, method, kw, lo, hi, text, log,
+                         sampled=None if found is None else found[0])
+    groups, rounds = refine.run(_Group(pieces, piece_params, kw.get("h_max"), sol, ends, check.worst))
+    result = refine.merged(groups, np.asarray(sol.t, float))
+    check = check_tube(result, lo, hi, t0, t1, names)
+    check.sampled = refine.sampled
+    return _with_spec(result, check, log, rounds)
 
-    user_hooks = list(kw.get("hooks") or ())
 
-    def run(bx, prm, h, why):
-        rec = _StepEnds(lo, hi, n)
-        s, pcs, pprm = _ladder(solve, ode, graph, bx, prm, t_span, **{**kw, "hooks": user_hooks + [rec], "h_max": h})
+class _Refinement:
+    """The rounds of :func:`_prove_spec`: the groups of pieces whose tube leaves the
+    bounds ``lo``, ``hi`` are split (:meth:`_split`) or run with shorter steps
+    (:meth:`_shorter_steps`), each refinement kept where it cuts the excess
+    (:meth:`_judge`). ``log`` (``method_log``) receives every run's records."""
+
+    def __init__(self, solve, ode, graph, t_span, method: Auto, kw: dict, lo, hi, text: str, log: list, sampled):
+        self.solve, self.ode, self.graph, self.t_span, self.method, self.kw = solve, ode, graph, t_span, method, kw
+        self.lo, self.hi, self.text, self.log, self.sampled = lo, hi, text, log, sampled
+        self.t0, self.t1 = float(t_span[0]), float(t_span[1])
+        self.n = graph.n_inputs
+        self.names = tuple(graph.input_names[:self.n])
+        self.user_hooks = list(kw.get("hooks") or ())
+        self.final: list[_Group] = []   # groups whose tube keeps inside (split off a group that did not)
+
+    def _run(self, bx, prm, h, why) -> _Group:
+        """The ladder on pieces ``bx`` with ``h_max = h``, its log records marked ``why``."""
+        rec = _StepEnds(self.lo, self.hi, self.n)
+        s, pcs, pprm = _ladder(self.solve, self.ode, self.graph, bx, prm, self.t_span,
+                               **{**self.kw, "hooks": self.user_hooks + [rec], "h_max": h})
         entries = list(s.method_log or ())
         if entries:
             entries[0] = {**entries[0], "spec": why}
-        log.extend(entries)
+        self.log.extend(entries)
         ends = rec.worst if rec.steps else np.nan
-        return _Group(pcs, pprm, h, s, ends, _group_excess(s, lo, hi, t0, t1))
+        return _Group(pcs, pprm, h, s, ends, _group_excess(s, self.lo, self.hi, self.t0, self.t1))
 
-    first = _Group(pieces, piece_params, kw.get("h_max"), sol, ends, check.worst)
-    final: list[_Group] = []
-    active = [first]
-    rounds, stop = 0, False
-    while rounds < SPEC_ROUNDS and not stop:
-        todo = [g for g in active if g.excess > 0 and _action(g) is not None]
-        if not todo:
-            break
-        rounds += 1
-        nxt = [g for g in active if not (g.excess > 0 and _action(g) is not None)]
-        total = sum(g.boxes.shape[0] for g in active) + sum(g.boxes.shape[0] for g in final)
-        for g in todo:
-            act = _action(g)
-            k = g.boxes.shape[0]
-            if act == "split":
-                pe = _piece_excess(g.sol, k, lo, hi, g.boxes)
-                bad = np.ones(k, bool) if pe is None else pe > 0
-                idx = np.flatnonzero(bad)
-                parts, part_params = split_pieces(graph, g.boxes[idx], _rows(g.params, idx), t1 - t0)
-                for _ in range(_spec_splits(g.excess, sampled) - 1):   # (as often at once as the excess asks)
-                    more, more_params = split_pieces(graph, parts, part_params, t1 - t0)
-                    if more.shape[0] == parts.shape[0] or total - idx.size + more.shape[0] > method.max_pieces:
-                        break
-                    parts, part_params = more, more_params
-                if parts.shape[0] == idx.size or total - idx.size + parts.shape[0] > method.max_pieces:
-                    g.tried += ("split",)
-                    nxt.append(g)
-                    continue
-                parent = g
-                if not bad.all():   # (the pieces whose tube keeps inside stay as they are)
-                    good = _restrict(g.sol, ~bad)
-                    final.append(_Group(g.boxes[np.flatnonzero(~bad)], _rows(g.params, np.flatnonzero(~bad)),
-                                        g.h_max, good, g.ends, _group_excess(good, lo, hi, t0, t1)))
-                    part = _restrict(g.sol, bad)
-                    parent = _Group(g.boxes[idx], _rows(g.params, idx), g.h_max, part, g.ends,
-                                    _group_excess(part, lo, hi, t0, t1), g.tried)
-                why = (f"spec round {rounds}: {text} exceeded by {parent.excess:.3g}; {idx.size} of {k} piece(s) "
-                       f"split into {parts.shape[0]}")
-                child = run(parts, part_params, g.h_max, why)
-                total += parts.shape[0] - idx.size
-            else:
-                dt = np.diff(np.asarray(g.sol.tube_t, float))
-                per = np.array([float(np.max(tube_excess(b, lo, hi))) for b in g.sol.tube])
-                h_long = float(np.max(dt[per > 0])) if np.any(per > 0) else float(np.max(dt))
-                h = _step_share(g) * h_long
-                if g.h_max is not None:
-                    h = min(h, float(g.h_max))
-                why = (f"spec round {rounds}: {text} exceeded by {g.excess:.3g}; h_max {h:.3g} "
-                       f"(offending steps up to {h_long:.3g})")
-                parent = g
-                child = run(g.boxes, g.params, h, why)
-            if child.sol.status in ("stopped", "interrupted"):
-                stop = True
-            if child.excess <= 0 or (child.sol.status == "completed"
-                                     and child.excess <= (1 - SPEC_GAIN) * parent.excess):
-                nxt.append(child)
-            else:
-                log[-1]["next"] = f"spec: {act} did not cut the excess ({parent.excess:.3g} -> {child.excess:.3g})"
-                if not np.isfinite(parent.ends) and np.isfinite(child.ends) and act == "step":
-                    parent.ends = child.ends
-                parent.tried += (act,)
-                nxt.append(parent)
-            if stop:
-                nxt += [h for h in todo if h is not g and h not in nxt]
+    def run(self, first: _Group):
+        """Refine from ``first`` for up to :data:`SPEC_ROUNDS` rounds: (the groups, rounds)."""
+        active = [first]
+        rounds, stop = 0, False
+        while rounds < SPEC_ROUNDS and not stop:
+            todo = [g for g in active if g.excess > 0 and _action(g) is not None]
+            if not todo:
                 break
-        active = nxt
-    groups = final + active
-    if len(groups) == 1:
-        result = groups[0].sol
-    else:
-        initial = concatenate([g.boxes for g in groups], axis=0)
-        ends = np.cumsum([g.boxes.shape[0] for g in groups])
-        ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
-        result = merge_solutions([g.sol for g in groups], ranges, initial, np.asarray(sol.t, float), t0, names)
-        result.chunks = None
-    result.stats["auto_pieces"] = int(sum(g.boxes.shape[0] for g in groups))
-    check = check_tube(result, lo, hi, t0, t1, names)
-    check.sampled = sampled
-    return _with_spec(result, check, log, rounds)
+            rounds += 1
+            nxt = [g for g in active if not (g.excess > 0 and _action(g) is not None)]
+            total = sum(g.boxes.shape[0] for g in active) + sum(g.boxes.shape[0] for g in self.final)
+            for g in todo:
+                act = _action(g)
+                if act == "split":
+                    tried = self._split(g, rounds, total)
+                    if tried is None:
+                        nxt.append(g)
+                        continue
+                    parent, child, added = tried
+                    total += added
+                else:
+                    parent, child = g, self._shorter_steps(g, rounds)
+                if child.sol.status in ("stopped", "interrupted"):
+                    stop = True
+                nxt.append(self._judge(parent, child, act))
+                if stop:
+                    nxt += [h for h in todo if h is not g and h not in nxt]
+                    break
+            active = nxt
+        return self.final + active, rounds
+
+    def _split(self, g: _Group, rounds: int, total: int):
+        """Split the pieces of ``g`` whose tube leaves the bounds (as often at once as the
+        excess asks, within ``max_pieces`` with ``total`` pieces now) and run them:
+        (the group they came from, the run, pieces added); None where they cannot be
+        split (``g`` then notes it tried)."""
+        lo, hi, t0, t1 = self.lo, self.hi, self.t0, self.t1
+        k = g.boxes.shape[0]
+        pe = _piece_excess(g.sol, k, lo, hi, g.boxes)
+        bad = np.ones(k, bool) if pe is None else pe > 0
+        idx = np.flatnonzero(bad)
+        parts, part_params = split_pieces(self.graph, g.boxes[idx], _rows(g.params, idx), t1 - t0)
+        for _ in range(_spec_splits(g.excess, self.sampled) - 1):   # (as often at once as the excess asks)
+            more, more_params = split_pieces(self.graph, parts, part_params, t1 - t0)
+            if more.shape[0] == parts.shape[0] or total - idx.size + more.shape[0] > self.method.max_pieces:
+                break
+            parts, part_params = more, more_params
+        if parts.shape[0] == idx.size or total - idx.size + parts.shape[0] > self.method.max_pieces:
+            g.tried += ("split",)
+            return None
+        parent = g
+        if not bad.all():   # (the pieces whose tube keeps inside stay as they are)
+            good = _restrict(g.sol, ~bad)
+            self.final.append(_Group(g.boxes[np.flatnonzero(~bad)], _rows(g.params, np.flatnonzero(~bad)),
+                                     g.h_max, good, g.ends, _group_excess(good, lo, hi, t0, t1)))
+            part = _restrict(g.sol, bad)
+            parent = _Group(g.boxes[idx], _rows(g.params, idx), g.h_max, part, g.ends,
+                            _group_excess(part, lo, hi, t0, t1), g.tried)
+        why = (f"spec round {rounds}: {self.text} exceeded by {parent.excess:.3g}; {idx.size} of {k} piece(s) "
+               f"split into {parts.shape[0]}")
+        return parent, self._run(parts, part_params, g.h_max, why), parts.shape[0] - idx.size
+
+    def _shorter_steps(self, g: _Group, rounds: int) -> _Group:
+        """``g``'s pieces again with steps shorter than the longest step whose tube left
+        the bounds (:func:`_step_share` of it)."""
+        from verified.spec import tube_excess
+
+        dt = np.diff(np.asarray(g.sol.tube_t, float))
+        per = np.array([float(np.max(tube_excess(b, self.lo, self.hi))) for b in g.sol.tube])
+        h_long = float(np.max(dt[per > 0])) if np.any(per > 0) else float(np.max(dt))
+        h = _step_share(g) * h_long
+        if g.h_max is not None:
+            h = min(h, float(g.h_max))
+        why = (f"spec round {rounds}: {self.text} exceeded by {g.excess:.3g}; h_max {h:.3g} "
+               f"(offending steps up to {h_long:.3g})")
+        return self._run(g.boxes, g.params, h, why)
+
+    def _judge(self, parent: _Group, child: _Group, act: str) -> _Group:
+        """The child where it cut the excess by :data:`SPEC_GAIN` (or removed it), else
+        the parent, noting that ``act`` was tried on it."""
+        if child.excess <= 0 or (child.sol.status == "completed"
+                                 and child.excess <= (1 - SPEC_GAIN) * parent.excess):
+            return child
+        self.log[-1]["next"] = f"spec: {act} did not cut the excess ({parent.excess:.3g} -> {child.excess:.3g})"
+        if not np.isfinite(parent.ends) and np.isfinite(child.ends) and act == "step":
+            parent.ends = child.ends
+        parent.tried += (act,)
+        return parent
+
+    def merged(self, groups, outs):
+        """One Solution of ``groups`` (output times ``outs``)."""
+        from verified.execution.merge import merge_solutions
+
+        if len(groups) == 1:
+            result = groups[0].sol
+        else:
+            initial = concatenate([g.boxes for g in groups], axis=0)
+            ends = np.cumsum([g.boxes.shape[0] for g in groups])
+            ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
+            result = merge_solutions([g.sol for g in groups], ranges, initial, outs, self.t0, self.names)
+            result.chunks = None
+        result.stats["auto_pieces"] = int(sum(g.boxes.shape[0] for g in groups))
+        return result
 
 
 #: how much one round of splitting is taken to cut the overestimation of the tube (its
