@@ -824,7 +824,6 @@ class TaylorModelFlowStepper(LohnerStepper):
         self._cur = None  # (used once: the next step begins with its own sets)
         work, live, caps, M = cur["work"], cur["live"], cur["caps"], cur["M"]
         mq = caps.mq
-        mu = live.size
         out = cur["out"][:, :K]
         h_iv = h if isinstance(h, Interval) else Interval(h)
         hm = float(h_iv.mid()) if isinstance(h, Interval) else float(h)
@@ -835,62 +834,19 @@ class TaylorModelFlowStepper(LohnerStepper):
             rng = self.models._interval(out, M, mq)  # (B, K, n)
             for k in range(1, K):
                 extra = extra + rng[:, k] * (h_iv ** k - Interval(hm) ** k)
-        # split the model: centre, linear in eps / delta, quadratic, remainder
-        centre = y[:, :, 0].T  # (B, n)
-        lin_u = y[:, :, 1: mu + 1].transpose(1, 0, 2)  # (B, n, mu)
-        A = np.empty((nb, n, n))  # (B, n, n): columns back in the order of r's components
-        Me = cur["M_set"]  # the set's symbols (parameters and errors); fresh ones follow
-        A[:, :, cur["errors"]] = y[:, :, mu + 1: Me + 1].transpose(1, 0, 2)
-        nq = mq * (mq + 1) // 2
-        quad = y[:, :, M + 1: M + 1 + nq].transpose(1, 0, 2)  # (B, n, pairs)
-        # cubic and quartic monomials: the sets are second order, so they join the error (in [-1, 1]),
-        # as do the fresh symbols (the coefficients' remainders)
-        sb = star_base(M, mq, caps.m3, caps.m4)
-        cubic = np.abs(y[:, :, M + 1 + nq: sb]).sum(axis=-1).T + np.abs(y[:, :, Me + 1: M + 1]).sum(axis=-1).T
-        # star monomials (off-diagonal): of two parameters into S, with an error symbol
-        # into the error (in [-1, 1])
-        si, sj = _star_pairs(M, mq, caps.ms, caps.ns)
-        s_on = sj < mu  # (si < ms <= mq <= sj: si is a parameter too)
-        star = y[:, :, sb: -1].transpose(1, 0, 2)  # (B, n, star pairs)
-        cubic = cubic + np.abs(star[:, :, ~s_on]).sum(axis=-1)
-        rem = _k_round_up(y[:, :, -1].T + cubic * (1.0 + 2.0**-40))  # (B, n)
+        centre, lin_u, A, quad, star, s_on, si, sj, rem = _split_flow(y, cur, nb, n)
         pi, pj = _pairs(mq)
-        on_u = pj < min(mu, mq)  # both symbols parameters (pi <= pj)
-        qd = quad[:, :, ~on_u]
-        diag = (pi == pj)[~on_u]
-        # quadratic terms with an error symbol: eps_j delta_l in [-1, 1], delta_l^2 in [0, 1]
-        q_lo = np.where(diag, np.minimum(qd, 0.0), -np.abs(qd)).sum(axis=-1)
-        q_hi = np.where(diag, np.maximum(qd, 0.0), np.abs(qd)).sum(axis=-1)
-        bump = (np.abs(q_lo) + np.abs(q_hi)) * 2.0**-40 + 1e-300  # (the float sums' rounding)
-        nonlinear = Interval._from_bounds(q_lo - bump, q_hi + bump) + Interval._from_bounds(-rem, rem)  # (B, n), outward
+        on_u = pj < min(live.size, mq)  # both symbols parameters (pi <= pj)
+        nonlinear = _error_terms(quad[:, :, ~on_u], (pi == pj)[~on_u], rem)
         incoming_all = point(centre) + extra + nonlinear
         bad = ~(np.isfinite(incoming_all.lo).all(axis=1) & np.isfinite(incoming_all.hi).all(axis=1)
                 & np.isfinite(y).all(axis=(0, 2)))
         c_new = incoming_all.mid()
         incoming = incoming_all - c_new
-        # new parameters: eps on [-1, 1] for the live columns, their images in C and S
-        m = sets.C.shape[2]
-        C_new = np.zeros((nb, n, m))
-        C_new[:, :, live] = lin_u
-        S_new = np.zeros((nb, n, m, m))
-        qi, qj = pi[on_u], pj[on_u]
-        qu = quad[:, :, on_u]
-        cols_i, cols_j = live[qi], live[qj]
-        half = np.where(qi == qj, qu, 0.5 * qu)
-        S_new[:, :, cols_i, cols_j] = half
-        S_new[:, :, cols_j, cols_i] = half
-        if s_on.any():
-            half_s = 0.5 * star[:, :, s_on]
-            S_new[:, :, live[si[s_on]], live[sj[s_on]]] = half_s
-            S_new[:, :, live[sj[s_on]], live[si[s_on]]] = half_s
-            qi = np.concatenate([qi, si[s_on]])  # (for the subnormal cover below)
+        C_new, S_new, r0_new, covered = _parameter_images(sets.C.shape[2], live, lin_u, quad[:, :, on_u],
+                                                          pi[on_u], pj[on_u], star, si, sj, s_on)
         # (halving a subnormal may round: cover it)
-        incoming = incoming + Interval._from_bounds(np.full((nb, n), -1e-300), np.full((nb, n), 1e-300)) * float(max(1, qi.size))
-        r0_lo = np.zeros((nb, m))
-        r0_hi = np.zeros((nb, m))
-        r0_lo[:, live] = -1.0
-        r0_hi[:, live] = 1.0
-        r0_new = Interval._from_bounds(r0_lo, r0_hi)
+        incoming = incoming + Interval._from_bounds(np.full((nb, n), -1e-300), np.full((nb, n), 1e-300)) * float(max(1, covered))
         # the error part: A delta + incoming, delta in [-1, 1] (0 where r had no width)
         has = work.r.rad() > 0
         unit = Interval._from_bounds(np.where(has, -1.0, 0.0), np.where(has, 1.0, 0.0))
@@ -906,13 +862,7 @@ class TaylorModelFlowStepper(LohnerStepper):
         tube = getattr(self, "_tube", None)
         view = tube[1] if tube is not None and tube[0] is E else None
         self._tube = None
-        with np.errstate(over="ignore", invalid="ignore"):
-            narrow = step_tube(out, cE, float(h_iv.hi), M, mq)
-        # (a row that is not finite, a model lost: E alone)
-        ok = np.isfinite(narrow.lo) & np.isfinite(narrow.hi)
-        inside = E.intersect(Interval._from_bounds(np.where(ok, narrow.lo, E.lo), np.where(ok, narrow.hi, E.hi)))
-        empty = inside.is_empty()
-        tube_box = E if empty.any() else inside
+        tube_box = _narrowed_tube(out, cE, float(h_iv.hi), E, M, mq)
         if self.min_order is not None:
             self.steps_by_order[K] = self.steps_by_order.get(K, 0) + 1
         if self._pending_order is not None:
@@ -921,3 +871,77 @@ class TaylorModelFlowStepper(LohnerStepper):
             self.order, self._pending_order = self._pending_order, None
         return StepResult(sets=new, previous=sets, h=h, hull=X, tube=tube_box, nonlinear_width=nonlinear.width(),
                           tube_view=view)
+
+
+def _split_flow(y: np.ndarray, cur: dict, nb: int, n: int):
+    """The flow's models ``y`` (n, B, L) at the step split by what becomes of each
+    part: ``(centre (B, n), lin_u (B, n, mu): linear in the set's live parameters,
+    A (B, n, n): linear in its error symbols, quad (B, n, pairs), star (B, n, star
+    pairs), s_on (star pairs of two parameters), si, sj, rem (B, n): the remainder
+    with the cubic, quartic and fresh-symbol terms and the stars with an error symbol
+    swept in)``. The sets are second order, so their cubic and quartic monomials join
+    the error (in [-1, 1]), as do the fresh symbols (the coefficients' remainders)."""
+    live, caps, M = cur["live"], cur["caps"], cur["M"]
+    mq, mu = caps.mq, live.size
+    centre = y[:, :, 0].T  # (B, n)
+    lin_u = y[:, :, 1: mu + 1].transpose(1, 0, 2)  # (B, n, mu)
+    A = np.empty((nb, n, n))  # (B, n, n): columns back in the order of r's components
+    Me = cur["M_set"]  # the set's symbols (parameters and errors); fresh ones follow
+    A[:, :, cur["errors"]] = y[:, :, mu + 1: Me + 1].transpose(1, 0, 2)
+    nq = mq * (mq + 1) // 2
+    quad = y[:, :, M + 1: M + 1 + nq].transpose(1, 0, 2)  # (B, n, pairs)
+    sb = star_base(M, mq, caps.m3, caps.m4)
+    cubic = np.abs(y[:, :, M + 1 + nq: sb]).sum(axis=-1).T + np.abs(y[:, :, Me + 1: M + 1]).sum(axis=-1).T
+    # star monomials (off-diagonal): of two parameters into S, with an error symbol
+    # into the error (in [-1, 1])
+    si, sj = _star_pairs(M, mq, caps.ms, caps.ns)
+    s_on = sj < mu  # (si < ms <= mq <= sj: si is a parameter too)
+    star = y[:, :, sb: -1].transpose(1, 0, 2)  # (B, n, star pairs)
+    cubic = cubic + np.abs(star[:, :, ~s_on]).sum(axis=-1)
+    rem = _k_round_up(y[:, :, -1].T + cubic * (1.0 + 2.0**-40))  # (B, n)
+    return centre, lin_u, A, quad, star, s_on, si, sj, rem
+
+
+def _error_terms(qd: np.ndarray, diag: np.ndarray, rem: np.ndarray) -> Interval:
+    """The nonlinear part that goes into the error (B, n), outward: the quadratic terms
+    ``qd`` (B, n, k) with an error symbol (eps_j delta_l in [-1, 1], delta_l^2 in [0, 1]
+    where ``diag``) and the remainder +- ``rem``."""
+    q_lo = np.where(diag, np.minimum(qd, 0.0), -np.abs(qd)).sum(axis=-1)
+    q_hi = np.where(diag, np.maximum(qd, 0.0), np.abs(qd)).sum(axis=-1)
+    bump = (np.abs(q_lo) + np.abs(q_hi)) * 2.0**-40 + 1e-300  # (the float sums' rounding)
+    return Interval._from_bounds(q_lo - bump, q_hi + bump) + Interval._from_bounds(-rem, rem)
+
+
+def _parameter_images(m: int, live: np.ndarray, lin_u, qu, qi, qj, star, si, sj, s_on):
+    """The new set's parameters, eps on [-1, 1] for the ``live`` columns of ``m``, and
+    their images: ``(C (B, n, m), S (B, n, m, m), r0 (B, m), count)`` with ``count`` the
+    halved quadratic terms (a halved subnormal may round; the caller covers them)."""
+    nb, n = lin_u.shape[:2]
+    C_new = np.zeros((nb, n, m))
+    C_new[:, :, live] = lin_u
+    S_new = np.zeros((nb, n, m, m))
+    cols_i, cols_j = live[qi], live[qj]
+    half = np.where(qi == qj, qu, 0.5 * qu)
+    S_new[:, :, cols_i, cols_j] = half
+    S_new[:, :, cols_j, cols_i] = half
+    if s_on.any():
+        half_s = 0.5 * star[:, :, s_on]
+        S_new[:, :, live[si[s_on]], live[sj[s_on]]] = half_s
+        S_new[:, :, live[sj[s_on]], live[si[s_on]]] = half_s
+        qi = np.concatenate([qi, si[s_on]])  # (for the subnormal cover)
+    r0_lo = np.zeros((nb, m))
+    r0_hi = np.zeros((nb, m))
+    r0_lo[:, live] = -1.0
+    r0_hi[:, live] = 1.0
+    return C_new, S_new, Interval._from_bounds(r0_lo, r0_hi), qi.size
+
+
+def _narrowed_tube(out: np.ndarray, cE: Interval, h_top: float, E: Interval, M: int, mq: int) -> Interval:
+    """The step's tube: the a-priori enclosure ``E`` narrowed by :func:`step_tube` (``E``
+    alone on a row that is not finite, a model lost, or where the two do not meet)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        narrow = step_tube(out, cE, h_top, M, mq)
+    ok = np.isfinite(narrow.lo) & np.isfinite(narrow.hi)
+    inside = E.intersect(Interval._from_bounds(np.where(ok, narrow.lo, E.lo), np.where(ok, narrow.hi, E.hi)))
+    empty = inside.is_empty()
+    return E if empty.any() else inside
