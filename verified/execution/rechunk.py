@@ -201,6 +201,35 @@ def stitch(items: list, root: int, outs, t0, n: int):
     if items[root].sol is None or not items[root].children:
         return items[root].sol  # (not re-chunked: the chunk's own Solution)
     order = _dfs(items, root)
+    recorded = _recorded_outputs(items, order, outs)
+    leaves = [i for i in order if not items[i].children]
+    worst, reason, t_reached, k_f = _leaves_outcome(items, leaves, recorded, outs, t0)
+    boxes = []
+    for k in range(k_f):
+        parts = [items[i].sol.boxes[recorded[i][k]] for i in order if k in recorded[i]]
+        boxes.append(concatenate(parts, axis=0))
+    ran = [i for i in order if items[i].sol is not None]
+    grid, tube, tube_hull = _stitched_tube(items, order, ran, t_reached, n)
+    r = items[root].sol
+    stats = _stitched_stats(items, order, ran, leaves, r)
+    sol = Solution(t=np.asarray(outs[:k_f], float), boxes=boxes, hull=stack([hull(b, axis=0) for b in boxes], axis=0),
+                   tube_t=grid, tube=tube, tube_hull=tube_hull, t_reached=float(grid[-1]), status=worst,
+                   reason=reason if worst != "completed" else "", stats=stats, state_names=r.state_names,
+                   consistency=r.consistency if len(ran) == 1 else None)
+    sol.pieces = [dict(parent=items[i].parent, t_start=float(items[i].start.t_exact) if items[i].start else float(t0),
+                       sets=(items[i].lo.shape[0]), status=None if items[i].sol is None else items[i].sol.status,
+                       t_reached=None if items[i].sol is None else float(items[i].sol.t_reached),
+                       steps=None if items[i].sol is None else items[i].sol.stats.get("steps"),
+                       wall_s=None if items[i].sol is None else items[i].sol.stats.get("wall_s"),
+                       worker_pid=None if items[i].sol is None else items[i].sol.stats.get("worker_pid"))
+                  for i in order]
+    return sol
+
+
+def _recorded_outputs(items: list, order: list[int], outs) -> dict:
+    """Per piece of ``order``: ``{output index: its row in the piece's t/boxes}`` for the
+    outputs it recorded (a piece that never ran: none; a continued piece's ``t[0]`` is its
+    start, not an output of its own)."""
     index_of = {float(t): j for j, t in enumerate(outs)}
     recorded = {}
     for i in order:
@@ -211,7 +240,14 @@ def stitch(items: list, root: int, outs, t0, n: int):
         ts = np.asarray(sol.t, float)
         first = 0 if items[i].start is None else 1  # a continued piece's t[0] is its start
         recorded[i] = {index_of[float(t)]: j for j, t in enumerate(ts[first:], first)}
-    leaves = [i for i in order if not items[i].children]
+    return recorded
+
+
+def _leaves_outcome(items: list, leaves: list[int], recorded: dict, outs, t0):
+    """``(status, reason, t_reached, k_f)`` of the stitched chunk from its leaves: the
+    earliest worst leaf's status and reason (a leaf that never ran is interrupted at its
+    start), the least ``t_reached``, and ``k_f``: how many leading outputs every path of
+    pieces (a leaf and its ancestors) recorded."""
     worst, reason, t_reached, reason_t = "completed", "", math.inf, math.inf
     k_f = len(outs)
     for leaf in leaves:
@@ -235,11 +271,14 @@ def stitch(items: list, root: int, outs, t0, n: int):
         while k < len(outs) and k in got:
             k += 1
         k_f = min(k_f, k)
-    boxes = []
-    for k in range(k_f):
-        parts = [items[i].sol.boxes[recorded[i][k]] for i in order if k in recorded[i]]
-        boxes.append(concatenate(parts, axis=0))
-    ran = [i for i in order if items[i].sol is not None]
+    return worst, reason, t_reached, k_f
+
+
+def _stitched_tube(items: list, order: list[int], ran: list[int], t_reached: float, n: int):
+    """``(grid, tube, tube_hull)``: the union of the pieces' step times up to ``t_reached``
+    and, on each of its intervals, one box per piece live there (the hull of that piece's
+    step's boxes), in depth-first order; raises RuntimeError where no piece covers an
+    interval (every path of pieces covers every interval up to ``t_reached``)."""
     grid = np.unique(np.concatenate([np.asarray(items[i].sol.tube_t, float) for i in ran]))
     grid = grid[grid <= t_reached]
     tube = []
@@ -269,6 +308,14 @@ def stitch(items: list, root: int, outs, t0, n: int):
             hi_h.append(hi.max(axis=0))
     tube_hull = (Interval._from_bounds(np.array(lo_h), np.array(hi_h)) if tube
                  else Interval._from_bounds(np.zeros((0, n)), np.zeros((0, n))))
+    return grid, tube, tube_hull
+
+
+def _stitched_stats(items: list, order: list[int], ran: list[int], leaves: list[int], r) -> dict:
+    """The stitched chunk's stats: numeric counters summed over the pieces that ran (in
+    depth-first order); ``order``/``worker_pid``/``boxes`` the root's (``r``: its
+    Solution), ``final_boxes``/``max_boxes`` summed over the leaves that ran, and how
+    many pieces ran and were cut."""
     stats = {}
     for i in ran:
         for key, v in items[i].sol.stats.items():
@@ -277,7 +324,6 @@ def stitch(items: list, root: int, outs, t0, n: int):
                 continue
             if isinstance(v, (int, float, np.integer, np.floating)):
                 stats[key] = stats.get(key, 0) + v
-    r = items[root].sol
     stats["order"] = r.stats.get("order")
     stats["worker_pid"] = r.stats.get("worker_pid")
     stats["boxes"] = r.stats.get("boxes")
@@ -286,18 +332,7 @@ def stitch(items: list, root: int, outs, t0, n: int):
     stats["max_boxes"] = sum(s.stats.get("max_boxes", 0) for s in done)  # (approximate: at different times)
     stats["pieces"] = len(ran)
     stats["rechunks"] = sum(1 for i in order if items[i].children)
-    sol = Solution(t=np.asarray(outs[:k_f], float), boxes=boxes, hull=stack([hull(b, axis=0) for b in boxes], axis=0),
-                   tube_t=grid, tube=tube, tube_hull=tube_hull, t_reached=float(grid[-1]), status=worst,
-                   reason=reason if worst != "completed" else "", stats=stats, state_names=r.state_names,
-                   consistency=r.consistency if len(ran) == 1 else None)
-    sol.pieces = [dict(parent=items[i].parent, t_start=float(items[i].start.t_exact) if items[i].start else float(t0),
-                       sets=(items[i].lo.shape[0]), status=None if items[i].sol is None else items[i].sol.status,
-                       t_reached=None if items[i].sol is None else float(items[i].sol.t_reached),
-                       steps=None if items[i].sol is None else items[i].sol.stats.get("steps"),
-                       wall_s=None if items[i].sol is None else items[i].sol.stats.get("wall_s"),
-                       worker_pid=None if items[i].sol is None else items[i].sol.stats.get("worker_pid"))
-                  for i in order]
-    return sol
+    return stats
 
 
 def _dfs(items: list, root: int) -> list[int]:

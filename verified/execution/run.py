@@ -83,6 +83,71 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
 
     wall0 = time.perf_counter()
     t_wall0 = time.time()
+    t0, t1, outs, graph, arithmetic, rechunk, replay, replay_ranges = _checked_args(ode, t_span, workers, chunks,
+                                                                                    kwargs)
+    boxes = initial_boxes(x0, graph.n_inputs, kwargs.pop("subdivision", None))
+    nb = boxes.shape[0]
+    params = check_params(kwargs.pop("params", None), graph, nb, None)
+    progress = kwargs.pop("progress", None)
+    consistency = kwargs.pop("consistency", None)
+    hooks_in = kwargs.pop("hooks", ()) or ()
+    hooks, deadline = _split_hooks(hooks_in, t_wall0)
+    backend, n_workers, client, own_client = _where(client, workers, nb)
+    adaptive = bool(kwargs.get("adaptive", False))
+    backend, n_workers, ranges, rechunk_on, cluster_start_s = _plan(
+        backend, n_workers, nb, workers, chunks, deadline, replay_ranges, adaptive, consistency, rechunk)
+    if backend == "inprocess" and len(ranges) == 1 and not rechunk_on and not replay:  # one batch: solve's own result
+        sol = solve_batch(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
+                          hooks=list(hooks_in), **kwargs)
+        sol.stats.update(chunks=1, workers=1, backend="inprocess")
+        return sol
+    base = dict(kwargs, t_span=(t0, t1))
+    base.pop("max_boxes", None)  # (per piece: _Piece.max_boxes)
+    board = _Board(progress, t0, t1, [b - a for a, b in ranges])
+    interrupted = False
+    # work stealing: a lagging piece's sets go to free threads (Dask only; not with a
+    # consistency test, whose record cannot be continued; not when replaying a run's cuts)
+    steal = backend != "inprocess" and consistency is None and replay is None and rechunk is not False
+    stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend, "rechunk": rechunk_on,
+                   "steal": steal}
+
+    def chunk_params(a, b):
+        if params is None:
+            return None
+        return params[a:b] if params.ndim == 2 else params
+
+    pieces = _Pieces(boxes, ranges, chunk_params, rechunk_on, int(kwargs.get("max_boxes", _MAX_BOXES)),
+                     steal=steal, replay=replay, outs=outs, t0=t0)
+    if backend == "inprocess":
+        prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(graph, arithmetic)
+        stats_extra["setup_s"] = time.perf_counter() - wall0
+        interrupted = _run_here(prob, pieces, base, consistency, hooks, progress, board)
+        stats_extra["sent_bytes"] = stats_extra["received_bytes"] = 0
+    else:
+        c = client if backend == "dask" else None
+        interrupted = _run_there(c, own_client, n_workers, cluster_start_s, graph, arithmetic, pieces, base,
+                                 consistency, hooks, board, t_wall0, stats_extra)
+    t_merge = time.perf_counter()
+    results = pieces.families(outs, t0)
+    stats_extra["pieces"] = sum(1 for p in pieces.items if p.sol is not None)
+    stats_extra["rechunks"] = pieces.cuts
+    stats_extra["cuts"] = pieces.cut_log
+    stats_extra["stitch_s"] = pieces.stitch_s  # (stitching of families as they completed, during the run)
+    sol = merge_solutions(results, ranges, boxes[:, :graph.n_inputs], outs, t0,
+                          tuple(graph.input_names[:graph.n_inputs]), interrupted=interrupted)
+    stats_extra["merge_s"] = time.perf_counter() - t_merge
+    board.emit()
+    sol.stats.update(stats_extra)
+    sol.stats["wall_s"] = time.perf_counter() - wall0
+    return sol
+
+
+def _checked_args(ode, t_span, workers, chunks, kwargs: dict):
+    """solve's argument checks, before any work, in solve's order; takes ``rechunk``,
+    ``start`` and ``replay`` out of ``kwargs`` (in place). Returns ``(t0, t1, outs,
+    graph, arithmetic, rechunk, replay, replay_ranges)``: ``replay`` as ``{path: (steps,
+    k)}`` (None: no replay; from ``replay=`` or :func:`replaying`), ``replay_ranges`` the
+    replayed Solution's chunks (None: this call's plan)."""
     # the same argument checks as solve, before any work
     settings = {k: kwargs[k] for k in ("t_eval", "order", "tol", "h_max", "h_min", "max_steps", "max_width",
                                        "adaptive", "split_ratio", "max_boxes", "wrap_target", "merge_slack",
@@ -122,15 +187,15 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     if workers is not None and workers != "auto" and (isinstance(workers, bool) or
                                                       not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be None, 'auto' or an integer >= 1, got {workers!r}")
-    boxes = initial_boxes(x0, graph.n_inputs, kwargs.pop("subdivision", None))
-    nb = boxes.shape[0]
-    params = check_params(kwargs.pop("params", None), graph, nb, None)
-    progress = kwargs.pop("progress", None)
-    consistency = kwargs.pop("consistency", None)
-    hooks_in = kwargs.pop("hooks", ()) or ()
-    hooks, deadline = _split_hooks(hooks_in, t_wall0)
+    return t0, t1, outs, graph, arithmetic, rechunk, replay, replay_ranges
 
-    # where to run
+
+def _where(client, workers, nb: int):
+    """Where to run ``nb`` boxes: ``(backend, n_workers, client, own_client)``, backend
+    "dask" (``client``; a scheduler address is connected to here, and that Client,
+    ``own_client``, is closed after the run), "dask-local" (a local cluster of
+    ``n_workers``) or "inprocess" (``n_workers`` 1). Warns (at solve's caller) when
+    ``workers > 1`` asks for Dask that is not installed."""
     backend, own_client = "inprocess", None
     if client is not None:
         if isinstance(client, str):
@@ -148,11 +213,22 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
             if dask_available():
                 backend = "dask-local"
             elif not auto:
+                # (stacklevel: solve's caller, through solve, solve_parallel and this)
                 warnings.warn(f"workers={workers}: dask.distributed is not installed "
                               "(pip install 'mbs-verified[parallel]'); running the chunks in this process",
-                              RuntimeWarning, stacklevel=3)
+                              RuntimeWarning, stacklevel=4)
     if backend == "inprocess":
         n_workers = 1
+    return backend, n_workers, client, own_client
+
+
+def _plan(backend, n_workers, nb, workers, chunks, deadline, replay_ranges, adaptive, consistency, rechunk):
+    """The chunks of ``nb`` boxes and whether to re-chunk them: ``(backend, n_workers,
+    ranges, rechunk_on, cluster_start_s)``. A replay's chunks replace the plan (they must
+    cover the boxes); one chunk for a local cluster runs here instead; with
+    ``workers=None`` a local cluster that cannot start warns (at solve's caller) and the
+    run stays here. ``cluster_start_s``: the seconds that start took (None: started
+    before, or not started here)."""
     # with a wall-clock cap every chunk should be running when it strikes: one per worker
     ranges = plan_chunks(nb, n_workers, chunks, max_per_worker=1 if deadline is not None else MAX_CHUNKS_PER_WORKER)
     if replay_ranges is not None:
@@ -160,7 +236,6 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
                 a[1] != b[0] for a, b in zip(replay_ranges, replay_ranges[1:])):
             raise ValueError(f"replay=: its chunks {replay_ranges} do not cover the {nb} boxes of this run")
         ranges = replay_ranges
-    adaptive = bool(kwargs.get("adaptive", False))
     rechunk_on = adaptive and consistency is None and (bool(rechunk) if rechunk is not None
                                                        else backend != "inprocess")
     if backend == "dask-local" and len(ranges) == 1 and not (rechunk_on and rechunk):
@@ -178,82 +253,61 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
             local_client(n_workers)
             cluster_start_s = time.perf_counter() - t_start if fresh else None
         except WorkerStartError as exc:
-            warnings.warn(f"{exc}; workers=None runs in this process", RuntimeWarning, stacklevel=3)
+            # (stacklevel: solve's caller, through solve, solve_parallel and this)
+            warnings.warn(f"{exc}; workers=None runs in this process", RuntimeWarning, stacklevel=4)
             backend, n_workers = "inprocess", 1
             ranges = [(0, nb)] if chunks is None else plan_chunks(nb, 1, chunks)
             rechunk_on = adaptive and consistency is None and bool(rechunk)
-    if backend == "inprocess" and len(ranges) == 1 and not rechunk_on and not replay:  # one batch: solve's own result
-        sol = solve_batch(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
-                          hooks=list(hooks_in), **kwargs)
-        sol.stats.update(chunks=1, workers=1, backend="inprocess")
-        return sol
-    base = dict(kwargs, t_span=(t0, t1))
-    base.pop("max_boxes", None)  # (per piece: _Piece.max_boxes)
-    board = _Board(progress, t0, t1, [b - a for a, b in ranges])
+    return backend, n_workers, ranges, rechunk_on, cluster_start_s
+
+
+def _run_here(prob, pieces: _Pieces, base: dict, consistency, hooks: list, progress, board) -> bool:
+    """Run the pieces one after another in this process, depth first (a paused piece's
+    pieces next); returns whether the run was interrupted (a piece's status, or Ctrl-C).
+    Each piece gets its own copies of the mutable arguments (error basis, consistency
+    test) and of the hooks list."""
     interrupted = False
-    # work stealing: a lagging piece's sets go to free threads (Dask only; not with a
-    # consistency test, whose record cannot be continued; not when replaying a run's cuts)
-    steal = backend != "inprocess" and consistency is None and replay is None and rechunk is not False
-    stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend, "rechunk": rechunk_on,
-                   "steal": steal}
+    todo = deque(range(len(pieces.items)))
+    try:
+        while todo:
+            i = todo.popleft()
+            piece = pieces.items[i]
+            kw = dict(base)
+            if not isinstance(kw.get("error_basis", "qr"), str):
+                kw["error_basis"] = copy.deepcopy(kw["error_basis"])
+            kw["consistency"] = None if consistency is None else copy.deepcopy(consistency)
+            kw["hooks"] = hooks + ([_Local(board, piece.family)] if progress is not None else [])
+            if progress is not None:
+                kw["hooks"].append(_EmitEvery(board))
+            sol, paused = _solve_piece(prob, piece, kw)
+            todo.extendleft(reversed(pieces.done(i, sol, paused)))  # depth first: its pieces next
+            if sol.status == "interrupted":
+                interrupted = True
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+    return interrupted
 
-    def chunk_params(a, b):
-        if params is None:
-            return None
-        return params[a:b] if params.ndim == 2 else params
 
-    pieces = _Pieces(boxes, ranges, chunk_params, rechunk_on, int(kwargs.get("max_boxes", _MAX_BOXES)),
-                     steal=steal, replay=replay, outs=outs, t0=t0)
-    if backend == "inprocess":
-        prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(graph, arithmetic)
-        stats_extra["setup_s"] = time.perf_counter() - wall0
-        todo = deque(range(len(pieces.items)))
-        try:
-            while todo:
-                i = todo.popleft()
-                piece = pieces.items[i]
-                kw = dict(base)
-                if not isinstance(kw.get("error_basis", "qr"), str):
-                    kw["error_basis"] = copy.deepcopy(kw["error_basis"])
-                kw["consistency"] = None if consistency is None else copy.deepcopy(consistency)
-                kw["hooks"] = hooks + ([_Local(board, piece.family)] if progress is not None else [])
-                if progress is not None:
-                    kw["hooks"].append(_EmitEvery(board))
-                sol, paused = _solve_piece(prob, piece, kw)
-                todo.extendleft(reversed(pieces.done(i, sol, paused)))  # depth first: its pieces next
-                if sol.status == "interrupted":
-                    interrupted = True
-                    break
-        except KeyboardInterrupt:
-            interrupted = True
-        stats_extra["sent_bytes"] = stats_extra["received_bytes"] = 0
-    else:
-        c = client if backend == "dask" else None
-        setup_t = time.perf_counter()
-        try:
-            if c is None:
-                fresh = n_workers not in _LOCAL
-                c = local_client(n_workers)
-                if fresh:
-                    stats_extra["cluster_start_s"] = time.perf_counter() - setup_t
-            if cluster_start_s is not None:
-                stats_extra["cluster_start_s"] = cluster_start_s
-            interrupted, sizes = _run_on_dask(c, graph, arithmetic, pieces, base, consistency, hooks, board, t_wall0)
-            stats_extra.update(sizes)
-        finally:
-            if own_client is not None:
-                own_client.close()
-        stats_extra["setup_s"] = stats_extra.pop("setup_s", time.perf_counter() - setup_t)
-    t_merge = time.perf_counter()
-    results = pieces.families(outs, t0)
-    stats_extra["pieces"] = sum(1 for p in pieces.items if p.sol is not None)
-    stats_extra["rechunks"] = pieces.cuts
-    stats_extra["cuts"] = pieces.cut_log
-    stats_extra["stitch_s"] = pieces.stitch_s  # (stitching of families as they completed, during the run)
-    sol = merge_solutions(results, ranges, boxes[:, :graph.n_inputs], outs, t0,
-                          tuple(graph.input_names[:graph.n_inputs]), interrupted=interrupted)
-    stats_extra["merge_s"] = time.perf_counter() - t_merge
-    board.emit()
-    sol.stats.update(stats_extra)
-    sol.stats["wall_s"] = time.perf_counter() - wall0
-    return sol
+def _run_there(c, own_client, n_workers, cluster_start_s, graph, arithmetic, pieces: _Pieces, base: dict,
+               consistency, hooks: list, board, t_wall0, stats_extra: dict) -> bool:
+    """Run the pieces on Dask: on ``c`` or (None) the local cluster of ``n_workers``,
+    started here if need be; ``own_client`` (a Client this call connected) is closed
+    after, whatever happens. Returns whether the run was interrupted; the cluster's
+    start, :func:`_run_on_dask`'s sizes and ``setup_s`` go into ``stats_extra``."""
+    setup_t = time.perf_counter()
+    try:
+        if c is None:
+            fresh = n_workers not in _LOCAL
+            c = local_client(n_workers)
+            if fresh:
+                stats_extra["cluster_start_s"] = time.perf_counter() - setup_t
+        if cluster_start_s is not None:
+            stats_extra["cluster_start_s"] = cluster_start_s
+        interrupted, sizes = _run_on_dask(c, graph, arithmetic, pieces, base, consistency, hooks, board, t_wall0)
+        stats_extra.update(sizes)
+    finally:
+        if own_client is not None:
+            own_client.close()
+    stats_extra["setup_s"] = stats_extra.pop("setup_s", time.perf_counter() - setup_t)
+    return interrupted
