@@ -30,7 +30,6 @@ from __future__ import annotations
 import io
 import logging
 import os
-import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -41,6 +40,7 @@ from .chain import IDENTITY, RawJoint, build_tree
 from .errors import ModelError, UnsupportedJointError
 from .inertia import RigidInertia
 from .kinematics import joint_motion
+from verified.user_warnings import warn_at_caller
 
 #: rotation-matrix entries closer than this to 0 or +-1 are snapped
 ROTATION_SNAP_TOL = 1e-10
@@ -172,10 +172,10 @@ def chain_from_urdf(path_or_xml, *, lock=None, gravity=(0.0, 0.0, -9.81), name=N
                        name=name or robot.robot.name or "urdf", source=src)
     if friction:  # once per model, after it was built (a refused model says only why)
         listed = ", ".join(f"{k!r} ({v:g})" for k, v in friction.items())
-        warnings.warn(
+        warn_at_caller(
             f"URDF {chain.name!r}: Coulomb friction (<dynamics friction>) of joint(s) {listed} "
             "is not modeled, only the viscous damping: the model and its enclosures are "
-            "those without Coulomb friction", UserWarning, stacklevel=2)
+            "those without Coulomb friction", UserWarning)
     return chain
 
 

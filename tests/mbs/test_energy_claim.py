@@ -49,6 +49,7 @@ def test_a_false_zero_claim_around_the_equilibrium_is_not_used_and_the_run_stays
             sol = None
     warned = [w for w in rec if issubclass(w.category, EnergyClaimWarning)]
     assert len(warned) == 1 and "\n" not in str(warned[0].message)
+    assert warned[0].filename == __file__  # (at the user's line, not inside the library)
     if sol is None:
         return
     assert sol.status == "completed"

@@ -751,3 +751,32 @@ def test_resume_from_a_pause_continues_the_run(ode, box):
         solve(ode, box, (0.0, T), start=st, set_order=1)
     with pytest.raises(ValueError, match="rechunk"):
         solve(ode, box, (0.0, T), chunks=2, rechunk="yes")
+
+
+def test_warnings_point_at_the_callers_line(ode, box, monkeypatch):
+    """A fallback warning is reported at the line that called solve, not inside the
+    library (its depth differs by path: solve -> the method's solve -> solve_parallel
+    -> the planner)."""
+    monkeypatch.setattr(exec_run, "dask_available", lambda: False)
+    with pytest.warns(RuntimeWarning, match="not installed") as record:
+        solve(ode, box, (0.0, 0.05), subdivision=[4, 1, 1, 1], workers=2)
+    assert [w.filename for w in record] == [__file__]
+
+
+def test_a_client_connected_here_is_closed_when_the_plan_refuses(ode, box, monkeypatch):
+    """client='address': the Client solve connects is closed even when the run is
+    refused before it starts (a replay whose chunks do not cover the boxes)."""
+    closed = []
+
+    class FakeClient:
+        def scheduler_info(self):
+            return {"workers": {"a": {}, "b": {}}}
+
+        def close(self):
+            closed.append(True)
+    monkeypatch.setattr(exec_run, "connect", lambda address: FakeClient())
+    sol = solve(ode, box, (0.0, 0.05), subdivision=[4, 1, 1, 1], workers=1, chunks=2)
+    with pytest.raises(ValueError, match="do not cover"):
+        with exec_run.replaying(sol):
+            solve(ode, box, (0.0, 0.05), subdivision=[8, 1, 1, 1], client="tcp://127.0.0.1:1")
+    assert closed == [True]

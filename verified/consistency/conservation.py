@@ -66,7 +66,6 @@ they are.
 
 from __future__ import annotations
 
-import warnings
 from typing import Sequence
 
 import numpy as np
@@ -79,6 +78,7 @@ from verified.graph.evaluate import eval_interval
 from verified.graph import Graph, GraphBuilder
 from verified.graph.ops import embed, rate_along
 from verified.driver.hooks import Hook, RunSetup
+from verified.user_warnings import warn_at_caller
 from verified.arith.interval import Interval, concatenate, point
 from verified.sets.second_order import QuadraticSets, quadratic_range
 from verified.sets.first_order import DoubletonSets
@@ -568,7 +568,6 @@ class InvariantHook(Hook):
         st["invariant_level_rise"] = st.get("invariant_level_rise", 0.0) + self.rise
         if self.unverified and not self.rise <= 1e-9:
             names = ", ".join(b.label for b in self.bound if b.kind == "non_increasing")
-            warnings.warn(InvariantWarning(
+            warn_at_caller(InvariantWarning(
                 f"dI/dt <= 0 could not be verified on {self.unverified} step(s) for {names}: its bound rose by "
-                f"{self.rise:.3g} in all (to what the enclosure shows; a rate graph in simpler form may help)"),
-                stacklevel=2)
+                f"{self.rise:.3g} in all (to what the enclosure shows; a rate graph in simpler form may help)"))

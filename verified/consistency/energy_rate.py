@@ -43,9 +43,9 @@ that names the new one.
 
 from __future__ import annotations
 
-import warnings
 
 from verified.graph import Graph
+from verified.user_warnings import warn_at_caller
 
 __all__ = ["DEPRECATED", "ENERGY_RATES", "MODEL_RATES", "SYSTEM_RATES", "check_energy_rate", "deprecated"]
 
@@ -73,9 +73,9 @@ DEPRECATED = {
 }
 
 
-def deprecated(old: str, stacklevel: int = 3):
-    """Warn that ``old`` (a key of :data:`DEPRECATED`) is spelt differently now."""
-    warnings.warn(f"{old} is deprecated; use {DEPRECATED[old]}", DeprecationWarning, stacklevel=stacklevel)
+def deprecated(old: str):
+    """Warn (at the user's line) that ``old`` (a key of :data:`DEPRECATED`) is spelt differently now."""
+    warn_at_caller(f"{old} is deprecated; use {DEPRECATED[old]}", DeprecationWarning)
 
 
 def check_energy_rate(value, allowed: tuple, where: str, graph: bool = False):

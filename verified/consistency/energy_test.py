@@ -49,7 +49,6 @@ below, keeps the statistics and hands the record to the Solution. The pieces:
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -65,6 +64,7 @@ from verified.consistency.energy_state import assign, initial_sets, reset_h
 from verified.graph import Graph
 from verified.graph.ops import negated
 from verified.driver.hooks import Hook
+from verified.user_warnings import warn_at_caller
 from verified.arith.interval import Interval, concatenate, hull, point
 from verified.consistency.reduction_area import ConsistencyRecord, ReductionArea, TestRecord
 from verified.sets.first_order import DoubletonSets
@@ -319,10 +319,10 @@ class EnergyTest(Hook):
             return
         decl = ("energy_rate='zero' (dH/dt = 0)" if isinstance(self.energy_rate, str)
                 else "the energy_rate graph")
-        warnings.warn(EnergyClaimWarning(
+        warn_at_caller(EnergyClaimWarning(
             f"{decl} could not be proven equal to grad H . f ({self._lifted.proof.reason}); the energy test "
             "does not use it and integrates the derived rate grad H . f instead (pass energy_rate='derive' to "
-            "skip the proof)"), stacklevel=2)
+            "skip the proof)"))
 
     def _refute_claim(self, boxes: Interval, points: np.ndarray, t: float):
         """See :func:`verified.consistency.graphs.refute_claim`."""

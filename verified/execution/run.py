@@ -11,7 +11,6 @@ import contextvars
 import copy
 import inspect
 import time
-import warnings
 from collections import deque
 
 import numpy as np
@@ -19,6 +18,7 @@ import numpy as np
 from verified.driver.batch import VerifiedODE, solve_batch
 from verified.driver.solution import Solution
 from verified.driver.solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
+from verified.user_warnings import warn_at_caller
 from verified.execution.cluster import WorkerStartError, _LOCAL, close_local_clients, connect, local_client
 from verified.execution.dask_run import _run_on_dask
 from verified.execution.hooks import _Board, _EmitEvery, _Local, _split_hooks
@@ -93,53 +93,57 @@ def solve_parallel(ode, x0, t_span, *, workers=None, client=None, chunks=None, *
     hooks_in = kwargs.pop("hooks", ()) or ()
     hooks, deadline = _split_hooks(hooks_in, t_wall0)
     backend, n_workers, client, own_client = _where(client, workers, nb)
-    adaptive = bool(kwargs.get("adaptive", False))
-    backend, n_workers, ranges, rechunk_on, cluster_start_s = _plan(
-        backend, n_workers, nb, workers, chunks, deadline, replay_ranges, adaptive, consistency, rechunk)
-    if backend == "inprocess" and len(ranges) == 1 and not rechunk_on and not replay:  # one batch: solve's own result
-        sol = solve_batch(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
-                          hooks=list(hooks_in), **kwargs)
-        sol.stats.update(chunks=1, workers=1, backend="inprocess")
+    try:
+        adaptive = bool(kwargs.get("adaptive", False))
+        backend, n_workers, ranges, rechunk_on, cluster_start_s = _plan(
+            backend, n_workers, nb, workers, chunks, deadline, replay_ranges, adaptive, consistency, rechunk)
+        if backend == "inprocess" and len(ranges) == 1 and not rechunk_on and not replay:  # (one batch)
+            sol = solve_batch(ode, boxes, (t0, t1), params=params, progress=progress, consistency=consistency,
+                              hooks=list(hooks_in), **kwargs)
+            sol.stats.update(chunks=1, workers=1, backend="inprocess")
+            return sol
+        base = dict(kwargs, t_span=(t0, t1))
+        base.pop("max_boxes", None)  # (per piece: _Piece.max_boxes)
+        board = _Board(progress, t0, t1, [b - a for a, b in ranges])
+        interrupted = False
+        # work stealing: a lagging piece's sets go to free threads (Dask only; not with a
+        # consistency test, whose record cannot be continued; not when replaying a run's cuts)
+        steal = backend != "inprocess" and consistency is None and replay is None and rechunk is not False
+        stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend, "rechunk": rechunk_on,
+                       "steal": steal}
+
+        def chunk_params(a, b):
+            if params is None:
+                return None
+            return params[a:b] if params.ndim == 2 else params
+
+        pieces = _Pieces(boxes, ranges, chunk_params, rechunk_on, int(kwargs.get("max_boxes", _MAX_BOXES)),
+                         steal=steal, replay=replay, outs=outs, t0=t0)
+        if backend == "inprocess":
+            prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(graph, arithmetic)
+            stats_extra["setup_s"] = time.perf_counter() - wall0
+            interrupted = _run_here(prob, pieces, base, consistency, hooks, progress, board)
+            stats_extra["sent_bytes"] = stats_extra["received_bytes"] = 0
+        else:
+            c = client if backend == "dask" else None
+            interrupted = _run_there(c, n_workers, cluster_start_s, graph, arithmetic, pieces, base,
+                                     consistency, hooks, board, t_wall0, stats_extra)
+        t_merge = time.perf_counter()
+        results = pieces.families(outs, t0)
+        stats_extra["pieces"] = sum(1 for p in pieces.items if p.sol is not None)
+        stats_extra["rechunks"] = pieces.cuts
+        stats_extra["cuts"] = pieces.cut_log
+        stats_extra["stitch_s"] = pieces.stitch_s  # (stitching of families as they completed, during the run)
+        sol = merge_solutions(results, ranges, boxes[:, :graph.n_inputs], outs, t0,
+                              tuple(graph.input_names[:graph.n_inputs]), interrupted=interrupted)
+        stats_extra["merge_s"] = time.perf_counter() - t_merge
+        board.emit()
+        sol.stats.update(stats_extra)
+        sol.stats["wall_s"] = time.perf_counter() - wall0
         return sol
-    base = dict(kwargs, t_span=(t0, t1))
-    base.pop("max_boxes", None)  # (per piece: _Piece.max_boxes)
-    board = _Board(progress, t0, t1, [b - a for a, b in ranges])
-    interrupted = False
-    # work stealing: a lagging piece's sets go to free threads (Dask only; not with a
-    # consistency test, whose record cannot be continued; not when replaying a run's cuts)
-    steal = backend != "inprocess" and consistency is None and replay is None and rechunk is not False
-    stats_extra = {"chunks": len(ranges), "workers": n_workers, "backend": backend, "rechunk": rechunk_on,
-                   "steal": steal}
-
-    def chunk_params(a, b):
-        if params is None:
-            return None
-        return params[a:b] if params.ndim == 2 else params
-
-    pieces = _Pieces(boxes, ranges, chunk_params, rechunk_on, int(kwargs.get("max_boxes", _MAX_BOXES)),
-                     steal=steal, replay=replay, outs=outs, t0=t0)
-    if backend == "inprocess":
-        prob = ode if isinstance(ode, VerifiedODE) else VerifiedODE(graph, arithmetic)
-        stats_extra["setup_s"] = time.perf_counter() - wall0
-        interrupted = _run_here(prob, pieces, base, consistency, hooks, progress, board)
-        stats_extra["sent_bytes"] = stats_extra["received_bytes"] = 0
-    else:
-        c = client if backend == "dask" else None
-        interrupted = _run_there(c, own_client, n_workers, cluster_start_s, graph, arithmetic, pieces, base,
-                                 consistency, hooks, board, t_wall0, stats_extra)
-    t_merge = time.perf_counter()
-    results = pieces.families(outs, t0)
-    stats_extra["pieces"] = sum(1 for p in pieces.items if p.sol is not None)
-    stats_extra["rechunks"] = pieces.cuts
-    stats_extra["cuts"] = pieces.cut_log
-    stats_extra["stitch_s"] = pieces.stitch_s  # (stitching of families as they completed, during the run)
-    sol = merge_solutions(results, ranges, boxes[:, :graph.n_inputs], outs, t0,
-                          tuple(graph.input_names[:graph.n_inputs]), interrupted=interrupted)
-    stats_extra["merge_s"] = time.perf_counter() - t_merge
-    board.emit()
-    sol.stats.update(stats_extra)
-    sol.stats["wall_s"] = time.perf_counter() - wall0
-    return sol
+    finally:
+        if own_client is not None:  # (a Client this call connected: closed whatever happens)
+            own_client.close()
 
 
 def _checked_args(ode, t_span, workers, chunks, kwargs: dict):
@@ -213,10 +217,9 @@ def _where(client, workers, nb: int):
             if dask_available():
                 backend = "dask-local"
             elif not auto:
-                # (stacklevel: solve's caller, through solve, solve_parallel and this)
-                warnings.warn(f"workers={workers}: dask.distributed is not installed "
-                              "(pip install 'mbs-verified[parallel]'); running the chunks in this process",
-                              RuntimeWarning, stacklevel=4)
+                warn_at_caller(f"workers={workers}: dask.distributed is not installed "
+                               "(pip install 'mbs-verified[parallel]'); running the chunks in this process",
+                               RuntimeWarning)
     if backend == "inprocess":
         n_workers = 1
     return backend, n_workers, client, own_client
@@ -253,8 +256,7 @@ def _plan(backend, n_workers, nb, workers, chunks, deadline, replay_ranges, adap
             local_client(n_workers)
             cluster_start_s = time.perf_counter() - t_start if fresh else None
         except WorkerStartError as exc:
-            # (stacklevel: solve's caller, through solve, solve_parallel and this)
-            warnings.warn(f"{exc}; workers=None runs in this process", RuntimeWarning, stacklevel=4)
+            warn_at_caller(f"{exc}; workers=None runs in this process", RuntimeWarning)
             backend, n_workers = "inprocess", 1
             ranges = [(0, nb)] if chunks is None else plan_chunks(nb, 1, chunks)
             rechunk_on = adaptive and consistency is None and bool(rechunk)
@@ -289,25 +291,20 @@ def _run_here(prob, pieces: _Pieces, base: dict, consistency, hooks: list, progr
     return interrupted
 
 
-def _run_there(c, own_client, n_workers, cluster_start_s, graph, arithmetic, pieces: _Pieces, base: dict,
+def _run_there(c, n_workers, cluster_start_s, graph, arithmetic, pieces: _Pieces, base: dict,
                consistency, hooks: list, board, t_wall0, stats_extra: dict) -> bool:
     """Run the pieces on Dask: on ``c`` or (None) the local cluster of ``n_workers``,
-    started here if need be; ``own_client`` (a Client this call connected) is closed
-    after, whatever happens. Returns whether the run was interrupted; the cluster's
+    started here if need be. Returns whether the run was interrupted; the cluster's
     start, :func:`_run_on_dask`'s sizes and ``setup_s`` go into ``stats_extra``."""
     setup_t = time.perf_counter()
-    try:
-        if c is None:
-            fresh = n_workers not in _LOCAL
-            c = local_client(n_workers)
-            if fresh:
-                stats_extra["cluster_start_s"] = time.perf_counter() - setup_t
-        if cluster_start_s is not None:
-            stats_extra["cluster_start_s"] = cluster_start_s
-        interrupted, sizes = _run_on_dask(c, graph, arithmetic, pieces, base, consistency, hooks, board, t_wall0)
-        stats_extra.update(sizes)
-    finally:
-        if own_client is not None:
-            own_client.close()
+    if c is None:
+        fresh = n_workers not in _LOCAL
+        c = local_client(n_workers)
+        if fresh:
+            stats_extra["cluster_start_s"] = time.perf_counter() - setup_t
+    if cluster_start_s is not None:
+        stats_extra["cluster_start_s"] = cluster_start_s
+    interrupted, sizes = _run_on_dask(c, graph, arithmetic, pieces, base, consistency, hooks, board, t_wall0)
+    stats_extra.update(sizes)
     stats_extra["setup_s"] = stats_extra.pop("setup_s", time.perf_counter() - setup_t)
     return interrupted
