@@ -40,7 +40,7 @@ from .chain import IDENTITY, RawJoint, build_tree
 from .errors import ModelError, UnsupportedJointError
 from .inertia import RigidInertia
 from .kinematics import joint_motion
-from verified.user_warnings import warn_at_caller
+from verified.driver.user_warnings import warn_at_caller
 
 #: rotation-matrix entries closer than this to 0 or +-1 are snapped
 ROTATION_SNAP_TOL = 1e-10

@@ -78,7 +78,7 @@ from verified.graph.evaluate import eval_interval
 from verified.graph import Graph, GraphBuilder
 from verified.graph.ops import embed, rate_along
 from verified.driver.hooks import Hook, RunSetup
-from verified.user_warnings import warn_at_caller
+from verified.driver.user_warnings import warn_at_caller
 from verified.arith.interval import Interval, concatenate, point
 from verified.sets.second_order import QuadraticSets, quadratic_range
 from verified.sets.first_order import DoubletonSets

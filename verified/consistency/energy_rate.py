@@ -45,7 +45,7 @@ from __future__ import annotations
 
 
 from verified.graph import Graph
-from verified.user_warnings import warn_at_caller
+from verified.driver.user_warnings import warn_at_caller
 
 __all__ = ["DEPRECATED", "ENERGY_RATES", "MODEL_RATES", "SYSTEM_RATES", "check_energy_rate", "deprecated"]
 

@@ -64,7 +64,7 @@ from verified.consistency.energy_state import assign, initial_sets, reset_h
 from verified.graph import Graph
 from verified.graph.ops import negated
 from verified.driver.hooks import Hook
-from verified.user_warnings import warn_at_caller
+from verified.driver.user_warnings import warn_at_caller
 from verified.arith.interval import Interval, concatenate, hull, point
 from verified.consistency.reduction_area import ConsistencyRecord, ReductionArea, TestRecord
 from verified.sets.first_order import DoubletonSets

@@ -18,7 +18,7 @@ import numpy as np
 from verified.driver.batch import VerifiedODE, solve_batch
 from verified.driver.solution import Solution
 from verified.driver.solver_args import check_arithmetic, check_graph, check_params, check_settings, initial_boxes
-from verified.user_warnings import warn_at_caller
+from verified.driver.user_warnings import warn_at_caller
 from verified.execution.cluster import WorkerStartError, _LOCAL, close_local_clients, connect, local_client
 from verified.execution.dask_run import _run_on_dask
 from verified.execution.hooks import _Board, _EmitEvery, _Local, _split_hooks

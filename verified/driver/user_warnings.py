@@ -16,7 +16,7 @@ import warnings
 
 __all__ = ["warn_at_caller"]
 
-_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 #: the library's package directories (as path prefixes)
 LIBRARY_PREFIXES = tuple(os.path.join(_ROOT, p) + os.sep for p in ("verified", "mbs", "models"))
 
