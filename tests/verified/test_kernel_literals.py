@@ -5,17 +5,20 @@ code types the 7 as ``Literal[int](7)``): the unary expansions' eight kinds, pas
 literals, were compiled eight or nine times over with everything they call, which more than
 doubled a first run's compile time (docs/lab/code_notes.md, "compile time: integer
 literals"). Constants are passed as ``np.int64(k)``. Checked on the source, so that the
-check costs nothing and needs no cold cache.
+check costs nothing and needs no cold cache. The rules of the recursion's tables
+(:mod:`verified.series.recursion`) are plain functions compiled into the engine: they are
+checked as compiled callers, and the engine's calls of the rule stubs as calls of
+compiled callees.
 """
 
 import ast
 import inspect
 
 from verified.arith import _kernels, linalg
-from verified.series import affine_taylor, taylor, taylor_model
+from verified.series import affine_taylor, recursion, taylor, taylor_model
 from verified.steppers import tm_flow
 
-MODULES = [_kernels, taylor, taylor_model, affine_taylor, tm_flow, linalg]
+MODULES = [_kernels, recursion, taylor, taylor_model, affine_taylor, tm_flow, linalg]
 
 
 def _jitted(tree):
@@ -24,6 +27,13 @@ def _jitted(tree):
         if isinstance(node, ast.FunctionDef) and any("njit" in ast.unparse(d) for d in node.decorator_list):
             out[node.name] = node
     return out
+
+
+def _rules(tree, module):
+    """The functions of ``module`` registered as rules of a table (compiled in the engine)."""
+    names = {f.__name__ for rules in recursion._TABLES.values() for f in rules.values()
+             if f.__module__ == module}
+    return {node.name: node for node in tree.body if isinstance(node, ast.FunctionDef) and node.name in names}
 
 
 def _literal(arg):
@@ -37,9 +47,10 @@ def literal_calls(modules=MODULES):
     jitted function to another (``_k.f`` resolves to :mod:`verified.arith._kernels`)."""
     trees = {m.__name__: ast.parse(inspect.getsource(m)) for m in modules}
     jitted = {name: set(_jitted(t)) for name, t in trees.items()}
+    jitted["verified.series.recursion"] = jitted.get("verified.series.recursion", set()) | set(recursion.RULES)
     found = []
     for mod, tree in trees.items():
-        for fname, fn in _jitted(tree).items():
+        for fname, fn in {**_jitted(tree), **_rules(tree, mod)}.items():
             for call in ast.walk(fn):
                 if not isinstance(call, ast.Call):
                     continue
@@ -77,3 +88,11 @@ def test_the_check_sees_a_literal(monkeypatch):
     real = inspect.getsource
     monkeypatch.setattr(inspect, "getsource", lambda m: src if m is Fake else real(m))
     assert literal_calls([Fake]) == [("fake", "f", "g", "7"), ("fake", "f", "g", "True")]
+
+
+def test_the_check_reads_the_rules_and_the_engine():
+    """The interval table's rules are read as compiled callers, and the engine's calls of
+    the rule stubs as calls of compiled callees."""
+    tree = ast.parse(inspect.getsource(taylor))
+    assert {"_iv_mul", "_iv_sincos", "_iv_integrate"} <= set(_rules(tree, "verified.series.taylor"))
+    assert {"add", "mul_const", "integrate"} <= set(recursion.RULES)

@@ -17,20 +17,27 @@ node with the classical recurrences (Moore 1966; Griewank & Walther, ch. 13):
     ...
 
 The graph is flattened once into a *tape* of integer arrays, and one compiled (numba)
-interpreter runs any tape, so no model needs compiling of its own. Every arithmetic
-step is an outward-rounded interval operation from :mod:`verified.arith._kernels`.
+interpreter runs any tape, so no model needs compiling of its own: the recursion of
+:mod:`verified.series.recursion` with the interval table of this module
+(:class:`IntervalTable`, its rules ``_iv_*``). Every arithmetic step is an
+outward-rounded interval operation from :mod:`verified.arith._kernels`.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from verified.arith import _kernels as _k
-from verified.graph import Graph, Op
 from verified.arith.interval import Interval, _as_interval
+from verified.graph import Graph, Op
+from verified.series.recursion import (
+    T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG, T_PARAM, T_SIN, T_SQR,
+    T_SQRT, T_SUB, T_TAN, recursion, register
+)
 
 __all__ = ["TaylorODE"]
 
@@ -39,9 +46,8 @@ __all__ = ["TaylorODE"]
 # the unary expansion were eight compilations of it and of everything it calls, which
 # multiplied a first run's compile time (docs/lab/code_notes.md, compile time).
 
-# Tape opcodes (independent of Op's numbering).
-T_CONST, T_INPUT, T_PARAM, T_ADD, T_SUB, T_MUL, T_DIV, T_NEG, T_SQR = range(9)
-T_SQRT, T_EXP, T_LOG, T_SIN, T_COS, T_TAN, T_ATAN, T_AUX, T_MID = range(9, 18)
+# The tape opcodes T_* are defined with the engine (verified.series.recursion); the affine
+# and Taylor-model kernels import them from here.
 
 _SIMPLE = {
     Op.ADD: T_ADD,
@@ -57,7 +63,7 @@ _SIMPLE = {
 
 
 class _Tape:
-    """Flat arrays describing the recurrences of one graph (see :func:`_taylor_kernel`).
+    """Flat arrays describing the recurrences of one graph (see :mod:`verified.series.recursion`).
 
     ``cst[s]`` marks slots whose series is constant in time (built from constants,
     parameters and frozen points ``mid`` only): their coefficients of order >= 1 are
@@ -149,7 +155,8 @@ class _Tape:
 
 
 # --------------------------------------------------------------------------
-# The interpreter. T[s, k, b] holds coefficient k of tape slot s for box b.
+# The interval table of the recursion (verified.series.recursion): lo[s, k, b], hi[s, k, b]
+# hold coefficient k of tape slot s for box b; every rule loops over the boxes.
 # --------------------------------------------------------------------------
 @njit(cache=True)
 def _frozen_point(lo, hi):
@@ -202,132 +209,227 @@ def _sqrconv(tlo, thi, u, k, j0, b):
     return sl, sh
 
 
-@njit(cache=True)
-def _taylor_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, xlo, xhi, plo, phi, order):
-    """Coefficients x_[0..order] for boxes ``x`` (shape (n, B)) and params (p, B).
+class IntervalTable(NamedTuple):
+    """Interval coefficients of every tape slot and of the state, for a batch of boxes
+    (the table of :func:`verified.series.recursion.recursion` that :class:`TaylorODE` runs).
+    Its rules are the functions ``_iv_*`` below (plain functions: numba compiles them into
+    the engine); every arithmetic step of theirs is an outward-rounded interval operation
+    of :mod:`verified.arith._kernels`, box by box."""
 
-    Returns lo, hi arrays of shape (n, order + 1, B).
-    """
+    lo: np.ndarray  # (slots, order + 1, B): coefficient k of slot s for box b
+    hi: np.ndarray
+    xlo: np.ndarray  # (n, order + 1, B): x_[k] of state i
+    xhi: np.ndarray
+    plo: np.ndarray  # (p, B): the parameters
+    phi: np.ndarray
+
+
+def _iv_const(ar, s, lo, hi):
+    for b in range(ar.lo.shape[2]):
+        ar.lo[s, 0, b] = lo
+        ar.hi[s, 0, b] = hi
+
+
+def _iv_mid(ar, s, u):  # a frozen point of u_[0]: a constant series
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, 0, b], thi[s, 0, b] = _frozen_point(tlo[u, 0, b], thi[u, 0, b])
+
+
+def _iv_param(ar, s, i):
+    for b in range(ar.lo.shape[2]):
+        ar.lo[s, 0, b] = ar.plo[i, b]
+        ar.hi[s, 0, b] = ar.phi[i, b]
+
+
+def _iv_state(ar, s, k, i):
+    for b in range(ar.lo.shape[2]):
+        ar.lo[s, k, b] = ar.xlo[i, k, b]
+        ar.hi[s, k, b] = ar.xhi[i, k, b]
+
+
+def _iv_add(ar, s, k, u, v):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, k, b], thi[s, k, b] = _k.add(tlo[u, k, b], thi[u, k, b], tlo[v, k, b], thi[v, k, b])
+
+
+def _iv_sub(ar, s, k, u, v):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, k, b], thi[s, k, b] = _k.sub(tlo[u, k, b], thi[u, k, b], tlo[v, k, b], thi[v, k, b])
+
+
+def _iv_neg(ar, s, k, u):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, k, b] = -thi[u, k, b]
+        thi[s, k, b] = -tlo[u, k, b]
+
+
+def _iv_mul_const(ar, s, k, u, v, ku, kv):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, k, b], thi[s, k, b] = _k.mul(tlo[u, ku, b], thi[u, ku, b], tlo[v, kv, b], thi[v, kv, b])
+
+
+def _iv_mul(ar, s, k, u, v):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, k, b], thi[s, k, b] = _conv(tlo, thi, u, v, k, np.int64(0), b)
+
+
+def _iv_sqr(ar, s, k, u):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, k, b], thi[s, k, b] = _sqrconv(tlo, thi, u, k, np.int64(0), b)
+
+
+def _iv_div_const(ar, s, k, u, v):  # w_k = u_k / v_0
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, k, b], thi[s, k, b] = _k.div(tlo[u, k, b], thi[u, k, b], tlo[v, 0, b], thi[v, 0, b])
+
+
+def _iv_div(ar, s, k, u, v):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
+        sl, sh = _conv(tlo, thi, v, s, k, np.int64(1), b)
+        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[v, 0, b], thi[v, 0, b])
+
+
+def _iv_sqrt0(ar, s, u):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, 0, b], thi[s, 0, b] = _k.sqrt(tlo[u, 0, b], thi[u, 0, b])
+
+
+def _iv_sqrt(ar, s, k, u):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
+        sl, sh = _sqrconv(tlo, thi, s, k, np.int64(1), b)
+        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+        dl, dh = _k.mul(2.0, 2.0, tlo[s, 0, b], thi[s, 0, b])
+        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, dl, dh)
+
+
+def _iv_exp0(ar, s, u):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, 0, b], thi[s, 0, b] = _k.exp(tlo[u, 0, b], thi[u, 0, b])
+
+
+def _iv_exp(ar, s, k, u):
+    tlo, thi = ar.lo, ar.hi
+    fk = float(k)
+    for b in range(tlo.shape[2]):
+        sl, sh = _wconv(tlo, thi, u, s, k, k, b)
+        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, fk, fk)
+
+
+def _iv_log0(ar, s, u):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, 0, b], thi[s, 0, b] = _k.log(tlo[u, 0, b], thi[u, 0, b])
+
+
+def _iv_log(ar, s, k, u):
+    tlo, thi = ar.lo, ar.hi
+    fk = float(k)
+    for b in range(tlo.shape[2]):
+        # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
+        sl, sh = _wconv(tlo, thi, s, u, k, k - 1, b)
+        sl, sh = _k.div(sl, sh, fk, fk)
+        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[u, 0, b], thi[u, 0, b])
+
+
+def _iv_sincos0(ar, ss, cs, u):
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[ss, 0, b], thi[ss, 0, b] = _k.sin(tlo[u, 0, b], thi[u, 0, b])
+        tlo[cs, 0, b], thi[cs, 0, b] = _k.cos(tlo[u, 0, b], thi[u, 0, b])
+
+
+def _iv_sincos(ar, ss, cs, k, u):
+    tlo, thi = ar.lo, ar.hi
+    fk = float(k)
+    for b in range(tlo.shape[2]):
+        sl, sh = _wconv(tlo, thi, u, cs, k, k, b)
+        tlo[ss, k, b], thi[ss, k, b] = _k.div(sl, sh, fk, fk)
+        sl, sh = _wconv(tlo, thi, u, ss, k, k, b)
+        tlo[cs, k, b], thi[cs, k, b] = _k.div(-sh, -sl, fk, fk)
+
+
+def _iv_tan0(ar, s, vs, u):  # vs: v = 1 + tan^2 = tan'
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tl, th = _k.tan(tlo[u, 0, b], thi[u, 0, b])
+        tlo[s, 0, b] = tl
+        thi[s, 0, b] = th
+        ql, qh = _k.sqr(tl, th)
+        tlo[vs, 0, b], thi[vs, 0, b] = _k.add(1.0, 1.0, ql, qh)
+
+
+def _iv_tan(ar, s, vs, k, u):
+    tlo, thi = ar.lo, ar.hi
+    fk = float(k)
+    for b in range(tlo.shape[2]):
+        sl, sh = _wconv(tlo, thi, u, vs, k, k, b)
+        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, fk, fk)
+        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, s, k, np.int64(0), b)
+
+
+def _iv_atan0(ar, s, vs, u):  # vs: v = 1 + u^2, atan(u)' = u' / v
+    tlo, thi = ar.lo, ar.hi
+    for b in range(tlo.shape[2]):
+        tlo[s, 0, b], thi[s, 0, b] = _k.atan(tlo[u, 0, b], thi[u, 0, b])
+        ql, qh = _k.sqr(tlo[u, 0, b], thi[u, 0, b])
+        tlo[vs, 0, b], thi[vs, 0, b] = _k.add(1.0, 1.0, ql, qh)
+
+
+def _iv_atan(ar, s, vs, k, u):
+    tlo, thi = ar.lo, ar.hi
+    fk = float(k)
+    for b in range(tlo.shape[2]):
+        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, u, k, np.int64(0), b)
+        sl, sh = _wconv(tlo, thi, s, vs, k, k - 1, b)
+        sl, sh = _k.div(sl, sh, fk, fk)
+        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
+        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[vs, 0, b], thi[vs, 0, b])
+
+
+def _iv_integrate(ar, i, o, k):  # x_[k+1] = f_[k] / (k + 1)
+    tlo, thi = ar.lo, ar.hi
+    fk = float(k)
+    for b in range(tlo.shape[2]):
+        ar.xlo[i, k + 1, b], ar.xhi[i, k + 1, b] = _k.div(tlo[o, k, b], thi[o, k, b], fk + 1.0, fk + 1.0)
+
+
+register(IntervalTable, const=_iv_const, mid=_iv_mid, param=_iv_param, state=_iv_state, add=_iv_add, sub=_iv_sub,
+         neg=_iv_neg, mul_const=_iv_mul_const, mul=_iv_mul, sqr=_iv_sqr, div_const=_iv_div_const, div=_iv_div,
+         sqrt0=_iv_sqrt0, sqrt=_iv_sqrt, exp0=_iv_exp0, exp=_iv_exp, log0=_iv_log0, log=_iv_log,
+         sincos0=_iv_sincos0, sincos=_iv_sincos, tan0=_iv_tan0, tan=_iv_tan, atan0=_iv_atan0, atan=_iv_atan,
+         integrate=_iv_integrate)
+
+
+@njit(cache=True)
+def _interval_coefficients(op, a0, a1, aux, idx, cst, clo, chi, outputs, xlo, xhi, plo, phi, order):
+    """Coefficients x_[0..order] for boxes ``x`` (shape (n, B)) and params (p, B): the
+    recursion with the interval table. Returns lo, hi arrays of shape (n, order + 1, B)."""
     nslots = op.size
     n, nb = xlo.shape
-    tlo = np.zeros((nslots, order + 1, nb))
-    thi = np.zeros((nslots, order + 1, nb))
-    clo_x = np.empty((n, order + 1, nb))
-    chi_x = np.empty((n, order + 1, nb))
-    clo_x[:, 0, :] = xlo
-    chi_x[:, 0, :] = xhi
-    for k in range(order):
-        fk = float(k)
-        for s in range(nslots):
-            o = op[s]
-            u = a0[s]
-            v = a1[s]
-            if o == T_AUX or (k > 0 and cst[s]):
-                continue  # a constant's coefficients >= 1 stay exactly 0
-            for b in range(nb):
-                if o == T_CONST:
-                    if k == 0:
-                        tlo[s, 0, b] = clo[s]
-                        thi[s, 0, b] = chi[s]
-                elif o == T_MID:  # a frozen point of u_[0]: a constant series
-                    if k == 0:
-                        tlo[s, 0, b], thi[s, 0, b] = _frozen_point(tlo[u, 0, b], thi[u, 0, b])
-                elif o == T_PARAM:
-                    if k == 0:
-                        tlo[s, 0, b] = plo[idx[s], b]
-                        thi[s, 0, b] = phi[idx[s], b]
-                elif o == T_INPUT:
-                    tlo[s, k, b] = clo_x[idx[s], k, b]
-                    thi[s, k, b] = chi_x[idx[s], k, b]
-                elif o == T_ADD:
-                    tlo[s, k, b], thi[s, k, b] = _k.add(tlo[u, k, b], thi[u, k, b], tlo[v, k, b], thi[v, k, b])
-                elif o == T_SUB:
-                    tlo[s, k, b], thi[s, k, b] = _k.sub(tlo[u, k, b], thi[u, k, b], tlo[v, k, b], thi[v, k, b])
-                elif o == T_NEG:
-                    tlo[s, k, b] = -thi[u, k, b]
-                    thi[s, k, b] = -tlo[u, k, b]
-                elif o == T_MUL:
-                    if cst[u]:
-                        tlo[s, k, b], thi[s, k, b] = _k.mul(tlo[u, 0, b], thi[u, 0, b], tlo[v, k, b], thi[v, k, b])
-                    elif cst[v]:
-                        tlo[s, k, b], thi[s, k, b] = _k.mul(tlo[u, k, b], thi[u, k, b], tlo[v, 0, b], thi[v, 0, b])
-                    else:
-                        tlo[s, k, b], thi[s, k, b] = _conv(tlo, thi, u, v, k, np.int64(0), b)
-                elif o == T_SQR:
-                    tlo[s, k, b], thi[s, k, b] = _sqrconv(tlo, thi, u, k, np.int64(0), b)
-                elif o == T_DIV:
-                    if cst[v]:  # w_k = u_k / v_0
-                        tlo[s, k, b], thi[s, k, b] = _k.div(tlo[u, k, b], thi[u, k, b], tlo[v, 0, b], thi[v, 0, b])
-                    else:
-                        # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
-                        sl, sh = _conv(tlo, thi, v, s, k, np.int64(1), b)
-                        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
-                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[v, 0, b], thi[v, 0, b])
-                elif o == T_SQRT:
-                    if k == 0:
-                        tlo[s, 0, b], thi[s, 0, b] = _k.sqrt(tlo[u, 0, b], thi[u, 0, b])
-                    else:
-                        # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
-                        sl, sh = _sqrconv(tlo, thi, s, k, np.int64(1), b)
-                        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
-                        dl, dh = _k.mul(2.0, 2.0, tlo[s, 0, b], thi[s, 0, b])
-                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, dl, dh)
-                elif o == T_EXP:
-                    if k == 0:
-                        tlo[s, 0, b], thi[s, 0, b] = _k.exp(tlo[u, 0, b], thi[u, 0, b])
-                    else:
-                        sl, sh = _wconv(tlo, thi, u, s, k, k, b)
-                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, fk, fk)
-                elif o == T_LOG:
-                    if k == 0:
-                        tlo[s, 0, b], thi[s, 0, b] = _k.log(tlo[u, 0, b], thi[u, 0, b])
-                    else:
-                        # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
-                        sl, sh = _wconv(tlo, thi, s, u, k, k - 1, b)
-                        sl, sh = _k.div(sl, sh, fk, fk)
-                        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
-                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[u, 0, b], thi[u, 0, b])
-                elif o == T_SIN or o == T_COS:
-                    ss = s if o == T_SIN else aux[s]
-                    cs = aux[s] if o == T_SIN else s
-                    if k == 0:
-                        tlo[ss, 0, b], thi[ss, 0, b] = _k.sin(tlo[u, 0, b], thi[u, 0, b])
-                        tlo[cs, 0, b], thi[cs, 0, b] = _k.cos(tlo[u, 0, b], thi[u, 0, b])
-                    else:
-                        sl, sh = _wconv(tlo, thi, u, cs, k, k, b)
-                        tlo[ss, k, b], thi[ss, k, b] = _k.div(sl, sh, fk, fk)
-                        sl, sh = _wconv(tlo, thi, u, ss, k, k, b)
-                        tlo[cs, k, b], thi[cs, k, b] = _k.div(-sh, -sl, fk, fk)
-                elif o == T_TAN:
-                    vs = aux[s]  # v = 1 + tan^2 = tan'
-                    if k == 0:
-                        tl, th = _k.tan(tlo[u, 0, b], thi[u, 0, b])
-                        tlo[s, 0, b] = tl
-                        thi[s, 0, b] = th
-                        ql, qh = _k.sqr(tl, th)
-                        tlo[vs, 0, b], thi[vs, 0, b] = _k.add(1.0, 1.0, ql, qh)
-                    else:
-                        sl, sh = _wconv(tlo, thi, u, vs, k, k, b)
-                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, fk, fk)
-                        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, s, k, np.int64(0), b)
-                elif o == T_ATAN:
-                    vs = aux[s]  # v = 1 + u^2, atan(u)' = u' / v
-                    if k == 0:
-                        tlo[s, 0, b], thi[s, 0, b] = _k.atan(tlo[u, 0, b], thi[u, 0, b])
-                        ql, qh = _k.sqr(tlo[u, 0, b], thi[u, 0, b])
-                        tlo[vs, 0, b], thi[vs, 0, b] = _k.add(1.0, 1.0, ql, qh)
-                    else:
-                        tlo[vs, k, b], thi[vs, k, b] = _sqrconv(tlo, thi, u, k, np.int64(0), b)
-                        sl, sh = _wconv(tlo, thi, s, vs, k, k - 1, b)
-                        sl, sh = _k.div(sl, sh, fk, fk)
-                        sl, sh = _k.sub(tlo[u, k, b], thi[u, k, b], sl, sh)
-                        tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[vs, 0, b], thi[vs, 0, b])
-        # x_[k+1] = f_[k] / (k + 1)
-        for i in range(n):
-            o = outputs[i]
-            for b in range(nb):
-                clo_x[i, k + 1, b], chi_x[i, k + 1, b] = _k.div(tlo[o, k, b], thi[o, k, b], fk + 1.0, fk + 1.0)
-    return clo_x, chi_x
+    ar = IntervalTable(np.zeros((nslots, order + 1, nb)), np.zeros((nslots, order + 1, nb)),
+                       np.empty((n, order + 1, nb)), np.empty((n, order + 1, nb)), plo, phi)
+    for i in range(n):  # (a loop: a slice assignment compiles numba's broadcasting errors, ~3 s)
+        for b in range(nb):
+            ar.xlo[i, 0, b] = xlo[i, b]
+            ar.xhi[i, 0, b] = xhi[i, b]
+    recursion(op, a0, a1, aux, idx, cst, clo, chi, outputs, order, ar)
+    return ar.xlo, ar.xhi
 
 
 class TaylorODE:
@@ -390,7 +492,8 @@ class TaylorODE:
         plo = _k.kernel_array(p.lo.reshape(nb, self.n_params).T)
         phi = _k.kernel_array(p.hi.reshape(nb, self.n_params).T)
         t = self._tape
-        lo, hi = _taylor_kernel(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, xlo, xhi, plo, phi, order)
+        lo, hi = _interval_coefficients(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, xlo, xhi, plo,
+                                        phi, order)
         # (n, order+1, B) -> (..., order+1, n)
         lo = np.moveaxis(lo, 2, 0).transpose(0, 2, 1).reshape(batch + (order + 1, self.n))
         hi = np.moveaxis(hi, 2, 0).transpose(0, 2, 1).reshape(batch + (order + 1, self.n))
