@@ -412,3 +412,47 @@ def test_probe_verdicts():
     verdict, why = _probe_verdict(probe("breakdown", 1.1), **args)  # (0.2 + 0.4 + 0.8 + 1.6 > 1.9: 8 * 8^4)
     assert verdict == "give up" and "more than max_pieces = 256" in why
     assert _probe_verdict(probe("breakdown", 2.0), **args) == ("go", None)  # (one more split: 64 pieces)
+
+
+def _three_oscillators():
+    """Three uncoupled copies of the vdp-like oscillator: 6 states."""
+    def f(x, p):
+        out = []
+        for i in range(0, 6, 2):
+            out += [x[i + 1], -x[i] - 2 * x[i + 1] * x[i] * x[i]]
+        return out
+    return trace(f, 6)
+
+
+@pytest.mark.parametrize("system, n_own", [("three", 6), ("one", 2)])
+def test_split_pieces_run_as_chunks_of_their_own_from_six_states(system, n_own, monkeypatch):
+    """From ladder.OWN_CHUNKS_STATES states on the composition runs a split's pieces as
+    one chunk each (their own steps), below as one batch; either way every sampled true
+    state at t = 3 lies in the result."""
+    import verified.solver as solver_mod
+    calls = []
+    real = solver_mod.solve_parallel
+
+    def spy(*a, **k):
+        calls.append(k.get("chunks"))
+        return real(*a, **k)
+    monkeypatch.setattr(solver_mod, "solve_parallel", spy)
+    small = 1e-3
+    if system == "three":
+        g = _three_oscillators()
+        box = Interval([-0.5, -0.5, 0.2 - small, -small, -small, 0.3 - small],
+                       [0.5, 0.5, 0.2 + small, small, small, 0.3 + small])
+    else:
+        g, box = _vdp_like(), BOX
+    sol = solve(g, box, (0.0, 3.0))
+    assert sol.status == "completed"
+    split = [e for e in sol.method_log if e["pieces"] > 1]
+    assert split, sol.method
+    if n_own >= ladder.OWN_CHUNKS_STATES:
+        assert calls and calls == [e["pieces"] - 1 for e in split if e["pieces"] > 2]  # (each probe's siblings)
+    else:
+        assert calls == []
+    states = _sampled_final(3.0)
+    lo, hi = np.asarray(sol.boxes[-1].lo), np.asarray(sol.boxes[-1].hi)
+    inside = ((states[:, None, :] >= lo[None, :, :2] - 1e-9) & (states[:, None, :] <= hi[None, :, :2] + 1e-9)).all(axis=2)
+    assert inside.any(axis=1).all()
