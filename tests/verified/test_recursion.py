@@ -1,5 +1,5 @@
-"""The Taylor recursion and its tables (verified.series.recursion): the interval table
-against exact (arb) coefficients, and the check bites on a table with a wrong rule."""
+"""The Taylor recursion and its tables (verified.series.recursion): the interval and affine
+tables against exact (arb) coefficients, and the checks bite on a table with a wrong rule."""
 
 from typing import NamedTuple
 
@@ -12,7 +12,7 @@ from oracles.graph_models import all_ops
 from verified.arith import _kernels as _k
 from verified.arith.interval import Interval
 from verified.graph import trace
-from verified.series import recursion, taylor
+from verified.series import affine_taylor, recursion, taylor
 from verified.series.taylor import TaylorODE
 
 
@@ -91,6 +91,76 @@ def test_the_exact_check_bites_on_a_wrong_rule():
     lo, hi = _coefficients(_DropsATerm, g, x0, 6)
     with pytest.raises(AssertionError, match="outside"):
         assert_inside(lo, hi, exact, "a product without its last term")
+
+
+# --------------------------------------------------------------------------
+# The affine table (affine_taylor.AffineTable, the reference kernel's) through the same
+# engine, and a copy whose product drops the last term of its convolution.
+# --------------------------------------------------------------------------
+class _AffineDropsATerm(NamedTuple):
+    F: np.ndarray
+    REC: np.ndarray
+    out: np.ndarray
+    P: np.ndarray
+    T: np.ndarray
+    S: np.ndarray
+    sel: np.ndarray
+    sel_base: int
+    m0: int
+    n_fresh: int
+
+
+def _affine_mul_without_last_term(ar, s, k, u, v):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        affine_taylor._clear(Z, m)
+        for j in range(k):  # (the term j = k, u_k v_0, is missing)
+            affine_taylor._acc_mul(Z, F[u, j, b], F[v, k - j, b], m, 1.0)
+
+
+recursion.register(_AffineDropsATerm, **{name: getattr(affine_taylor, "_ar_" + name) for name in recursion.RULES
+                                         if name != "mul"}, mul=_affine_mul_without_last_term)
+
+
+def _affine_coefficients(table, graph, X, order):
+    """The forms of x_[0..order] (n, order + 1, B, m + 2) from the input forms X (n, B, m + 2),
+    with the rules of ``table``."""
+    t = taylor._Tape(graph)
+    n, nb, m2 = X.shape
+    ns = t.op.size
+    out = np.zeros((n, order + 1, nb, m2))
+    out[:, 0] = X
+    ar = table(np.zeros((ns, order + 1, nb, m2)), np.zeros((ns, nb, m2)), out, np.zeros((0, nb, m2)), np.zeros(m2),
+               np.zeros(m2), affine_taylor._NO_SLOTS, 0, 0, 0)
+    _run(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, order, ar)
+    return ar.out
+
+
+def test_the_affine_checks_bite_on_a_wrong_rule():
+    """The affine table run through the engine here is the reference kernel, bit for bit,
+    and its forms contain the exact coefficients at the centre; the table whose product
+    drops a term fails both."""
+    g = trace(lambda x, p: [x[0] * x[1], -x[0]], 2)
+    x0 = np.array([0.6, -0.3])
+    order = 6
+    X = np.zeros((2, 1, 4))  # centre x0, one symbol per state, no error
+    X[:, 0, 0] = x0
+    X[0, 0, 1] = X[1, 0, 2] = 1e-3
+    t = taylor._Tape(g)
+    ref, _ = affine_taylor._affine_kernel_reference(t.op, t.a0, t.a1, t.aux, t.idx, t.cst, t.clo, t.chi, t.outputs, X,
+                                                    np.zeros((0, 1, 4)), order, 2, 0, affine_taylor._NO_SLOTS, 0)
+    exact = arb_taylor(g, x0, None, order)
+    good = _affine_coefficients(affine_taylor.AffineTable, g, X, order)
+    assert np.array_equal(good, ref)
+    lo, hi = affine_taylor.forms_to_interval(good[:, :, 0])
+    assert_inside(lo.T, hi.T, exact, "affine table")
+    bad = _affine_coefficients(_AffineDropsATerm, g, X, order)
+    assert not np.array_equal(bad, ref)
+    lo, hi = affine_taylor.forms_to_interval(bad[:, :, 0])
+    with pytest.raises(AssertionError, match="outside"):
+        assert_inside(lo.T, hi.T, exact, "an affine product without its last term")
 
 
 def test_register_checks_the_rules():

@@ -41,12 +41,14 @@ interval. :func:`forms_to_interval` gives the interval ranges.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from verified.arith import _kernels as _k
 from verified.arith.interval import Interval, _as_interval
+from verified.series.recursion import recursion, register
 from verified.series.taylor import (
     T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG, T_PARAM, T_SIN, T_SQR,
     T_SQRT, T_SUB, T_TAN, _Tape
@@ -319,17 +321,312 @@ def _unary_into(Z, x, m, kind, known_lo=-INF):
 
 
 # --------------------------------------------------------------------------
-# The reference interpreter: one box at a time, every loop over all m symbols.
-# F[s, k, b, :] is the form of coefficient k of tape slot s for box b: index 0 the
-# centre, 1..m the symbol coefficients, m + 1 the error radius. The solver runs the
-# batched interpreter below (_affine_kernel), which computes the same numbers faster;
-# this one is the plain statement of the rules that tests/verified/test_affine_taylor.py checks
-# it against, bit for bit. A change to a rule goes into both.
+# The reference interpreter: one box at a time, every loop over all m symbols; the
+# recursion of verified.series.recursion with the affine table below (AffineTable, its
+# rules _ar_*). F[s, k, b, :] is the form of coefficient k of tape slot s for box b:
+# index 0 the centre, 1..m the symbol coefficients, m + 1 the error radius. The solver
+# runs the batched interpreter below (_affine_kernel), which computes the same numbers
+# faster; this one is the plain statement of the rules that tests/verified/test_affine_taylor.py
+# checks it against, bit for bit. A change to a rule goes into both.
 # --------------------------------------------------------------------------
+class AffineTable(NamedTuple):
+    """Affine forms of every tape slot and of the state, one box after the other (the
+    table of :func:`verified.series.recursion.recursion` that :func:`_affine_kernel_reference`
+    runs). Its rules are the functions ``_ar_*`` below (plain functions: numba compiles
+    them into the engine); every operation on forms is one of the helpers above."""
+
+    F: np.ndarray  # (slots, order + 1, B, m + 2): coefficient k of slot s for box b
+    REC: np.ndarray  # (slots, B, m + 2): the reciprocal of the order-0 divisor of a slot
+    out: np.ndarray  # (n, order + 1, B, m + 2): x_[k] of state i
+    P: np.ndarray  # (p, B, m + 2): the parameters
+    T: np.ndarray  # (m + 2,): scratch forms
+    S: np.ndarray
+    sel: np.ndarray  # fresh symbols of slots (see _affine_kernel_reference)
+    sel_base: int
+    m0: int  # fresh symbols of the coefficients: 1 + m0 + k n_fresh + i for x_[k+1], i
+    n_fresh: int
+
+
+def _ar_const(ar, s, lo, hi):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        mid = 0.5 * lo + 0.5 * hi
+        F[s, 0, b, 0] = mid
+        F[s, 0, b, m + 1] = _up(max(hi - mid, mid - lo))
+
+
+def _ar_param(ar, s, i):
+    F = ar.F
+    for b in range(F.shape[2]):
+        for j in range(F.shape[3]):
+            F[s, 0, b, j] = ar.P[i, b, j]
+
+
+def _ar_mid(ar, s, u):  # the centre of u_[0], frozen as a point: a constant series
+    F = ar.F
+    for b in range(F.shape[2]):
+        _frozen_point_into(F[s, 0, b], F[u, 0, b], F.shape[3] - 2)
+
+
+def _ar_state(ar, s, k, i):
+    F = ar.F
+    for b in range(F.shape[2]):
+        for j in range(F.shape[3]):
+            F[s, k, b, j] = ar.out[i, k, b, j]
+
+
+def _ar_add(ar, s, k, u, v):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        _clear(Z, m)
+        _acc_add(Z, F[u, k, b], m, 1.0)
+        _acc_add(Z, F[v, k, b], m, 1.0)
+
+
+def _ar_sub(ar, s, k, u, v):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        _clear(Z, m)
+        _acc_add(Z, F[u, k, b], m, 1.0)
+        _acc_add(Z, F[v, k, b], m, -1.0)
+
+
+def _ar_neg(ar, s, k, u):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        for i in range(m + 1):
+            F[s, k, b, i] = -F[u, k, b, i]
+        F[s, k, b, m + 1] = F[u, k, b, m + 1]
+
+
+def _ar_mul_const(ar, s, k, u, v, ku, kv):  # (c w)_[k] = c_[0] w_[k]: the other terms are exact zeros
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        _clear(Z, m)
+        _acc_mul(Z, F[u, ku, b], F[v, kv, b], m, 1.0)
+
+
+def _ar_mul(ar, s, k, u, v):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        _clear(Z, m)
+        for j in range(k + 1):
+            _acc_mul(Z, F[u, j, b], F[v, k - j, b], m, 1.0)
+
+
+def _ar_sqr(ar, s, k, u):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        _clear(Z, m)
+        _sqrconv(Z, F, u, k, np.int64(0), b, m)
+
+
+def _ar_div_const(ar, s, k, u, v):  # w_k = u_k / v_0 (times the form of 1 / v_0)
+    F, T = ar.F, ar.T
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        if k == 0:
+            _unary_into(ar.REC[s, b], F[v, 0, b], m, np.int64(7), -INF)
+        _clear(T, m)
+        _acc_add(T, F[u, k, b], m, 1.0)
+        Z = F[s, k, b]
+        _clear(Z, m)
+        _acc_mul(Z, T, ar.REC[s, b], m, 1.0)
+
+
+def _ar_div(ar, s, k, u, v):
+    F, T = ar.F, ar.T
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        if k == 0:
+            _unary_into(ar.REC[s, b], F[v, 0, b], m, np.int64(7), -INF)
+        # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
+        _clear(T, m)
+        _acc_add(T, F[u, k, b], m, 1.0)
+        for j in range(1, k + 1):
+            _acc_mul(T, F[v, j, b], F[s, k - j, b], m, -1.0)
+        Z = F[s, k, b]
+        _clear(Z, m)
+        _acc_mul(Z, T, ar.REC[s, b], m, 1.0)
+
+
+def _ar_sqrt0(ar, s, u):
+    F, T = ar.F, ar.T
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        Z = F[s, 0, b]
+        _unary_into(Z, F[u, 0, b], m, np.int64(0), -INF)
+        _scale_into(T, Z, m, 2.0)
+        _unary_into(ar.REC[s, b], T, m, np.int64(7), -INF)
+
+
+def _ar_sqrt(ar, s, k, u):
+    F, T, S = ar.F, ar.T, ar.S
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
+        _clear(T, m)
+        _acc_add(T, F[u, k, b], m, 1.0)
+        _clear(S, m)
+        _sqrconv(S, F, s, k, np.int64(1), b, m)
+        _acc_add(T, S, m, -1.0)
+        Z = F[s, k, b]
+        _clear(Z, m)
+        _acc_mul(Z, T, ar.REC[s, b], m, 1.0)
+
+
+def _ar_exp0(ar, s, u):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        _unary_into(F[s, 0, b], F[u, 0, b], m, np.int64(1), -INF)
+
+
+def _ar_exp(ar, s, k, u):
+    F, T = ar.F, ar.T
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        _clear(T, m)
+        for j in range(1, k + 1):
+            _acc_mul(T, F[u, j, b], F[s, k - j, b], m, float(j))
+        _div_int_into(F[s, k, b], T, m, float(k))
+
+
+def _ar_log0(ar, s, u):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        _unary_into(F[s, 0, b], F[u, 0, b], m, np.int64(2), -INF)
+        _unary_into(ar.REC[s, b], F[u, 0, b], m, np.int64(7), -INF)
+
+
+def _ar_log(ar, s, k, u):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
+        _quotient_step(F[s, k, b], F, s, u, u, k, b, m, ar.REC[s, b], ar.T, ar.S)
+
+
+def _ar_sincos0(ar, ss, cs, u):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        _unary_into(F[ss, 0, b], F[u, 0, b], m, np.int64(3), -INF)
+        _unary_into(F[cs, 0, b], F[u, 0, b], m, np.int64(4), -INF)
+
+
+def _ar_sincos(ar, ss, cs, k, u):
+    F, T = ar.F, ar.T
+    m = F.shape[3] - 2
+    fk = float(k)
+    for b in range(F.shape[2]):
+        _clear(T, m)
+        for j in range(1, k + 1):
+            _acc_mul(T, F[u, j, b], F[cs, k - j, b], m, float(j))
+        _div_int_into(F[ss, k, b], T, m, fk)
+        _clear(T, m)
+        for j in range(1, k + 1):
+            _acc_mul(T, F[u, j, b], F[ss, k - j, b], m, -float(j))
+        _div_int_into(F[cs, k, b], T, m, fk)
+
+
+def _ar_tan0(ar, s, vs, u):  # vs: v = 1 + tan^2 = tan'
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        Z = F[s, 0, b]
+        _unary_into(Z, F[u, 0, b], m, np.int64(5), -INF)
+        V = F[vs, 0, b]
+        _clear(V, m)
+        V[0] = 1.0
+        _acc_sqr(V, Z, m, 1.0)
+
+
+def _ar_tan(ar, s, vs, k, u):
+    F, T = ar.F, ar.T
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        _clear(T, m)
+        for j in range(1, k + 1):
+            _acc_mul(T, F[u, j, b], F[vs, k - j, b], m, float(j))
+        _div_int_into(F[s, k, b], T, m, float(k))
+        V = F[vs, k, b]
+        _clear(V, m)
+        _sqrconv(V, F, s, k, np.int64(0), b, m)
+
+
+def _ar_atan0(ar, s, vs, u):  # vs: v = 1 + u^2, atan(u)' = u' / v
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        _unary_into(F[s, 0, b], F[u, 0, b], m, np.int64(6), -INF)
+        V = F[vs, 0, b]
+        _clear(V, m)
+        V[0] = 1.0
+        _acc_sqr(V, F[u, 0, b], m, 1.0)
+        _unary_into(ar.REC[s, b], V, m, np.int64(7), 1.0)  # v0 = 1 + u0^2 >= 1
+
+
+def _ar_atan(ar, s, vs, k, u):
+    F = ar.F
+    m = F.shape[3] - 2
+    for b in range(F.shape[2]):
+        V = F[vs, k, b]
+        _clear(V, m)
+        _sqrconv(V, F, u, k, np.int64(0), b, m)
+        # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
+        _quotient_step(F[s, k, b], F, s, u, vs, k, b, m, ar.REC[s, b], ar.T, ar.S)
+
+
+def _ar_slot_done(ar, s, k):
+    sel = ar.sel
+    if k == 0 and sel.size > 0 and sel[s] >= 0:
+        # this slot's error becomes a symbol of its own (fresh_slots)
+        F = ar.F
+        m = F.shape[3] - 2
+        for b in range(F.shape[2]):
+            F[s, 0, b, ar.sel_base + sel[s]] = F[s, 0, b, m + 1]
+            F[s, 0, b, m + 1] = 0.0
+
+
+def _ar_integrate(ar, i, o, k):  # x_[k+1] = f_[k] / (k + 1)
+    F, out = ar.F, ar.out
+    m = F.shape[3] - 2
+    fk = float(k)
+    for b in range(F.shape[2]):
+        _div_int_into(out[i, k + 1, b], F[o, k, b], m, fk + 1.0)
+        if i < ar.n_fresh:
+            # the error of x_[k+1] becomes a symbol of its own: later orders then
+            # carry it with its dependencies instead of as a bare radius
+            out[i, k + 1, b, 1 + ar.m0 + k * ar.n_fresh + i] = out[i, k + 1, b, m + 1]
+            out[i, k + 1, b, m + 1] = 0.0
+
+
+register(AffineTable, const=_ar_const, mid=_ar_mid, param=_ar_param, state=_ar_state, add=_ar_add, sub=_ar_sub,
+         neg=_ar_neg, mul_const=_ar_mul_const, mul=_ar_mul, sqr=_ar_sqr, div_const=_ar_div_const, div=_ar_div,
+         sqrt0=_ar_sqrt0, sqrt=_ar_sqrt, exp0=_ar_exp0, exp=_ar_exp, log0=_ar_log0, log=_ar_log,
+         sincos0=_ar_sincos0, sincos=_ar_sincos, tan0=_ar_tan0, tan=_ar_tan, atan0=_ar_atan0, atan=_ar_atan,
+         slot_done=_ar_slot_done, integrate=_ar_integrate)
+
+
 @njit(cache=True)
 def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh,
                              sel, sel_base):
-    """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
+    """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms:
+    the recursion (:mod:`verified.series.recursion`) with the affine table.
 
     ``sel`` (empty ``_NO_SLOTS``, or one entry per tape slot; passed explicitly, as every
     argument: numba cannot cache a signature with an omitted default, and every process
@@ -343,156 +640,14 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
     """
     nslots = op.size
     n, nb, m2 = X.shape
-    m = m2 - 2
     F = np.zeros((nslots, order + 1, nb, m2))
-    REC = np.zeros((nslots, nb, m2))  # reciprocal of the order-0 divisor of a slot
     out = np.zeros((n, order + 1, nb, m2))
-    out[:, 0, :, :] = X
-    T = np.zeros(m2)
-    S = np.zeros(m2)
-    for k in range(order):
-        fk = float(k)
-        for s in range(nslots):
-            o = op[s]
-            u = a0[s]
-            v = a1[s]
-            if o == T_AUX or (k > 0 and cst[s]):
-                continue  # a constant's coefficients >= 1 stay exactly 0
-            for b in range(nb):
-                Z = F[s, k, b]
-                if o == T_CONST:
-                    if k == 0:
-                        mid = 0.5 * clo[s] + 0.5 * chi[s]
-                        Z[0] = mid
-                        Z[m + 1] = _up(max(chi[s] - mid, mid - clo[s]))
-                elif o == T_PARAM:
-                    if k == 0:
-                        Z[:] = P[idx[s], b]
-                elif o == T_MID:  # the centre of u_[0], frozen as a point: a constant series
-                    if k == 0:
-                        _frozen_point_into(Z, F[u, 0, b], m)
-                elif o == T_INPUT:
-                    Z[:] = out[idx[s], k, b]
-                elif o == T_ADD or o == T_SUB:
-                    _clear(Z, m)
-                    _acc_add(Z, F[u, k, b], m, 1.0)
-                    _acc_add(Z, F[v, k, b], m, 1.0 if o == T_ADD else -1.0)
-                elif o == T_NEG:
-                    for i in range(m + 1):
-                        Z[i] = -F[u, k, b, i]
-                    Z[m + 1] = F[u, k, b, m + 1]
-                elif o == T_MUL:
-                    _clear(Z, m)
-                    if cst[u]:  # (c w)_[k] = c_[0] w_[k]: the other terms are exact zeros
-                        _acc_mul(Z, F[u, 0, b], F[v, k, b], m, 1.0)
-                    elif cst[v]:
-                        _acc_mul(Z, F[u, k, b], F[v, 0, b], m, 1.0)
-                    else:
-                        for j in range(k + 1):
-                            _acc_mul(Z, F[u, j, b], F[v, k - j, b], m, 1.0)
-                elif o == T_SQR:
-                    _clear(Z, m)
-                    _sqrconv(Z, F, u, k, np.int64(0), b, m)
-                elif o == T_DIV:
-                    if k == 0:
-                        _unary_into(REC[s, b], F[v, 0, b], m, np.int64(7), -INF)
-                    # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0 (the sum is 0 for a constant v)
-                    _clear(T, m)
-                    _acc_add(T, F[u, k, b], m, 1.0)
-                    if not cst[v]:
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[v, j, b], F[s, k - j, b], m, -1.0)
-                    _clear(Z, m)
-                    _acc_mul(Z, T, REC[s, b], m, 1.0)
-                elif o == T_SQRT:
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, np.int64(0), -INF)
-                        _scale_into(T, Z, m, 2.0)
-                        _unary_into(REC[s, b], T, m, np.int64(7), -INF)
-                    else:
-                        # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
-                        _clear(T, m)
-                        _acc_add(T, F[u, k, b], m, 1.0)
-                        _clear(S, m)
-                        _sqrconv(S, F, s, k, np.int64(1), b, m)
-                        _acc_add(T, S, m, -1.0)
-                        _clear(Z, m)
-                        _acc_mul(Z, T, REC[s, b], m, 1.0)
-                elif o == T_EXP:
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, np.int64(1), -INF)
-                    else:
-                        _clear(T, m)
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[u, j, b], F[s, k - j, b], m, float(j))
-                        _div_int_into(Z, T, m, fk)
-                elif o == T_LOG:
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, np.int64(2), -INF)
-                        _unary_into(REC[s, b], F[u, 0, b], m, np.int64(7), -INF)
-                    else:
-                        # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
-                        _quotient_step(Z, F, s, u, u, k, b, m, REC[s, b], T, S)
-                elif o == T_SIN or o == T_COS:
-                    ss = s if o == T_SIN else aux[s]
-                    cs = aux[s] if o == T_SIN else s
-                    if k == 0:
-                        _unary_into(F[ss, 0, b], F[u, 0, b], m, np.int64(3), -INF)
-                        _unary_into(F[cs, 0, b], F[u, 0, b], m, np.int64(4), -INF)
-                    else:
-                        _clear(T, m)
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[u, j, b], F[cs, k - j, b], m, float(j))
-                        _div_int_into(F[ss, k, b], T, m, fk)
-                        _clear(T, m)
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[u, j, b], F[ss, k - j, b], m, -float(j))
-                        _div_int_into(F[cs, k, b], T, m, fk)
-                elif o == T_TAN:
-                    vs = aux[s]  # v = 1 + tan^2 = tan'
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, np.int64(5), -INF)
-                        V = F[vs, 0, b]
-                        _clear(V, m)
-                        V[0] = 1.0
-                        _acc_sqr(V, Z, m, 1.0)
-                    else:
-                        _clear(T, m)
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[u, j, b], F[vs, k - j, b], m, float(j))
-                        _div_int_into(Z, T, m, fk)
-                        V = F[vs, k, b]
-                        _clear(V, m)
-                        _sqrconv(V, F, s, k, np.int64(0), b, m)
-                elif o == T_ATAN:
-                    vs = aux[s]  # v = 1 + u^2, atan(u)' = u' / v
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], m, np.int64(6), -INF)
-                        V = F[vs, 0, b]
-                        _clear(V, m)
-                        V[0] = 1.0
-                        _acc_sqr(V, F[u, 0, b], m, 1.0)
-                        _unary_into(REC[s, b], V, m, np.int64(7), 1.0)  # v0 = 1 + u0^2 >= 1
-                    else:
-                        V = F[vs, k, b]
-                        _clear(V, m)
-                        _sqrconv(V, F, u, k, np.int64(0), b, m)
-                        # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
-                        _quotient_step(Z, F, s, u, vs, k, b, m, REC[s, b], T, S)
-                if k == 0 and sel.size > 0 and sel[s] >= 0:
-                    # this slot's error becomes a symbol of its own (fresh_slots)
-                    F[s, 0, b, sel_base + sel[s]] = F[s, 0, b, m + 1]
-                    F[s, 0, b, m + 1] = 0.0
-        # x_[k+1] = f_[k] / (k + 1)
-        for i in range(n):
-            o = outputs[i]
-            for b in range(nb):
-                _div_int_into(out[i, k + 1, b], F[o, k, b], m, fk + 1.0)
-                if i < n_fresh:
-                    # the error of x_[k+1] becomes a symbol of its own: later orders then
-                    # carry it with its dependencies instead of as a bare radius
-                    out[i, k + 1, b, 1 + m0 + k * n_fresh + i] = out[i, k + 1, b, m + 1]
-                    out[i, k + 1, b, m + 1] = 0.0
+    for i in range(n):  # (a loop: a slice assignment compiles numba's broadcasting errors)
+        for b in range(nb):
+            for j in range(m2):
+                out[i, 0, b, j] = X[i, b, j]
+    ar = AffineTable(F, np.zeros((nslots, nb, m2)), out, P, np.zeros(m2), np.zeros(m2), sel, sel_base, m0, n_fresh)
+    recursion(op, a0, a1, aux, idx, cst, clo, chi, outputs, order, ar)
     return out, F
 
 

@@ -63,6 +63,10 @@ rule               orders      equation
 ``atan0``          0           ``w_0 = atan(u_0)``, partner ``t_0 = 1 + u_0^2``
 ``atan``           k >= 1      ``t_k = sum_{j=0}^{k} u_j u_{k-j}``,
                                ``w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j t_{k-j}) / t_0``
+``slot_done``      all         nothing required: called after the rule of every slot the
+                               engine visits (``s`` the slot, not its partner), for a
+                               table's step after a slot (the affine table's fresh symbol
+                               of a slot's order-0 error); a no-op in the interval table
 ``integrate``      all         ``x_[k+1], i = f_[k] / (k + 1)`` with ``f_[k]`` slot ``o``
 =================  ==========  ============================================================
 
@@ -269,6 +273,11 @@ def atan(ar, s, vs, k, u):
 
 
 @_stub
+def slot_done(ar, s, k):
+    pass
+
+
+@_stub
 def integrate(ar, i, o, k):
     pass
 
@@ -352,6 +361,7 @@ def recursion(op, a0, a1, aux, idx, cst, clo, chi, outputs, order, ar):
                     atan0(ar, s, aux[s], u)
                 else:
                     atan(ar, s, aux[s], k, u)
+            slot_done(ar, s, k)
         # x_[k+1] = f_[k] / (k + 1)
         for i in range(outputs.size):
             integrate(ar, i, outputs[i], k)

@@ -402,6 +402,10 @@ def _iv_atan(ar, s, vs, k, u):
         tlo[s, k, b], thi[s, k, b] = _k.div(sl, sh, tlo[vs, 0, b], thi[vs, 0, b])
 
 
+def _iv_slot_done(ar, s, k):  # nothing after a slot (inlined: no code)
+    pass
+
+
 def _iv_integrate(ar, i, o, k):  # x_[k+1] = f_[k] / (k + 1)
     tlo, thi = ar.lo, ar.hi
     fk = float(k)
@@ -413,7 +417,7 @@ register(IntervalTable, const=_iv_const, mid=_iv_mid, param=_iv_param, state=_iv
          neg=_iv_neg, mul_const=_iv_mul_const, mul=_iv_mul, sqr=_iv_sqr, div_const=_iv_div_const, div=_iv_div,
          sqrt0=_iv_sqrt0, sqrt=_iv_sqrt, exp0=_iv_exp0, exp=_iv_exp, log0=_iv_log0, log=_iv_log,
          sincos0=_iv_sincos0, sincos=_iv_sincos, tan0=_iv_tan0, tan=_iv_tan, atan0=_iv_atan0, atan=_iv_atan,
-         integrate=_iv_integrate)
+         slot_done=_iv_slot_done, integrate=_iv_integrate)
 
 
 @njit(cache=True)
