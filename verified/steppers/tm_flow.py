@@ -846,7 +846,8 @@ class TaylorModelFlowStepper(LohnerStepper):
         C_new, S_new, r0_new, covered = _parameter_images(sets.C.shape[2], live, lin_u, quad[:, :, on_u],
                                                           pi[on_u], pj[on_u], star, si, sj, s_on)
         # (halving a subnormal may round: cover it)
-        incoming = incoming + Interval._from_bounds(np.full((nb, n), -1e-300), np.full((nb, n), 1e-300)) * float(max(1, covered))
+        tiny = Interval._from_bounds(np.full((nb, n), -1e-300), np.full((nb, n), 1e-300))
+        incoming = incoming + tiny * float(max(1, covered))
         # the error part: A delta + incoming, delta in [-1, 1] (0 where r had no width)
         has = work.r.rad() > 0
         unit = Interval._from_bounds(np.where(has, -1.0, 0.0), np.where(has, 1.0, 0.0))
