@@ -42,11 +42,6 @@ LARGE_STATES = 10
 LARGE_ORDER = Composition.order
 LARGE_MIN_ORDER = 6
 LARGE_PARAMS_PER_STATE = 12
-#: from this many states on (parameters carried as states included) the composition
-#: runs split pieces as chunks of their own, not as one batch: 4 payload pieces of a
-#: Panda cost 1.47x the CPU in one batch, 8 pieces of the 3-link arm 1.16x, while 16
-#: pieces of the double pendulum (4 states) cost 0.71x (docs/lab/auto.md)
-OWN_CHUNKS_STATES = 6
 #: split pieces must get further than their parent by this fraction of the time span, or
 #: splitting stops (what stops them is then not the width of the set)
 MIN_GAIN = 0.01
@@ -275,7 +270,8 @@ class _Ladder:
         self.todo = [_Task(boxes, pv, 0)]
         self.later = None  # the reason of a probe stopped or interrupted, for the result's
         self.first = None
-        self.covers = []  # [(boxes, Solution, params), ...] of failed attempts that, with the pieces done, covered everything
+        # [(boxes, Solution, params), ...] of failed attempts that, with the pieces done, covered everything
+        self.covers = []
         self.done: list[tuple[Interval, Solution, object]] = []  # (pieces, their Solution, their params)
         self.log: list[dict] = []
         self.pieces_total = boxes.shape[0]
@@ -293,27 +289,11 @@ class _Ladder:
         return caps_from(self.hooks, self.started) + ([] if r == self.fallback else [StallGuard(t_from, self.t1)])
 
     def _attempt(self, pieces, params, r):
-        """Rung ``r`` on ``pieces`` from t0 (each piece a chunk of its own where
-        :meth:`_own_chunks` says so)."""
+        """Rung ``r`` on ``pieces`` from t0."""
         consistency = None if self.consistency is None else copy.deepcopy(self.consistency)
-        common = self.common
-        if self._own_chunks(pieces.shape[0], r):
-            common = {**common, "chunks": pieces.shape[0]}
         return self.solve(self.ode, pieces, (self.t0, self.t1), method=self.rungs[r], params=params,
                           t_eval=self.t_eval, consistency=consistency, hooks=self._run_hooks(r, self.t0),
-                          progress=self.progress, **common)
-
-    def _own_chunks(self, k: int, r: int) -> bool:
-        """Whether ``k`` pieces on rung ``r`` run as ``k`` chunks, each with its own steps
-        (and, with ``workers``, on its own worker), instead of one batch that steps them
-        together: the composition from :data:`OWN_CHUNKS_STATES` states on, where a
-        step's cost is its sets' Taylor models rather than Python, and one batch takes
-        every piece's shortest step (docs/lab/auto.md). Not where the caller chose
-        ``chunks`` or a ``client``, and not with a consistency test (one batch can
-        suspend an idle one, a chunk cannot)."""
-        return (k > 1 and isinstance(self.rungs[r], Composition) and self.consistency is None
-                and self.n + _carried(self.pv) >= OWN_CHUNKS_STATES
-                and self.common.get("chunks") is None and self.common.get("client") is None)
+                          progress=self.progress, **self.common)
 
     def _attempt_task(self, task, t_from):
         """The Solution of ``task``: the rest of a probed split merged with its probe, the
@@ -445,7 +425,8 @@ class _Ladder:
                 return
         if why is not None:
             entry["next"] = f"gave up: {why}"
-            self.done.append((task.boxes, sol, task.params))  # (the failed attempt encloses all its pieces up to its end)
+            # (the failed attempt encloses all its pieces up to its end)
+            self.done.append((task.boxes, sol, task.params))
             self.give_up = "breakdown"
             return
         if kept:
