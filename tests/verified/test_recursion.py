@@ -80,6 +80,7 @@ def _coefficients(table, graph, x0, order):
     return ar.xlo[:, :, 0].T, ar.xhi[:, :, 0].T
 
 
+@pytest.mark.slow  # (compiles a mutant table through the engine: 13-29 s; the default run stays under 3 minutes)
 def test_the_exact_check_bites_on_a_wrong_rule():
     """Both tables through the same engine: the interval table's coefficients contain the
     exact ones, those of the table whose product drops a term do not."""
@@ -138,6 +139,7 @@ def _affine_coefficients(table, graph, X, order):
     return ar.out
 
 
+@pytest.mark.slow  # (compiles a mutant table through the engine: 13-29 s; the default run stays under 3 minutes)
 def test_the_affine_checks_bite_on_a_wrong_rule():
     """The affine table run through the engine here is the reference kernel, bit for bit,
     and its forms contain the exact coefficients at the centre; the table whose product
