@@ -198,6 +198,19 @@ def _log_entry(method: Method, pieces: int, splits: int, t_from: float, sol: Sol
                 status=sol.status, reason=sol.reason, wall_s=time.perf_counter() - t_start)
 
 
+def merge_parts(sols, sizes, initial: Interval, outs, t0, names, interrupted: bool = False) -> Solution:
+    """One Solution of consecutive parts of the pieces ``initial`` (``sizes[i]`` pieces
+    with Solution ``sols[i]``, in order), by :func:`verified.execution.merge.merge_solutions`;
+    its ``chunks`` are None (the attempts are in ``method_log``)."""
+    from verified.execution.merge import merge_solutions
+
+    ends = np.cumsum(sizes)
+    ranges = list(zip([0] + ends[:-1].tolist(), ends.tolist()))
+    out = merge_solutions(list(sols), ranges, initial, outs, t0, names, interrupted=interrupted)
+    out.chunks = None
+    return out
+
+
 def _failure_time(sol: Solution) -> float:
     """Where a run's first piece broke down (its end where none did)."""
     return min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=float(sol.t_reached))
@@ -298,16 +311,13 @@ class _Ladder:
     def _attempt_task(self, task, t_from):
         """The Solution of ``task``: the rest of a probed split merged with its probe, the
         pieces from t0, or a continuation from the failed attempt's sets."""
-        from verified.execution.merge import merge_solutions
-
         cont = task.failure
         if cont is None and task.probe is not None:
             # a split whose first part ran alone as its probe: the others, then both as one attempt
             k = task.boxes.shape[0]
             rest = self._attempt(task.boxes[1:], _rows(task.params, range(1, k)), task.rung)
-            sol = merge_solutions([task.probe, rest], [(0, 1), (1, k)], task.boxes, self.outs, self.t0, self.names,
-                                  interrupted=rest.status == "interrupted")
-            sol.chunks = None
+            sol = merge_parts([task.probe, rest], [1, k - 1], task.boxes, self.outs, self.t0, self.names,
+                              interrupted=rest.status == "interrupted")
             if rest.status not in ("completed", "breakdown"):
                 # (stopped or interrupted: nothing more is tried, whatever the probe did)
                 sol.status, sol.reason = rest.status, rest.reason
@@ -464,17 +474,11 @@ class _Ladder:
 
     # ------------------------------------------------------------------ the result
     def _merged(self, parts):
-        from verified.execution.merge import merge_solutions
-
         if len(parts) == 1 and parts[0][1] is not None:
             return parts[0][1]
-        initial = concatenate([b for b, _, _ in parts], axis=0)
-        ends = np.cumsum([b.shape[0] for b, _, _ in parts])
-        ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
-        out = merge_solutions([s for _, s, _ in parts], ranges, initial, self.outs, self.t0,
-                              self.names, interrupted=self.give_up == "interrupted")
-        out.chunks = None  # (the attempts are in method_log)
-        return out
+        return merge_parts([s for _, s, _ in parts], [b.shape[0] for b, _, _ in parts],
+                           concatenate([b for b, _, _ in parts], axis=0), self.outs, self.t0, self.names,
+                           interrupted=self.give_up == "interrupted")
 
     def _result(self):
         """The done pieces merged into one Solution (or a cover that got further), with

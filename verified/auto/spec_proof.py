@@ -13,7 +13,7 @@ from verified.driver.hooks import Hook
 from verified.arith.interval import Interval, concatenate
 from verified.methods import Auto
 from verified.driver.solution import Solution
-from verified.auto.ladder import _ladder, _rows, _summary
+from verified.auto.ladder import _ladder, _rows, _summary, merge_parts
 from verified.auto.splitting import split_pieces
 
 
@@ -339,16 +339,11 @@ class _Refinement:
 
     def merged(self, groups, outs):
         """One Solution of ``groups`` (output times ``outs``)."""
-        from verified.execution.merge import merge_solutions
-
         if len(groups) == 1:
             result = groups[0].sol
         else:
-            initial = concatenate([g.boxes for g in groups], axis=0)
-            ends = np.cumsum([g.boxes.shape[0] for g in groups])
-            ranges = list(zip(np.concatenate([[0], ends[:-1]]).tolist(), ends.tolist()))
-            result = merge_solutions([g.sol for g in groups], ranges, initial, outs, self.t0, self.names)
-            result.chunks = None
+            result = merge_parts([g.sol for g in groups], [g.boxes.shape[0] for g in groups],
+                                 concatenate([g.boxes for g in groups], axis=0), outs, self.t0, self.names)
         result.stats["auto_pieces"] = int(sum(g.boxes.shape[0] for g in groups))
         return result
 
