@@ -83,14 +83,6 @@ def _pm(a, b):
 
 
 @njit(cache=True)
-def _rad(F, s, k, b, m):
-    r = 0.0
-    for i in range(1, m + 1):
-        r += abs(F[s, k, b, i])
-    return _up(r)
-
-
-@njit(cache=True)
 def _clear(T, m):
     for i in range(m + 2):
         T[i] = 0.0
