@@ -412,3 +412,91 @@ def test_probe_verdicts():
     verdict, why = _probe_verdict(probe("breakdown", 1.1), **args)  # (0.2 + 0.4 + 0.8 + 1.6 > 1.9: 8 * 8^4)
     assert verdict == "give up" and "more than max_pieces = 256" in why
     assert _probe_verdict(probe("breakdown", 2.0), **args) == ("go", None)  # (one more split: 64 pieces)
+
+
+def _three_oscillators():
+    """Three uncoupled copies of the vdp-like oscillator: 6 states."""
+    def f(x, p):
+        out = []
+        for i in range(0, 6, 2):
+            out += [x[i + 1], -x[i] - 2 * x[i + 1] * x[i] * x[i]]
+        return out
+    return trace(f, 6)
+
+
+@pytest.mark.parametrize("system, n_own", [("three", 6), ("one", 2)])
+def test_split_pieces_run_each_alone_from_six_states(system, n_own, monkeypatch):
+    """From ladder.OWN_CHUNKS_STATES states on the composition runs a split's pieces each
+    alone (their own steps; the probe's run reused), below as one batch; either way every
+    sampled true state at t = 3 lies in the result."""
+    alone = []
+    real = ladder._Ladder._one_piece
+
+    def spy(self, piece, params, r):
+        alone.append(piece.shape[0])
+        return real(self, piece, params, r)
+    monkeypatch.setattr(ladder._Ladder, "_one_piece", spy)
+    small = 1e-3
+    if system == "three":
+        g = _three_oscillators()
+        box = Interval([-0.5, -0.5, 0.2 - small, -small, -small, 0.3 - small],
+                       [0.5, 0.5, 0.2 + small, small, small, 0.3 + small])
+    else:
+        g, box = _vdp_like(), BOX
+    sol = solve(g, box, (0.0, 3.0))
+    assert sol.status == "completed"
+    split = [e for e in sol.method_log if e["pieces"] > 1]
+    assert split, sol.method
+    if n_own >= ladder.OWN_CHUNKS_STATES:
+        assert alone and set(alone) == {1}
+        assert len(alone) == sum(e["pieces"] - 1 for e in split)  # (each probe's siblings, one by one)
+    else:
+        assert alone == []
+    states = _sampled_final(3.0)
+    lo, hi = np.asarray(sol.boxes[-1].lo), np.asarray(sol.boxes[-1].hi)
+    inside = ((states[:, None, :] >= lo[None, :, :2] - 1e-9) & (states[:, None, :] <= hi[None, :, :2] + 1e-9)).all(axis=2)
+    assert inside.any(axis=1).all()
+
+
+def _blowup_and_decay():
+    """6 uncoupled states: x0' = x0^2 (blows up at t = 1 from x0 = 1, decays from -1), the
+    others x' = -x."""
+    return trace(lambda x, p: [x[0] * x[0]] + [-x[i] for i in range(1, 6)], 6)
+
+
+def test_loose_pieces_leave_the_survivors_and_are_split_with_the_failed():
+    """Pieces run alone: one blows up (x0 = 1), one completes 100x as wide as its three
+    siblings. ``_loose_pieces`` names the wide one, and the attempt's ``surviving`` holds
+    the three others only; with LOOSE_FACTOR above the ratio it keeps all four."""
+    from verified.methods import Auto
+    rows = [([-1.0] + [0.1] * 5, 1e-4)] * 3 + [([-1.0] + [0.1] * 5, 1e-2), ([1.0] + [0.1] * 5, 1e-4)]
+    lo = np.array([np.array(c) - w for c, w in rows])
+    hi = np.array([np.array(c) + w for c, w in rows])
+    pieces = Interval(lo, hi)
+    g = _blowup_and_decay()
+    lad = ladder._Ladder(solve, g, g, pieces, None, (0.0, 1.5), method=Auto(), t_eval=None, consistency=None,
+                         hooks=[], progress=None, started=0.0, common={})
+    assert lad._own_chunks(5, 0)
+    sols = [lad._one_piece(pieces[i:i + 1], None, 0) for i in range(5)]
+    assert [s.status for s in sols] == ["completed"] * 4 + ["breakdown"]
+    assert ladder._loose_pieces(sols) == [3]
+    sol = lad._alone_merged(sols, pieces)
+    assert sol.stats["loose_pieces"] == [3]
+    assert sol.surviving.boxes[-1].shape[0] == 3
+    wide = float(np.max(sols[3].hull[-1].width()))
+    assert float(np.max(sol.surviving.hull[-1].width())) < wide / 10
+    # every sampled state of the three narrow pieces at the end lies in surviving
+    for c, w in rows[:3]:
+        x = np.array(c) + w * np.random.default_rng(0).uniform(-1, 1, (50, 6))
+        T = 1.5
+        x_end = np.column_stack([x[:, 0] / (1 - T * x[:, 0])] + [x[:, i] * np.exp(-T) for i in range(1, 6)])
+        assert Interval(sol.surviving.hull[-1].lo, sol.surviving.hull[-1].hi).contains(x_end).all()
+    import verified.auto.ladder as mod
+    old = mod.LOOSE_FACTOR
+    try:
+        mod.LOOSE_FACTOR = 1e6
+        assert ladder._loose_pieces(sols) == []
+        kept_all = lad._alone_merged(sols, pieces)
+        assert kept_all.surviving.boxes[-1].shape[0] == 4
+    finally:
+        mod.LOOSE_FACTOR = old

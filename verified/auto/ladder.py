@@ -42,6 +42,17 @@ LARGE_STATES = 10
 LARGE_ORDER = Composition.order
 LARGE_MIN_ORDER = 6
 LARGE_PARAMS_PER_STATE = 12
+#: from this many states on (parameters carried as states included) the composition
+#: runs split pieces each alone, not as one batch: 4 payload pieces of a Panda cost
+#: 1.47x the CPU in one batch, 8 pieces of the 3-link arm 1.16x, while 16 pieces of the
+#: double pendulum (4 states) cost 0.71x (docs/lab/auto.md)
+OWN_CHUNKS_STATES = 6
+#: a piece that reached the end with a final enclosure more than this many times as
+#: wide, in some state, as the median of its siblings that reached it too "only just
+#: held" (:func:`_loose_pieces`): where other pieces broke down and are split, it is
+#: split with them (one such piece, 20-35x its siblings' qd, set a payload run's
+#: result; docs/lab/auto.md)
+LOOSE_FACTOR = 8.0
 #: split pieces must get further than their parent by this fraction of the time span, or
 #: splitting stops (what stops them is then not the width of the set)
 MIN_GAIN = 0.01
@@ -211,6 +222,23 @@ def merge_parts(sols, sizes, initial: Interval, outs, t0, names, interrupted: bo
     return out
 
 
+def _loose_pieces(sols) -> list:
+    """The indices of the runs in ``sols`` (one piece each, the same output times) that
+    completed with a final box wider than :data:`LOOSE_FACTOR` times the median of the
+    completed runs' final widths in some state (states where that median is 0 are not
+    compared); [] with fewer than 3 completed runs (no median to speak of)."""
+    done = [i for i, s in enumerate(sols) if s is not None and s.status == "completed"]
+    if len(done) < 3:
+        return []
+    w = np.stack([np.asarray(sols[i].hull[-1].width(), float) for i in done])  # (pieces, n)
+    med = np.median(w, axis=0)
+    cmp = med > 0
+    if not cmp.any():
+        return []
+    ratio = (w[:, cmp] / med[cmp]).max(axis=1)
+    return [done[j] for j in np.flatnonzero(ratio > LOOSE_FACTOR)]
+
+
 def _failure_time(sol: Solution) -> float:
     """Where a run's first piece broke down (its end where none did)."""
     return min((p.t_reached for p in (sol.piece_results or ()) if p.failed), default=float(sol.t_reached))
@@ -301,12 +329,66 @@ class _Ladder:
         """The caller's hooks (with what is left of their caps), and a stall guard but on the fallback."""
         return caps_from(self.hooks, self.started) + ([] if r == self.fallback else [StallGuard(t_from, self.t1)])
 
-    def _attempt(self, pieces, params, r):
-        """Rung ``r`` on ``pieces`` from t0."""
+    def _attempt(self, pieces, params, r, first=None):
+        """Rung ``r`` on ``pieces`` from t0: one batch, or each piece alone where
+        :meth:`_own_chunks` says so (``first``: piece 0's run, a probe, reused)."""
         consistency = None if self.consistency is None else copy.deepcopy(self.consistency)
-        return self.solve(self.ode, pieces, (self.t0, self.t1), method=self.rungs[r], params=params,
-                          t_eval=self.t_eval, consistency=consistency, hooks=self._run_hooks(r, self.t0),
-                          progress=self.progress, **self.common)
+        k = pieces.shape[0]
+        if first is None and not self._own_chunks(k, r):
+            return self.solve(self.ode, pieces, (self.t0, self.t1), method=self.rungs[r], params=params,
+                              t_eval=self.t_eval, consistency=consistency, hooks=self._run_hooks(r, self.t0),
+                              progress=self.progress, **self.common)
+        sols = [] if first is None else [first]
+        for i in range(len(sols), k):
+            if sols and sols[-1].status in ("stopped", "interrupted"):
+                break  # (a cap or Ctrl-C: the pieces after it do not run)
+            sols.append(self._one_piece(pieces[i:i + 1], _rows(params, [i]), r))
+        return self._alone_merged(sols, pieces)
+
+    def _own_chunks(self, k: int, r: int) -> bool:
+        """Whether ``k`` pieces on rung ``r`` run each alone, with its own steps, instead
+        of one batch that steps them together: the composition from
+        :data:`OWN_CHUNKS_STATES` states on, where a step's cost is its sets' Taylor
+        models rather than Python, and one batch takes every piece's shortest step
+        (docs/lab/auto.md). Not where the caller chose ``chunks``, a ``client`` or
+        ``workers`` > 1 (their batches are the caller's), and not with a consistency
+        test (one batch can suspend an idle one, a piece alone cannot)."""
+        workers = self.common.get("workers")
+        return (k > 1 and isinstance(self.rungs[r], Composition) and self.consistency is None
+                and self.n + _carried(self.pv) >= OWN_CHUNKS_STATES
+                and self.common.get("chunks") is None and self.common.get("client") is None
+                and (workers is None or (isinstance(workers, str) and workers == "auto") or workers == 1))
+
+    def _one_piece(self, piece, params, r):
+        return self.solve(self.ode, piece, (self.t0, self.t1), method=self.rungs[r], params=params,
+                          t_eval=self.t_eval, hooks=self._run_hooks(r, self.t0), progress=self.progress,
+                          **self.common)
+
+    def _alone_merged(self, sols, pieces):
+        """One attempt's Solution from its pieces' own runs (None after a stop), with the
+        completed pieces whose enclosure only just held (:func:`_loose_pieces`) taken
+        out of ``surviving`` and named in ``stats["loose_pieces"]`` where other pieces
+        broke down: those are split with them (a survivor 20-35x its siblings' width
+        set a payload run's result; docs/lab/auto.md)."""
+        k = pieces.shape[0]
+        stop = next((s for s in sols if s.status in ("stopped", "interrupted")), None)
+        runs = sols + [None] * (k - len(sols))
+        sol = merge_parts(runs, [1] * k, pieces, self.outs, self.t0, self.names,
+                          interrupted=stop is not None and stop.status == "interrupted")
+        if stop is not None:
+            sol.status, sol.reason = stop.status, stop.reason
+            return sol
+        failed = [i for i, s in enumerate(sols) if s.status == "breakdown"]
+        loose = _loose_pieces(sols) if failed else []
+        sol.stats["loose_pieces"] = loose
+        if loose:
+            kept = [i for i in range(k) if i not in set(failed) | set(loose)]
+            sol.surviving = None if not kept else merge_parts([sols[i] for i in kept], [1] * len(kept),
+                                                             pieces[np.asarray(kept)], self.outs, self.t0,
+                                                             self.names)
+            if sol.surviving is not None:
+                sol.surviving.piece_results = sol.piece_results
+        return sol
 
     def _attempt_task(self, task, t_from):
         """The Solution of ``task``: the rest of a probed split merged with its probe, the
@@ -315,6 +397,8 @@ class _Ladder:
         if cont is None and task.probe is not None:
             # a split whose first part ran alone as its probe: the others, then both as one attempt
             k = task.boxes.shape[0]
+            if self._own_chunks(k, task.rung):
+                return self._attempt(task.boxes, task.params, task.rung, first=task.probe)
             rest = self._attempt(task.boxes[1:], _rows(task.params, range(1, k)), task.rung)
             sol = merge_parts([task.probe, rest], [1, k - 1], task.boxes, self.outs, self.t0, self.names,
                               interrupted=rest.status == "interrupted")
@@ -376,6 +460,11 @@ class _Ladder:
             failed = [p.index for p in (sol.piece_results or ()) if p.failed]
             if not failed or sol.surviving is None:
                 failed = list(range(task.boxes.shape[0]))
+            loose = [i for i in sol.stats.get("loose_pieces", ()) if i not in set(failed)]
+            if loose:  # (pieces that only just held: split with the failed ones, out of sol.surviving)
+                entry["loose"] = f"{len(loose)} piece(s) completed more than {LOOSE_FACTOR:g}x as wide as " \
+                                 "their siblings: split with the failed ones"
+                failed = sorted(failed + loose)
             failures = [f for f in (sol.failures or ()) if _continuable(f, task.params, self.n + _carried(self.pv))]
         kept = [i for i in range(task.boxes.shape[0]) if i not in set(failed)]
         stalled = sol.reason.startswith(STALLED) and task.rung != self.fallback
