@@ -1165,13 +1165,295 @@ def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0
                                sel, sel_base, np.empty(0))
 
 
+# --------------------------------------------------------------------------
+# The batched interpreter as a table of the recursion (verified.series.recursion):
+# LaneTable and its rules _ln_*, the branches of the kernel once written out in its own
+# loop, moved one to one (docs/lab/recursion_engine.md). The table is one chunk of
+# lanes: the entry _affine_kernel_into runs the engine once per chunk, copying the
+# chunk's X in before and the coefficients and kept forms out after. A rule reads its
+# rows from the slot numbers the engine passes: the order-k form of slot s starts at
+# row s KM + k m2.
+# --------------------------------------------------------------------------
+class LaneTable(NamedTuple):
+    """The working forms of one chunk of boxes (the layout of :func:`_affine_kernel_into`);
+    the table it runs per chunk. Its rules are the functions ``_ln_*`` below, plain
+    functions compiled into the engine; every operation on forms is a ``_b_*`` helper."""
+
+    A: np.ndarray  # (rows, CB): the forms, lanes innermost
+    Af: np.ndarray  # the same numbers, flat (for runs of whole rows)
+    L: np.ndarray  # (slots, order + 1): bound of the highest nonzero symbol (_live_counts)
+    R: np.ndarray  # (3, CB): per-lane sums
+    P: np.ndarray  # (p, B, m + 2): the parameters
+    b0: int  # the chunk's first box
+    cb: int  # its boxes: lanes 0..cb-1
+    m: int
+    KM: int  # rows per slot, (order + 1) (m + 2)
+    RB: int  # first row of the reciprocals
+    TB: int  # scratch forms T and S
+    SB: int
+    OB: int  # first row of the coefficients x_[k]
+    sel: np.ndarray  # fresh symbols of slots (see _affine_kernel_reference)
+    sel_base: int
+    m0: int  # fresh symbols of the coefficients: 1 + m0 + k n_fresh + i for x_[k+1], i
+    n_fresh: int
+
+
+def _ln_const(ar, s, lo, hi):
+    A, m, z = ar.A, ar.m, s * ar.KM
+    mid = 0.5 * lo + 0.5 * hi
+    e = _up(max(hi - mid, mid - lo))
+    for c in range(ar.cb):
+        A[z, c] = mid
+        A[z + m + 1, c] = e
+
+
+def _ln_param(ar, s, i):
+    A, P, m, z, b0 = ar.A, ar.P, ar.m, s * ar.KM, ar.b0
+    for r in range(ar.L[s, 0] + 1):
+        for c in range(ar.cb):
+            A[z + r, c] = P[i, b0 + c, r]
+    for c in range(ar.cb):
+        A[z + m + 1, c] = P[i, b0 + c, m + 1]
+
+
+def _ln_mid(ar, s, u):  # the centre of u_[0], frozen as a point: a constant series
+    _b_frozen_point_into(ar.A, s * ar.KM, u * ar.KM, ar.L[u, 0], ar.m, ar.cb)
+
+
+def _ln_state(ar, s, k, i):
+    m2 = ar.m + 2
+    _b_copy(ar.Af, s * ar.KM + k * m2, ar.OB + i * ar.KM + k * m2, ar.L[s, k], ar.m, ar.A.shape[1], 1.0)
+
+
+def _ln_add(ar, s, k, u, v):
+    A, L, m, KM, cb, R = ar.A, ar.L, ar.m, ar.KM, ar.cb, ar.R
+    z = s * KM + k * (m + 2)
+    _b_clear(ar.Af, z, L[s, k], m, A.shape[1])
+    lz = _b_acc_add(A, z, u * KM + k * (m + 2), np.int64(0), L[u, k], m, 1.0, cb, R)
+    _b_acc_add(A, z, v * KM + k * (m + 2), lz, L[v, k], m, 1.0, cb, R)
+
+
+def _ln_sub(ar, s, k, u, v):
+    A, L, m, KM, cb, R = ar.A, ar.L, ar.m, ar.KM, ar.cb, ar.R
+    z = s * KM + k * (m + 2)
+    _b_clear(ar.Af, z, L[s, k], m, A.shape[1])
+    lz = _b_acc_add(A, z, u * KM + k * (m + 2), np.int64(0), L[u, k], m, 1.0, cb, R)
+    _b_acc_add(A, z, v * KM + k * (m + 2), lz, L[v, k], m, -1.0, cb, R)
+
+
+def _ln_neg(ar, s, k, u):
+    m2 = ar.m + 2
+    _b_copy(ar.Af, s * ar.KM + k * m2, u * ar.KM + k * m2, ar.L[s, k], ar.m, ar.A.shape[1], -1.0)
+
+
+def _ln_mul_const(ar, s, k, u, v, ku, kv):  # (c w)_[k] = c_[0] w_[k]: the other terms are exact zeros
+    A, L, m, KM = ar.A, ar.L, ar.m, ar.KM
+    m2 = m + 2
+    z = s * KM + k * m2
+    _b_clear(ar.Af, z, L[s, k], m, A.shape[1])
+    _b_acc_mul(A, z, u * KM + ku * m2, v * KM + kv * m2, np.int64(0), max(L[u, ku], L[v, kv]), m, 1.0, ar.cb, ar.R)
+
+
+def _ln_mul(ar, s, k, u, v):
+    A, L, m, KM, cb, R = ar.A, ar.L, ar.m, ar.KM, ar.cb, ar.R
+    m2 = m + 2
+    z = s * KM + k * m2
+    _b_clear(ar.Af, z, L[s, k], m, A.shape[1])
+    lz = 0
+    for j in range(k + 1):
+        lz = _b_acc_mul(A, z, u * KM + j * m2, v * KM + (k - j) * m2, lz, max(L[u, j], L[v, k - j]), m, 1.0, cb, R)
+
+
+def _ln_sqr(ar, s, k, u):
+    A, L, m, KM = ar.A, ar.L, ar.m, ar.KM
+    z = s * KM + k * (m + 2)
+    _b_clear(ar.Af, z, L[s, k], m, A.shape[1])
+    _b_sqrconv(A, z, u * KM, u, L, k, np.int64(0), np.int64(0), m, ar.cb, ar.R)
+
+
+def _ln_div_const(ar, s, k, u, v):  # w_k = u_k / v_0 (times the form of 1 / v_0)
+    A, Af, L, m, KM, cb, R, TB = ar.A, ar.Af, ar.L, ar.m, ar.KM, ar.cb, ar.R, ar.TB
+    m2 = m + 2
+    z, rec, Ls = s * KM + k * m2, ar.RB + s * m2, L[s, k]
+    if k == 0:
+        _b_unary_into(A, rec, v * KM, Ls, m, np.int64(7), -INF, cb)
+    _b_clear(Af, TB, Ls, m, A.shape[1])
+    lt = _b_acc_add(A, TB, u * KM + k * m2, np.int64(0), L[u, k], m, 1.0, cb, R)
+    _b_clear(Af, z, Ls, m, A.shape[1])
+    _b_acc_mul(A, z, TB, rec, np.int64(0), max(lt, L[s, 0]), m, 1.0, cb, R)
+
+
+def _ln_div(ar, s, k, u, v):  # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0
+    A, Af, L, m, KM, cb, R, TB = ar.A, ar.Af, ar.L, ar.m, ar.KM, ar.cb, ar.R, ar.TB
+    m2 = m + 2
+    z, rec, Ls = s * KM + k * m2, ar.RB + s * m2, L[s, k]
+    if k == 0:
+        _b_unary_into(A, rec, v * KM, Ls, m, np.int64(7), -INF, cb)
+    _b_clear(Af, TB, Ls, m, A.shape[1])
+    lt = _b_acc_add(A, TB, u * KM + k * m2, np.int64(0), L[u, k], m, 1.0, cb, R)
+    for j in range(1, k + 1):
+        lt = _b_acc_mul(A, TB, v * KM + j * m2, s * KM + (k - j) * m2, lt, max(L[v, j], L[s, k - j]), m, -1.0, cb, R)
+    _b_clear(Af, z, Ls, m, A.shape[1])
+    _b_acc_mul(A, z, TB, rec, np.int64(0), max(lt, L[s, 0]), m, 1.0, cb, R)
+
+
+def _ln_sqrt0(ar, s, u):
+    A, m, cb, TB, Ls = ar.A, ar.m, ar.cb, ar.TB, ar.L[s, 0]
+    z = s * ar.KM
+    _b_unary_into(A, z, u * ar.KM, Ls, m, np.int64(0), -INF, cb)
+    _b_scale_into(A, TB, z, Ls, m, 2.0, cb)
+    _b_unary_into(A, ar.RB + s * (m + 2), TB, Ls, m, np.int64(7), -INF, cb)
+
+
+def _ln_sqrt(ar, s, k, u):  # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
+    A, Af, L, m, KM, cb, R, TB, SB = ar.A, ar.Af, ar.L, ar.m, ar.KM, ar.cb, ar.R, ar.TB, ar.SB
+    m2 = m + 2
+    z, Ls = s * KM + k * m2, L[s, k]
+    _b_clear(Af, TB, Ls, m, A.shape[1])
+    lt = _b_acc_add(A, TB, u * KM + k * m2, np.int64(0), L[u, k], m, 1.0, cb, R)
+    _b_clear(Af, SB, Ls, m, A.shape[1])
+    ls = _b_sqrconv(A, SB, s * KM, s, L, k, np.int64(1), np.int64(0), m, cb, R)
+    lt = _b_acc_add(A, TB, SB, lt, ls, m, -1.0, cb, R)
+    _b_clear(Af, z, Ls, m, A.shape[1])
+    _b_acc_mul(A, z, TB, ar.RB + s * m2, np.int64(0), max(lt, L[s, 0]), m, 1.0, cb, R)
+
+
+def _ln_exp0(ar, s, u):
+    _b_unary_into(ar.A, s * ar.KM, u * ar.KM, ar.L[s, 0], ar.m, np.int64(1), -INF, ar.cb)
+
+
+def _ln_exp(ar, s, k, u):
+    A, L, m, KM, cb, R, TB = ar.A, ar.L, ar.m, ar.KM, ar.cb, ar.R, ar.TB
+    m2 = m + 2
+    Ls = L[s, k]
+    _b_clear(ar.Af, TB, Ls, m, A.shape[1])
+    lt = 0
+    for j in range(1, k + 1):
+        lt = _b_acc_mul(A, TB, u * KM + j * m2, s * KM + (k - j) * m2, lt, max(L[u, j], L[s, k - j]), m, float(j),
+                        cb, R)
+    _b_div_int_into(A, s * KM + k * m2, TB, Ls, m, float(k), cb, R)
+
+
+def _ln_log0(ar, s, u):
+    A, m, cb, Ls = ar.A, ar.m, ar.cb, ar.L[s, 0]
+    _b_unary_into(A, s * ar.KM, u * ar.KM, Ls, m, np.int64(2), -INF, cb)
+    _b_unary_into(A, ar.RB + s * (m + 2), u * ar.KM, Ls, m, np.int64(7), -INF, cb)
+
+
+def _ln_log(ar, s, k, u):  # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
+    m, KM = ar.m, ar.KM
+    _b_quotient_step(ar.A, ar.Af, s * KM, s, u * KM, u, u * KM, u, ar.L, k, ar.RB + s * (m + 2), ar.TB, ar.SB,
+                     ar.L[s, k], m, ar.cb, ar.R)
+
+
+def _ln_sincos0(ar, ss, cs, u):  # (both partners have the bounds of either: see _live_counts)
+    A, m, KM, cb, Ls = ar.A, ar.m, ar.KM, ar.cb, ar.L[ss, 0]
+    _b_unary_into(A, ss * KM, u * KM, Ls, m, np.int64(3), -INF, cb)
+    _b_unary_into(A, cs * KM, u * KM, Ls, m, np.int64(4), -INF, cb)
+
+
+def _ln_sincos(ar, ss, cs, k, u):
+    A, Af, L, m, KM, cb, R, TB = ar.A, ar.Af, ar.L, ar.m, ar.KM, ar.cb, ar.R, ar.TB
+    m2 = m + 2
+    fk, Ls = float(k), L[ss, k]
+    _b_clear(Af, TB, Ls, m, A.shape[1])
+    lt = 0
+    for j in range(1, k + 1):
+        lt = _b_acc_mul(A, TB, u * KM + j * m2, cs * KM + (k - j) * m2, lt, max(L[u, j], L[ss, k - j]), m, float(j),
+                        cb, R)
+    _b_div_int_into(A, ss * KM + k * m2, TB, Ls, m, fk, cb, R)
+    _b_clear(Af, TB, Ls, m, A.shape[1])
+    lt = 0
+    for j in range(1, k + 1):
+        lt = _b_acc_mul(A, TB, u * KM + j * m2, ss * KM + (k - j) * m2, lt, max(L[u, j], L[ss, k - j]), m,
+                        -float(j), cb, R)
+    _b_div_int_into(A, cs * KM + k * m2, TB, Ls, m, fk, cb, R)
+
+
+def _ln_tan0(ar, s, vs, u):  # vs: v = 1 + tan^2 = tan'
+    A, m, KM, cb, Ls = ar.A, ar.m, ar.KM, ar.cb, ar.L[s, 0]
+    _b_unary_into(A, s * KM, u * KM, Ls, m, np.int64(5), -INF, cb)
+    _b_clear(ar.Af, vs * KM, Ls, m, A.shape[1])
+    for c in range(cb):
+        A[vs * KM, c] = 1.0
+    _b_acc_sqr(A, vs * KM, s * KM, np.int64(0), Ls, m, 1.0, cb, ar.R)
+
+
+def _ln_tan(ar, s, vs, k, u):
+    A, Af, L, m, KM, cb, R, TB = ar.A, ar.Af, ar.L, ar.m, ar.KM, ar.cb, ar.R, ar.TB
+    m2 = m + 2
+    Ls = L[s, k]
+    _b_clear(Af, TB, Ls, m, A.shape[1])
+    lt = 0
+    for j in range(1, k + 1):
+        lt = _b_acc_mul(A, TB, u * KM + j * m2, vs * KM + (k - j) * m2, lt, max(L[u, j], L[s, k - j]), m, float(j),
+                        cb, R)
+    _b_div_int_into(A, s * KM + k * m2, TB, Ls, m, float(k), cb, R)
+    _b_clear(Af, vs * KM + k * m2, Ls, m, A.shape[1])
+    _b_sqrconv(A, vs * KM + k * m2, s * KM, s, L, k, np.int64(0), np.int64(0), m, cb, R)
+
+
+def _ln_atan0(ar, s, vs, u):  # vs: v = 1 + u^2, atan(u)' = u' / v
+    A, L, m, KM, cb, Ls = ar.A, ar.L, ar.m, ar.KM, ar.cb, ar.L[s, 0]
+    _b_unary_into(A, s * KM, u * KM, Ls, m, np.int64(6), -INF, cb)
+    _b_clear(ar.Af, vs * KM, Ls, m, A.shape[1])
+    for c in range(cb):
+        A[vs * KM, c] = 1.0
+    _b_acc_sqr(A, vs * KM, u * KM, np.int64(0), L[u, 0], m, 1.0, cb, ar.R)
+    _b_unary_into(A, ar.RB + s * (m + 2), vs * KM, Ls, m, np.int64(7), 1.0, cb)  # v0 = 1 + u0^2 >= 1
+
+
+def _ln_atan(ar, s, vs, k, u):
+    A, L, m, KM = ar.A, ar.L, ar.m, ar.KM
+    m2 = m + 2
+    Ls = L[s, k]
+    _b_clear(ar.Af, vs * KM + k * m2, Ls, m, A.shape[1])
+    _b_sqrconv(A, vs * KM + k * m2, u * KM, u, L, k, np.int64(0), np.int64(0), m, ar.cb, ar.R)
+    # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
+    _b_quotient_step(A, ar.Af, s * KM, s, u * KM, u, vs * KM, vs, L, k, ar.RB + s * m2, ar.TB, ar.SB, Ls, m, ar.cb,
+                     ar.R)
+
+
+def _ln_slot_done(ar, s, k):
+    sel = ar.sel
+    if k == 0 and sel.size > 0 and sel[s] >= 0:
+        # this slot's error becomes a symbol of its own (fresh_slots)
+        A, m, z = ar.A, ar.m, s * ar.KM
+        for c in range(ar.cb):
+            A[z + ar.sel_base + sel[s], c] = A[z + m + 1, c]
+            A[z + m + 1, c] = 0.0
+
+
+def _ln_integrate(ar, i, o, k):  # x_[k+1] = f_[k] / (k + 1)
+    A, m, KM = ar.A, ar.m, ar.KM
+    m2 = m + 2
+    z = ar.OB + i * KM + (k + 1) * m2
+    _b_div_int_into(A, z, o * KM + k * m2, ar.L[o, k], m, float(k) + 1.0, ar.cb, ar.R)
+    if i < ar.n_fresh:
+        # the error of x_[k+1] becomes a symbol of its own: later orders then
+        # carry it with its dependencies instead of as a bare radius
+        sym = 1 + ar.m0 + k * ar.n_fresh + i
+        for c in range(ar.cb):
+            A[z + sym, c] = A[z + m + 1, c]
+            A[z + m + 1, c] = 0.0
+
+
+register(LaneTable, const=_ln_const, mid=_ln_mid, param=_ln_param, state=_ln_state, add=_ln_add, sub=_ln_sub,
+         neg=_ln_neg, mul_const=_ln_mul_const, mul=_ln_mul, sqr=_ln_sqr, div_const=_ln_div_const, div=_ln_div,
+         sqrt0=_ln_sqrt0, sqrt=_ln_sqrt, exp0=_ln_exp0, exp=_ln_exp, log0=_ln_log0, log=_ln_log,
+         sincos0=_ln_sincos0, sincos=_ln_sincos, tan0=_ln_tan0, tan=_ln_tan, atan0=_ln_atan0, atan=_ln_atan,
+         slot_done=_ln_slot_done, integrate=_ln_integrate)
+
+
 @njit(cache=True)
 def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
                         sel, sel_base, work):
-    """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms.
+    """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms:
+    the recursion (:mod:`verified.series.recursion`) with the table :class:`LaneTable`,
+    once per chunk of ``lanes`` boxes.
 
     Returns the forms of the coefficients, (B, order + 1, n, m + 2), and the order-0
-    forms of the slots ``keep``, (len(keep), B, m + 2); ``lanes`` boxes at a time.
+    forms of the slots ``keep``, (len(keep), B, m + 2).
     The same numbers as :func:`_affine_kernel_reference` (see the comment above).
     ``work``: a flat float array for the working forms, zeroed here, used when large
     enough (the caller keeps it between calls: fresh memory costs page faults of tens
@@ -1209,169 +1491,8 @@ def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, orde
             for r in range(m2):
                 for c in range(cb):
                     A[OB + i * KM + r, c] = X[i, b0 + c, r]
-        for k in range(order):
-            fk = float(k)
-            for s in range(nslots):
-                o = op[s]
-                if o == T_AUX or (k > 0 and cst[s]):
-                    continue  # a constant's coefficients >= 1 stay exactly 0
-                u = a0[s] * KM  # first rows of the operands' order-0 forms
-                v = a1[s] * KM
-                s0 = s * KM
-                z = s0 + k * m2  # the form being computed
-                uk = u + k * m2
-                rec = RB + s * m2
-                Ls = L[s, k]
-                if o == T_CONST:
-                    if k == 0:
-                        mid = 0.5 * clo[s] + 0.5 * chi[s]
-                        e = _up(max(chi[s] - mid, mid - clo[s]))
-                        for c in range(cb):
-                            A[z, c] = mid
-                            A[z + m + 1, c] = e
-                elif o == T_PARAM:
-                    if k == 0:
-                        for r in range(Ls + 1):
-                            for c in range(cb):
-                                A[z + r, c] = P[idx[s], b0 + c, r]
-                        for c in range(cb):
-                            A[z + m + 1, c] = P[idx[s], b0 + c, m + 1]
-                elif o == T_MID:
-                    if k == 0:
-                        _b_frozen_point_into(A, z, u, L[a0[s], 0], m, cb)
-                elif o == T_INPUT:
-                    _b_copy(Af, z, OB + idx[s] * KM + k * m2, Ls, m, CB, 1.0)
-                elif o == T_ADD or o == T_SUB:
-                    _b_clear(Af, z, Ls, m, CB)
-                    lz = _b_acc_add(A, z, uk, np.int64(0), L[a0[s], k], m, 1.0, cb, R)
-                    _b_acc_add(A, z, v + k * m2, lz, L[a1[s], k], m, 1.0 if o == T_ADD else -1.0, cb, R)
-                elif o == T_NEG:
-                    _b_copy(Af, z, uk, Ls, m, CB, -1.0)
-                elif o == T_MUL:
-                    _b_clear(Af, z, Ls, m, CB)
-                    if cst[a0[s]]:  # (c w)_[k] = c_[0] w_[k]: the other terms are exact zeros
-                        _b_acc_mul(A, z, u, v + k * m2, np.int64(0), max(L[a0[s], 0], L[a1[s], k]), m, 1.0, cb, R)
-                    elif cst[a1[s]]:
-                        _b_acc_mul(A, z, uk, v, np.int64(0), max(L[a0[s], k], L[a1[s], 0]), m, 1.0, cb, R)
-                    else:
-                        lz = 0
-                        for j in range(k + 1):
-                            lz = _b_acc_mul(A, z, u + j * m2, v + (k - j) * m2, lz, max(L[a0[s], j], L[a1[s], k - j]),
-                                            m, 1.0, cb, R)
-                elif o == T_SQR:
-                    _b_clear(Af, z, Ls, m, CB)
-                    _b_sqrconv(A, z, u, a0[s], L, k, np.int64(0), np.int64(0), m, cb, R)
-                elif o == T_DIV:
-                    if k == 0:
-                        _b_unary_into(A, rec, v, Ls, m, np.int64(7), -INF, cb)
-                    # w_k = (u_k - sum_{j=1}^k v_j w_{k-j}) / v_0 (the sum is 0 for a constant v)
-                    _b_clear(Af, TB, Ls, m, CB)
-                    lt = _b_acc_add(A, TB, uk, np.int64(0), L[a0[s], k], m, 1.0, cb, R)
-                    if not cst[a1[s]]:
-                        for j in range(1, k + 1):
-                            lt = _b_acc_mul(A, TB, v + j * m2, s0 + (k - j) * m2, lt, max(L[a1[s], j], L[s, k - j]),
-                                            m, -1.0, cb, R)
-                    _b_clear(Af, z, Ls, m, CB)
-                    _b_acc_mul(A, z, TB, rec, np.int64(0), max(lt, L[s, 0]), m, 1.0, cb, R)
-                elif o == T_SQRT:
-                    if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, np.int64(0), -INF, cb)
-                        _b_scale_into(A, TB, z, Ls, m, 2.0, cb)
-                        _b_unary_into(A, rec, TB, Ls, m, np.int64(7), -INF, cb)
-                    else:
-                        # w_k = (u_k - sum_{j=1}^{k-1} w_j w_{k-j}) / (2 w_0)
-                        _b_clear(Af, TB, Ls, m, CB)
-                        lt = _b_acc_add(A, TB, uk, np.int64(0), L[a0[s], k], m, 1.0, cb, R)
-                        _b_clear(Af, SB, Ls, m, CB)
-                        ls = _b_sqrconv(A, SB, s0, s, L, k, np.int64(1), np.int64(0), m, cb, R)
-                        lt = _b_acc_add(A, TB, SB, lt, ls, m, -1.0, cb, R)
-                        _b_clear(Af, z, Ls, m, CB)
-                        _b_acc_mul(A, z, TB, rec, np.int64(0), max(lt, L[s, 0]), m, 1.0, cb, R)
-                elif o == T_EXP:
-                    if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, np.int64(1), -INF, cb)
-                    else:
-                        _b_clear(Af, TB, Ls, m, CB)
-                        lt = 0
-                        for j in range(1, k + 1):
-                            lt = _b_acc_mul(A, TB, u + j * m2, s0 + (k - j) * m2, lt, max(L[a0[s], j], L[s, k - j]),
-                                            m, float(j), cb, R)
-                        _b_div_int_into(A, z, TB, Ls, m, fk, cb, R)
-                elif o == T_LOG:
-                    if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, np.int64(2), -INF, cb)
-                        _b_unary_into(A, rec, u, Ls, m, np.int64(7), -INF, cb)
-                    else:
-                        # w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j u_{k-j}) / u_0
-                        _b_quotient_step(A, Af, s0, s, u, a0[s], u, a0[s], L, k, rec, TB, SB, Ls, m, cb, R)
-                elif o == T_SIN or o == T_COS:
-                    ss = s0 if o == T_SIN else aux[s] * KM
-                    cs = aux[s] * KM if o == T_SIN else s0
-                    if k == 0:
-                        _b_unary_into(A, ss, u, Ls, m, np.int64(3), -INF, cb)
-                        _b_unary_into(A, cs, u, Ls, m, np.int64(4), -INF, cb)
-                    else:
-                        # both partners have the bounds L[s] (see _live_counts)
-                        _b_clear(Af, TB, Ls, m, CB)
-                        lt = 0
-                        for j in range(1, k + 1):
-                            lt = _b_acc_mul(A, TB, u + j * m2, cs + (k - j) * m2, lt, max(L[a0[s], j], L[s, k - j]),
-                                            m, float(j), cb, R)
-                        _b_div_int_into(A, ss + k * m2, TB, Ls, m, fk, cb, R)
-                        _b_clear(Af, TB, Ls, m, CB)
-                        lt = 0
-                        for j in range(1, k + 1):
-                            lt = _b_acc_mul(A, TB, u + j * m2, ss + (k - j) * m2, lt, max(L[a0[s], j], L[s, k - j]),
-                                            m, -float(j), cb, R)
-                        _b_div_int_into(A, cs + k * m2, TB, Ls, m, fk, cb, R)
-                elif o == T_TAN:
-                    vs = aux[s] * KM  # v = 1 + tan^2 = tan'
-                    if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, np.int64(5), -INF, cb)
-                        _b_clear(Af, vs, Ls, m, CB)
-                        for c in range(cb):
-                            A[vs, c] = 1.0
-                        _b_acc_sqr(A, vs, z, np.int64(0), Ls, m, 1.0, cb, R)
-                    else:
-                        _b_clear(Af, TB, Ls, m, CB)
-                        lt = 0
-                        for j in range(1, k + 1):
-                            lt = _b_acc_mul(A, TB, u + j * m2, vs + (k - j) * m2, lt, max(L[a0[s], j], L[s, k - j]),
-                                            m, float(j), cb, R)
-                        _b_div_int_into(A, z, TB, Ls, m, fk, cb, R)
-                        _b_clear(Af, vs + k * m2, Ls, m, CB)
-                        _b_sqrconv(A, vs + k * m2, s0, s, L, k, np.int64(0), np.int64(0), m, cb, R)
-                elif o == T_ATAN:
-                    vs = aux[s] * KM  # v = 1 + u^2, atan(u)' = u' / v
-                    if k == 0:
-                        _b_unary_into(A, z, u, Ls, m, np.int64(6), -INF, cb)
-                        _b_clear(Af, vs, Ls, m, CB)
-                        for c in range(cb):
-                            A[vs, c] = 1.0
-                        _b_acc_sqr(A, vs, u, np.int64(0), L[a0[s], 0], m, 1.0, cb, R)
-                        _b_unary_into(A, rec, vs, Ls, m, np.int64(7), 1.0, cb)  # v0 = 1 + u0^2 >= 1
-                    else:
-                        _b_clear(Af, vs + k * m2, Ls, m, CB)
-                        _b_sqrconv(A, vs + k * m2, u, a0[s], L, k, np.int64(0), np.int64(0), m, cb, R)
-                        # a_k = (u_k - (1/k) sum_{j=1}^{k-1} j a_j v_{k-j}) / v_0
-                        _b_quotient_step(A, Af, s0, s, u, a0[s], vs, aux[s], L, k, rec, TB, SB, Ls, m, cb, R)
-                if k == 0 and sel.size > 0 and sel[s] >= 0:
-                    # this slot's error becomes a symbol of its own (fresh_slots)
-                    for c in range(cb):
-                        A[z + sel_base + sel[s], c] = A[z + m + 1, c]
-                        A[z + m + 1, c] = 0.0
-            # x_[k+1] = f_[k] / (k + 1)
-            for i in range(n):
-                o = outputs[i]
-                z = OB + i * KM + (k + 1) * m2
-                _b_div_int_into(A, z, o * KM + k * m2, L[o, k], m, fk + 1.0, cb, R)
-                if i < n_fresh:
-                    # the error of x_[k+1] becomes a symbol of its own: later orders then
-                    # carry it with its dependencies instead of as a bare radius
-                    sym = 1 + m0 + k * n_fresh + i
-                    for c in range(cb):
-                        A[z + sym, c] = A[z + m + 1, c]
-                        A[z + m + 1, c] = 0.0
+        ar = LaneTable(A, Af, L, R, P, b0, cb, m, KM, RB, TB, SB, OB, sel, sel_base, m0, n_fresh)
+        recursion(op, a0, a1, aux, idx, cst, clo, chi, outputs, order, ar)
         for c in range(cb):
             for k in range(K1):
                 for i in range(n):
