@@ -1,3 +1,4 @@
+# Whole: one pass of the ladder (_Ladder) and the rules by which it judges each attempt.
 """The ladder of ``method="auto"``: the first rung from the problem (:func:`default_rungs`),
 each rung continued from the sets where the one before it stopped (:func:`switch_start`), a
 stall handed down early (:class:`StallGuard`), and failing pieces split and run again
