@@ -1596,14 +1596,26 @@ def affine_range(graph, x, params=None) -> Interval:
     deep expressions (the LDL^T pivots of a 5-link arm's mass matrix over a box of
     radius 1e-3: interval [-0.29, 0.39], affine > 0). Returns (B, n_outputs).
     """
-    n = graph.n_inputs
     tape = _Tape(graph)
     X, P, m = _wide_symbol_forms(graph, x, params, extra=0)
-    # one pass at order 0 gives every slot's form, kept for the output slots; the
-    # kernel's "state outputs" are not used here, any valid slots will do
-    dummy = np.full(n, tape.outputs[0] if tape.outputs.size else 0, dtype=np.int64)
-    _, G = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo, tape.chi, dummy, X, P,
-                          1, m, 0, tape.outputs, _lanes(tape, 1, m, n, X.shape[1]), _NO_SLOTS, 0)
+    nb = X.shape[1]
+    # One pass at order 0 of the per-box kernel gives every slot's form. It gives the
+    # batched kernel's numbers (tests/verified/test_affine_taylor.py) at 0.95-1.23x its
+    # time here, and a robot's frames and mass-matrix proof then never compile the
+    # batched kernel, ~60 s of CPU once per installation (docs/lab/recursion_engine.md).
+    # Boxes in chunks: the kernel keeps every slot's forms, slots x 2 x boxes x (m + 2).
+    # the kernel integrates n "state outputs", not used here: any valid slots will do
+    dummy = np.full(graph.n_inputs, tape.outputs[0] if tape.outputs.size else 0, dtype=np.int64)
+    per_box = tape.op.size * 2 * (m + 2) * 8
+    step = int(max(1, min(nb, _CHUNK_BYTES // max(per_box, 1))))
+    parts = []
+    for b0 in range(0, max(nb, 1), step):
+        b1 = min(nb, b0 + step)
+        _, F = _affine_kernel_reference(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo,
+                                        tape.chi, dummy, np.ascontiguousarray(X[:, b0:b1]),
+                                        np.ascontiguousarray(P[:, b0:b1]), 1, m, 0, _NO_SLOTS, 0)
+        parts.append(F[tape.outputs, 0])  # (outputs, boxes, m + 2)
+    G = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
     lo, hi = forms_to_interval(G.transpose(1, 0, 2))
     return Interval._from_bounds(lo, hi)
 
