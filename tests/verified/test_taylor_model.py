@@ -330,22 +330,46 @@ def test_degree_three_is_tighter_on_the_arm(arm_pin):
 
 
 def _mutant_kernel(monkeypatch, func, cut, replacement):
-    """Recompile ``func`` with ``cut`` replaced, and the kernel (and the unary expansion)
-    that call it, so the mutant is what runs."""
-    from numba import njit
+    """Recompile ``func`` (a compiled helper, a rule ``_tm_*`` of the model table or the
+    kernel's entry) with ``cut`` replaced, and everything that calls it, so the mutant is
+    what runs: the helpers above the rules, every rule, registered for a table class of
+    their own (the engine is compiled once per table class, with the rules it found then),
+    and the entry :func:`_model_kernel` building that table."""
+    from collections import namedtuple
 
-    src = inspect.getsource(getattr(tm, func).py_func).split("\n", 1)[1]  # without the decorator
-    assert cut in src
-    namespace = dict(vars(tm))
-    exec(src.replace(cut, replacement), namespace)
-    monkeypatch.setattr(tm, func, njit(namespace[func]))
+    from numba import njit
+    from verified.series import recursion
+
+    def recompile(name, cut=None, replacement=None):
+        f = getattr(tm, name)
+        jitted = hasattr(f, "py_func")
+        src = inspect.getsource(f.py_func if jitted else f)
+        if jitted:
+            src = src.split("\n", 1)[1]  # without the decorator
+        if cut is not None:
+            assert cut in src
+            src = src.replace(cut, replacement)
+        namespace = dict(vars(tm))
+        exec(src, namespace)
+        options = {k: v for k, v in getattr(f, "targetoptions", {}).items() if k != "nopython"}  # (its flags kept)
+        monkeypatch.setattr(tm, name, njit(**options)(namespace[name]) if jitted else namespace[name])
+
+    if func != "_model_kernel":
+        recompile(func, cut, replacement)
     for caller in ("_unary_into", "_sqrconv", "_quotient_step", "_conv_pre", "_sqrconv_pre", "_quotient_step_pre",
-                   "_linear_order_slot", "_model_kernel"):  # (in the order they call each other)
-        if caller == func:
-            continue
-        ns = dict(vars(tm))
-        exec(inspect.getsource(getattr(tm, caller).py_func).split("\n", 1)[1], ns)
-        monkeypatch.setattr(tm, caller, njit(ns[caller]))
+                   "_quotient_rule"):  # (in the order they call each other)
+        if caller != func:
+            recompile(caller)
+    for rule in recursion.RULES:
+        if "_tm_" + rule != func:
+            recompile("_tm_" + rule)
+    table = namedtuple("MutantModelTable", tm.ModelTable._fields)
+    recursion.register(table, **{rule: getattr(tm, "_tm_" + rule) for rule in recursion.RULES})
+    monkeypatch.setattr(tm, "ModelTable", table)
+    if func == "_model_kernel":
+        recompile("_model_kernel", cut, replacement)
+    else:
+        recompile("_model_kernel")
 
 
 @pytest.mark.parametrize("cubic, quartic", [(0, 0), (1, 0), (1, 1)])
@@ -485,7 +509,8 @@ def test_oracle_catches_pool_symbols_that_lose_the_remainder(monkeypatch):
     must fail the pointwise check."""
     args = (_pointwise_ode(), [0.375, -0.25], [0.125, 0.25], 3)
     assert check_models_pointwise(*args, cubic_symbols=2, pool=8, pool_orders=3)
-    _mutant_kernel(monkeypatch, "_model_kernel", "Z[1 + pool0 + used[b]] = Z[E]", "Z[1 + pool0 + used[b]] = 0.0")
+    _mutant_kernel(monkeypatch, "_tm_slot_done", "Z[1 + ar.pool0 + used[b]] = Z[E]",
+                   "Z[1 + ar.pool0 + used[b]] = 0.0")
     with pytest.raises(AssertionError, match="outside its model"):
         check_models_pointwise(*args, cubic_symbols=2, pool=8, pool_orders=3)
 
@@ -525,7 +550,8 @@ def test_oracle_catches_fresh_symbols_that_lose_the_remainder(monkeypatch):
     symbol must fail the pointwise check."""
     args = (_pointwise_ode(), [0.375, -0.25], [0.125, 0.25], 3)
     check_models_pointwise(*args, cubic_symbols=2, fresh=True)
-    _mutant_kernel(monkeypatch, "_model_kernel", "Y[1 + fresh0 + k * n + i] = Y[E]", "Y[1 + fresh0 + k * n + i] = 0.0")
+    _mutant_kernel(monkeypatch, "_tm_integrate", "Y[1 + ar.fresh0 + k * n + i] = Y[E]",
+                   "Y[1 + ar.fresh0 + k * n + i] = 0.0")
     with pytest.raises(AssertionError, match="outside its model"):
         check_models_pointwise(*args, cubic_symbols=2, fresh=True)
 

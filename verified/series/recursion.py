@@ -66,7 +66,8 @@ rule               orders      equation
 ``slot_done``      all         nothing required: called after the rule of every slot the
                                engine visits (``s`` the slot, not its partner), for a
                                table's step after a slot (the affine table's fresh symbol
-                               of a slot's order-0 error); a no-op in the interval table
+                               of a slot's order-0 error, the Taylor-model table's pool);
+                               a no-op in the interval table
 ``integrate``      all         ``x_[k+1], i = f_[k] / (k + 1)`` with ``f_[k]`` slot ``o``
 =================  ==========  ============================================================
 
@@ -79,6 +80,14 @@ them to, and they must be exact zeros (the engine relies on that in ``mul_const`
 reads ``x_[0]``, which the table holds before the call. The engine does no arithmetic of
 its own: outward rounding (or whatever makes a table's numbers enclosures) lives in the
 rules, and a table is verified exactly when each of its rules encloses its equation.
+
+A compiled function a rule calls is compiled with the rule's ``forceinline`` and without
+reference counting (numba passes a caller's ``forceinline``, ``nrt``, ``fastmath`` and
+``error_model`` on to a callee that sets none of its own), unless it sets them: a helper
+that should stay a function of its own, compiled as any other caller would compile it,
+sets ``forceinline=False, _nrt=True`` (the Taylor-model table's helpers do; see
+docs/lab/recursion_engine.md, where this cost 4x the compile time and changed the last bits
+of reassociated sums).
 
 numba caches the engine's compiled code per table only as part of a cached caller: a
 table's module calls :func:`recursion` from a ``cache=True`` function of its own, and

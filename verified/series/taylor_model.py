@@ -67,6 +67,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -77,6 +78,7 @@ from verified.series.affine_taylor import (
 )
 from verified.arith.interval import Interval, _as_interval
 from verified.arith.linalg import upper_pairs
+from verified.series.recursion import recursion, register
 from verified.series.taylor import (
     T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG, T_PARAM, T_SIN, T_SQR,
     T_SQRT, T_SUB, T_TAN, _Tape
@@ -244,7 +246,7 @@ def product_table(m: int, mq: int, m3: int = 0, m4: int = 0, ms: int = 0,
 # Model operations on 1-D arrays of length L = m + nq + 2: [0] centre, [1..m] linear,
 # [m+1 .. m+nq] quadratic (pair p = (PI[p], PJ[p])), [L-1] remainder radius.
 # --------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _clear(T):
     for i in range(T.size):
         T[i] = 0.0
@@ -257,7 +259,7 @@ def _poison(T):
     T[T.size - 1] = INF
 
 
-@njit(cache=True, fastmath={"reassoc"})
+@njit(cache=True, fastmath={"reassoc"}, forceinline=False, _nrt=True)
 def _abs_sum(x, lo, hi):
     """An upper bound of ``sum |x[lo:hi]|``.
 
@@ -288,7 +290,7 @@ def _width_bound(x):
     return _up(_spread(x) + x[x.size - 1])
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _acc_mul(T, x, y, PA, PB, PC, w):
     """T += w * x * y, truncated to the monomials of :func:`product_table` (``w`` any
     float: its rounding is bounded).
@@ -335,7 +337,7 @@ def _acc_mul(T, x, y, PA, PB, PC, w):
     T[E] = _up(T[E] + _pm(aw, _up(nl)) + _up(rnd) * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _acc_add(T, x, sign):
     """T += sign * x (sign = +1 or -1)."""
     E = T.size - 1
@@ -345,7 +347,7 @@ def _acc_add(T, x, sign):
     T[E] = _up(T[E] + x[E] + _abs_sum(T, 0, E) * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _scale_into(Z, x, d):
     """Z = d * x for a float d."""
     E = Z.size - 1
@@ -354,7 +356,7 @@ def _scale_into(Z, x, d):
     Z[E] = _up(_pm(abs(d), x[E]) + _abs_sum(Z, 0, E) * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _div_int_into(Z, x, kf):
     """Z = x / kf for a positive integer kf."""
     E = Z.size - 1
@@ -380,7 +382,7 @@ def _abs_sum_from(x, lo, hi):
     return _abs_sum(x[lo:hi], 0, hi - lo)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _clear_pre(T, l):
     """Zero the prefix [0, l) and the remainder."""
     for i in range(l):
@@ -388,7 +390,7 @@ def _clear_pre(T, l):
     T[T.size - 1] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _copy_pre(Z, x, l):
     """Z = x on the prefix [0, l) and the remainder (x without a nonlinear block)."""
     for i in range(l):
@@ -396,7 +398,7 @@ def _copy_pre(Z, x, l):
     Z[Z.size - 1] = x[x.size - 1]
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _neg_pre(Z, x, l):
     """Z = -x on the prefix (exact), the same remainder."""
     for i in range(l):
@@ -404,7 +406,7 @@ def _neg_pre(Z, x, l):
     Z[Z.size - 1] = x[x.size - 1]
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _acc_add_pre(T, x, sign, lt, lx):
     """:func:`_acc_add` on prefixes (``lx <= lt``; x without a nonlinear block)."""
     E = T.size - 1
@@ -413,7 +415,7 @@ def _acc_add_pre(T, x, sign, lt, lx):
     T[E] = _up(T[E] + x[E] + _abs_sum(T, 0, lt) * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _add_pre(Z, x, y, sign, l):
     """Z = x + sign * y on the prefix (sign = +1 or -1; x, y without nonlinear blocks):
     one rounding per coefficient, at most u |result|."""
@@ -423,7 +425,7 @@ def _add_pre(Z, x, y, sign, l):
     Z[E] = _up(x[E] + y[E] + _abs_sum(Z, 0, l) * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _div_int_pre(Z, x, kf, l):
     """:func:`_div_int_into` on the prefix (x without a nonlinear block)."""
     E = Z.size - 1
@@ -432,7 +434,7 @@ def _div_int_pre(Z, x, kf, l):
     Z[E] = _up(x[E] / kf + _abs_sum(Z, 0, l) * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _sweep_nonlinear(Y, q0):
     """Y's nonlinear coefficients (the block [q0, E)) into its remainder: each monomial
     lies in [-1, 1], so their sum of |.|, rounded up, bounds them; the block is zeroed."""
@@ -470,7 +472,7 @@ def _centre_terms_pre(T, x, y, w, lx, ly):
             Tl[i] = Tl[i] + w * (y0 * xl[i])
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _acc_mul_pre(T, x, y, w, lt, lx, hx, ly, hy, q0):
     """T += w * x * y into a result without nonlinear coefficients (prefix ``lt``):
     :func:`_acc_mul` with an empty product table, on the operands' prefixes ``lx, ly <= lt``
@@ -508,7 +510,7 @@ def _acc_mul_pre(T, x, y, w, lt, lx, hx, ly, hy, q0):
     T[E] = _up(T[E] + _pm(aw, _up(nl)) + _up(rnd) * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _frozen_point_into(Z, x):
     """Z = the graph op ``mid``: the model's centre as an exact point (unknown stays unknown)."""
     c = x[0]
@@ -646,7 +648,7 @@ def _mid_rad(lo, hi):
     return mid, _up(max(hi - mid, mid - lo))
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, D3, known_lo=-INF):
     """Z = f(x) by the expansion of degree ``deg`` (2, 3 or 4) about the centre ``c``
     (module docstring), with ``d = x - c``: ``f(c) + f'(c) d + f2(xi)/2 d^2`` (deg 2),
@@ -729,7 +731,7 @@ def _unary_into(Z, x, PA, PB, PC, deg, kind, D, D2, D3, known_lo=-INF):
             Z[E] = grad
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _sqrconv(Z, F, u, k, j0, b, PA, PB, PC):
     """Z += sum_{j=j0}^{k-j0} F[u, j] F[u, k-j] (pairs of equal terms once, times 2)."""
     for j in range(j0, (k + 1) // 2):
@@ -760,7 +762,7 @@ def _model_sums(F, C, s, j, b, LV, HV, q0):
     return sp
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _conv_pre(T, F, C, u, v, k, j0, j1, wa, wb, b, LV, HV, q0, fresh):
     """T += sum_{j0 <= j < j1} (wa + wb j) F[u, j, b] F[v, k - j, b] (``fresh`` 1: T = that
     sum, T's contents ignored; an int64, not a literal, as every flag here) into a result at the
@@ -812,7 +814,7 @@ def _conv_pre(T, F, C, u, v, k, j0, j1, wa, wb, b, LV, HV, q0, fresh):
     T[E] = _up(acc + _up(rnd) * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _sqrconv_pre(Z, F, C, u, k, j0, b, LV, HV, q0, fresh):
     """:func:`_sqrconv` at a linear order (:func:`_conv_pre`; the order-j models'
     prefixes and blocks ``LV[j], HV[j]``; ``fresh``: Z = the sum)."""
@@ -822,7 +824,7 @@ def _sqrconv_pre(Z, F, C, u, k, j0, b, LV, HV, q0, fresh):
         _conv_pre(Z, F, C, u, u, k, h, h + 1, 1.0, 0.0, b, LV, HV, q0, np.int64(0))
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _quotient_step_pre(Z, F, C, s, u, v, k, b, rec, T, S, LV, HV, q0):
     """:func:`_quotient_step` at a linear order (``rec``: an order-0 model)."""
     lk = LV[k]
@@ -833,7 +835,7 @@ def _quotient_step_pre(Z, F, C, s, u, v, k, b, rec, T, S, LV, HV, q0):
     _acc_mul_pre(Z, S, rec, 1.0, lk, lk, np.int64(0), LV[0], HV[0], q0)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _quotient_step(Z, F, s, u, v, k, b, PA, PB, PC, rec, T, S):
     """Z = (F[u, k] - (1/k) sum_{j=1}^{k-1} j F[s, j] F[v, k-j]) * rec (log, atan)."""
     _clear(S)
@@ -847,85 +849,446 @@ def _quotient_step(Z, F, s, u, v, k, b, PA, PB, PC, rec, T, S):
     _acc_mul(Z, S, rec, PA, PB, PC, 1.0)
 
 
-@njit(cache=True)
-def _linear_order_slot(F, C, REC, out, T, S, o, s, u, v, a, ix, cu, cv, k, LV, HV, q0):
-    """Slot s's models at order ``k >= linear_orders`` (:func:`_model_kernel`), every box:
-    the recursion of the kernel's loop with the prefix operations (:func:`_acc_mul_pre`).
-    ``a``, ``ix``: the slot's aux and index; ``cu``, ``cv``: whether its operands are
-    constant. The orders k >= 1 only (constants, parameters and ``mid`` are done at 0)."""
-    nb = F.shape[2]
-    lk = LV[k]
-    l0 = LV[0]
-    h0 = HV[0]
-    z = np.int64(0)
-    fk = float(k)
-    for b in range(nb):
+# The helpers the rules call carry ``forceinline=False, _nrt=True``: numba compiles a callee
+# with the flags of the function being compiled where it sets none of its own (``forceinline``,
+# ``nrt``, ``fastmath``, ``error_model``), and the rules are compiled with ``forceinline`` and
+# without reference counting (recursion._stub). Without them every helper (``_unary_into``,
+# ``_acc_mul``, ...) became ``alwaysinline``, inlined at every call in every rule (the first
+# compile took 205 s of CPU against 33 s), and, compiled without reference counting, LLVM
+# vectorized ``_abs_sum``'s reassociated sums otherwise: other (equally rigorous) bounds than
+# the kernel's before the table, in the last bits. With them the helpers compile as they did
+# under the hand-written kernel, whichever caller compiles them first (docs/lab/recursion_engine.md).
+class ModelTable(NamedTuple):
+    """Taylor models of every tape slot and of the state, every set of the batch (the table
+    of :func:`verified.series.recursion.recursion` that :func:`_model_kernel` runs). Its
+    rules are the functions ``_tm_*`` below (plain functions: numba compiles them into the
+    engine), each with the loop over the sets inside it and its two bodies side by side:
+    whole models (``HV[k]``) and, at the linear orders, the prefix operations
+    (:func:`_acc_mul_pre`). Every array exists before the engine runs: the rules make none."""
+
+    F: np.ndarray  # (slots, order + 1, B, L): the model of coefficient k of slot s for set b
+    REC: np.ndarray  # (slots, B, L): the reciprocal of slot s's order-0 divisor (div, sqrt, log, atan)
+    out: np.ndarray  # (n, order + 1, B, L): x_[k] of state i
+    P: np.ndarray  # (p, B, L): the parameters' models
+    C: np.ndarray  # (slots, order + 1, B, 2): the models' sums (_model_sums; -1: not yet)
+    T: np.ndarray  # (L,): scratch models
+    S: np.ndarray
+    D: np.ndarray  # (L,): scratch of the unary expansion (_unary_into)
+    D2: np.ndarray
+    D3: np.ndarray
+    used: np.ndarray  # (B,): the pool symbols handed out so far, per set
+    PA: np.ndarray  # the product table (product_table) ...
+    PB: np.ndarray
+    PC: np.ndarray
+    NA: np.ndarray  # ... and the empty one, for the orders k >= product_orders (_products)
+    NB: np.ndarray
+    NC: np.ndarray
+    LV: np.ndarray  # (order + 1,): order k's prefix of the linear part (its length q0 where whole)
+    HV: np.ndarray  # (order + 1,): 1 where order k's models are whole, 0 at the linear orders
+    op: np.ndarray  # the tape's opcodes (the pool skips inputs, parameters, constants and mid)
+    deg: int  # the models' degree (2, 3 or 4)
+    q0: int  # storage index of the first nonlinear coefficient
+    fresh0: int  # the coefficients' fresh symbols (-1: none)
+    pool0: int  # the pool's first symbol (-1: no pool), its size, threshold and orders
+    pool_n: int
+    pool_tol: float
+    pool_orders: int
+    product_orders: int
+
+
+@njit(inline="always")
+def _products(ar, k):
+    """The product table of order ``k``: the empty one from ``product_orders`` on, where
+    :func:`_acc_mul` bounds every pair of non-constant monomials into the remainder (see
+    :attr:`TaylorModelODE.product_orders`)."""
+    if 0 <= ar.product_orders <= k:
+        return ar.NA, ar.NB, ar.NC
+    return ar.PA, ar.PB, ar.PC
+
+
+def _tm_const(ar, s, lo, hi):
+    F = ar.F
+    E = F.shape[3] - 1
+    for b in range(F.shape[2]):
+        Z = F[s, 0, b]
+        _clear(Z)
+        mid = 0.5 * lo + 0.5 * hi
+        Z[0] = mid
+        Z[E] = _up(max(hi - mid, mid - lo))
+
+
+def _tm_param(ar, s, i):
+    F = ar.F
+    for b in range(F.shape[2]):
+        Z = F[s, 0, b]
+        x = ar.P[i, b]
+        for j in range(Z.size):
+            Z[j] = x[j]
+
+
+def _tm_mid(ar, s, u):
+    F = ar.F
+    for b in range(F.shape[2]):
+        _frozen_point_into(F[s, 0, b], F[u, 0, b])
+
+
+def _tm_state(ar, s, k, i):
+    F = ar.F
+    for b in range(F.shape[2]):
         Z = F[s, k, b]
-        if o == T_INPUT:
-            _copy_pre(Z, out[ix, k, b], lk)
-        elif o == T_ADD or o == T_SUB:
-            _add_pre(Z, F[u, k, b], F[v, k, b], 1.0 if o == T_ADD else -1.0, lk)
-        elif o == T_NEG:
-            _neg_pre(Z, F[u, k, b], lk)
-        elif o == T_MUL:
-            if cu:
-                _conv_pre(Z, F, C, u, v, k, z, np.int64(1), 1.0, 0.0, b, LV, HV, q0, np.int64(1))
-            elif cv:
-                _conv_pre(Z, F, C, u, v, k, k, k + 1, 1.0, 0.0, b, LV, HV, q0, np.int64(1))
-            else:
-                _conv_pre(Z, F, C, u, v, k, z, k + 1, 1.0, 0.0, b, LV, HV, q0, np.int64(1))
-        elif o == T_SQR:
-            _sqrconv_pre(Z, F, C, u, k, z, b, LV, HV, q0, np.int64(1))
-        elif o == T_DIV:
+        x = ar.out[i, k, b]
+        if ar.HV[k]:
+            for j in range(Z.size):
+                Z[j] = x[j]
+        else:
+            _copy_pre(Z, x, ar.LV[k])
+
+
+def _tm_add(ar, s, k, u, v):
+    F = ar.F
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if ar.HV[k]:
+            _clear(Z)
+            _acc_add(Z, F[u, k, b], 1.0)
+            _acc_add(Z, F[v, k, b], 1.0)
+        else:
+            _add_pre(Z, F[u, k, b], F[v, k, b], 1.0, ar.LV[k])
+
+
+def _tm_sub(ar, s, k, u, v):
+    F = ar.F
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if ar.HV[k]:
+            _clear(Z)
+            _acc_add(Z, F[u, k, b], 1.0)
+            _acc_add(Z, F[v, k, b], -1.0)
+        else:
+            _add_pre(Z, F[u, k, b], F[v, k, b], -1.0, ar.LV[k])
+
+
+def _tm_neg(ar, s, k, u):
+    F = ar.F
+    E = F.shape[3] - 1
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if ar.HV[k]:
+            for i in range(E):
+                Z[i] = -F[u, k, b, i]
+            Z[E] = F[u, k, b, E]
+        else:
+            _neg_pre(Z, F[u, k, b], ar.LV[k])
+
+
+def _tm_mul_const(ar, s, k, u, v, ku, kv):
+    F = ar.F
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if ar.HV[k]:
+            _clear(Z)
+            _acc_mul(Z, F[u, ku, b], F[v, kv, b], PA, PB, PC, 1.0)
+        else:  # (the one term j = ku of the convolution)
+            _conv_pre(Z, F, ar.C, u, v, k, ku, ku + 1, 1.0, 0.0, b, ar.LV, ar.HV, ar.q0, np.int64(1))
+
+
+def _tm_mul(ar, s, k, u, v):
+    F = ar.F
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if ar.HV[k]:
+            _clear(Z)
+            for j in range(k + 1):
+                _acc_mul(Z, F[u, j, b], F[v, k - j, b], PA, PB, PC, 1.0)
+        else:
+            _conv_pre(Z, F, ar.C, u, v, k, np.int64(0), k + 1, 1.0, 0.0, b, ar.LV, ar.HV, ar.q0, np.int64(1))
+
+
+def _tm_sqr(ar, s, k, u):
+    F = ar.F
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if ar.HV[k]:
+            _clear(Z)
+            _sqrconv(Z, F, u, k, np.int64(0), b, PA, PB, PC)
+        else:
+            _sqrconv_pre(Z, F, ar.C, u, k, np.int64(0), b, ar.LV, ar.HV, ar.q0, np.int64(1))
+
+
+@njit(inline="always")  # (numba inlines it into the rules div and div_const: one body for both)
+def _quotient_rule(F, C, REC, T, D, D2, D3, PA, PB, PC, deg, LV, HV, q0, s, k, u, v, series):
+    """Slot ``s = u / v`` at order ``k``, every set (the rules ``div``, ``series`` 1, and
+    ``div_const``, 0: v constant, its orders >= 1 zero): ``(u_k - sum_{j=1}^{k} v_j s_{k-j})``
+    times the reciprocal of ``v_0``, which order 0 computes into ``REC[s]``."""
+    lk = LV[k]
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if HV[k]:
+            if k == 0:
+                _unary_into(REC[s, b], F[v, 0, b], PA, PB, PC, deg, np.int64(7), D, D2, D3, -INF)
+            _clear(T)
+            _acc_add(T, F[u, k, b], 1.0)
+            if series:
+                for j in range(1, k + 1):
+                    _acc_mul(T, F[v, j, b], F[s, k - j, b], PA, PB, PC, -1.0)
+            _clear(Z)
+            _acc_mul(Z, T, REC[s, b], PA, PB, PC, 1.0)
+        else:
             _clear_pre(T, lk)
             _acc_add_pre(T, F[u, k, b], 1.0, lk, lk)
-            if not cv:
+            if series:
                 _conv_pre(T, F, C, v, s, k, np.int64(1), k + 1, -1.0, 0.0, b, LV, HV, q0, np.int64(0))
             _clear_pre(Z, lk)
-            _acc_mul_pre(Z, T, REC[s, b], 1.0, lk, lk, z, l0, h0, q0)
-        elif o == T_SQRT:
-            _sqrconv_pre(S, F, C, s, k, np.int64(1), b, LV, HV, q0, np.int64(1))
+            _acc_mul_pre(Z, T, REC[s, b], 1.0, lk, lk, np.int64(0), LV[0], HV[0], q0)
+
+
+def _tm_div_const(ar, s, k, u, v):
+    PA, PB, PC = _products(ar, k)
+    _quotient_rule(ar.F, ar.C, ar.REC, ar.T, ar.D, ar.D2, ar.D3, PA, PB, PC, ar.deg, ar.LV, ar.HV, ar.q0,
+                   s, k, u, v, np.int64(0))
+
+
+def _tm_div(ar, s, k, u, v):
+    PA, PB, PC = _products(ar, k)
+    _quotient_rule(ar.F, ar.C, ar.REC, ar.T, ar.D, ar.D2, ar.D3, PA, PB, PC, ar.deg, ar.LV, ar.HV, ar.q0,
+                   s, k, u, v, np.int64(1))
+
+
+def _tm_sqrt0(ar, s, u):
+    F = ar.F
+    PA, PB, PC = _products(ar, np.int64(0))
+    for b in range(F.shape[2]):
+        Z = F[s, 0, b]
+        _unary_into(Z, F[u, 0, b], PA, PB, PC, ar.deg, np.int64(0), ar.D, ar.D2, ar.D3, -INF)
+        _scale_into(ar.T, Z, 2.0)
+        _unary_into(ar.REC[s, b], ar.T, PA, PB, PC, ar.deg, np.int64(7), ar.D, ar.D2, ar.D3, -INF)
+
+
+def _tm_sqrt(ar, s, k, u):
+    F = ar.F
+    T = ar.T
+    S = ar.S
+    lk = ar.LV[k]
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if ar.HV[k]:
+            _clear(T)
+            _acc_add(T, F[u, k, b], 1.0)
+            _clear(S)
+            _sqrconv(S, F, s, k, np.int64(1), b, PA, PB, PC)
+            _acc_add(T, S, -1.0)
+            _clear(Z)
+            _acc_mul(Z, T, ar.REC[s, b], PA, PB, PC, 1.0)
+        else:
+            _sqrconv_pre(S, F, ar.C, s, k, np.int64(1), b, ar.LV, ar.HV, ar.q0, np.int64(1))
             _add_pre(T, F[u, k, b], S, -1.0, lk)
             _clear_pre(Z, lk)
-            _acc_mul_pre(Z, T, REC[s, b], 1.0, lk, lk, z, l0, h0, q0)
-        elif o == T_EXP:
-            _conv_pre(T, F, C, u, s, k, np.int64(1), k + 1, 0.0, 1.0, b, LV, HV, q0, np.int64(1))
-            _div_int_pre(Z, T, fk, lk)
-        elif o == T_LOG:
-            _quotient_step_pre(Z, F, C, s, u, u, k, b, REC[s, b], T, S, LV, HV, q0)
-        elif o == T_SIN or o == T_COS:
-            ss = s if o == T_SIN else a
-            cs = a if o == T_SIN else s
-            _conv_pre(T, F, C, u, cs, k, np.int64(1), k + 1, 0.0, 1.0, b, LV, HV, q0, np.int64(1))
-            _div_int_pre(F[ss, k, b], T, fk, lk)
-            _conv_pre(T, F, C, u, ss, k, np.int64(1), k + 1, 0.0, -1.0, b, LV, HV, q0, np.int64(1))
-            _div_int_pre(F[cs, k, b], T, fk, lk)
-        elif o == T_TAN:
-            _conv_pre(T, F, C, u, a, k, np.int64(1), k + 1, 0.0, 1.0, b, LV, HV, q0, np.int64(1))
-            _div_int_pre(Z, T, fk, lk)
-            V = F[a, k, b]
-            _sqrconv_pre(V, F, C, s, k, z, b, LV, HV, q0, np.int64(1))
-        elif o == T_ATAN:
-            V = F[a, k, b]
-            _sqrconv_pre(V, F, C, u, k, z, b, LV, HV, q0, np.int64(1))
-            _quotient_step_pre(Z, F, C, s, u, a, k, b, REC[s, b], T, S, LV, HV, q0)
+            _acc_mul_pre(Z, T, ar.REC[s, b], 1.0, lk, lk, np.int64(0), ar.LV[0], ar.HV[0], ar.q0)
+
+
+def _tm_exp0(ar, s, u):
+    F = ar.F
+    PA, PB, PC = _products(ar, np.int64(0))
+    for b in range(F.shape[2]):
+        _unary_into(F[s, 0, b], F[u, 0, b], PA, PB, PC, ar.deg, np.int64(1), ar.D, ar.D2, ar.D3, -INF)
+
+
+def _tm_exp(ar, s, k, u):
+    F = ar.F
+    T = ar.T
+    fk = float(k)
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        if ar.HV[k]:
+            _clear(T)
+            for j in range(1, k + 1):
+                _acc_mul(T, F[u, j, b], F[s, k - j, b], PA, PB, PC, float(j))
+            _div_int_into(Z, T, fk)
+        else:
+            _conv_pre(T, F, ar.C, u, s, k, np.int64(1), k + 1, 0.0, 1.0, b, ar.LV, ar.HV, ar.q0, np.int64(1))
+            _div_int_pre(Z, T, fk, ar.LV[k])
+
+
+def _tm_log0(ar, s, u):
+    F = ar.F
+    PA, PB, PC = _products(ar, np.int64(0))
+    for b in range(F.shape[2]):
+        _unary_into(F[s, 0, b], F[u, 0, b], PA, PB, PC, ar.deg, np.int64(2), ar.D, ar.D2, ar.D3, -INF)
+        _unary_into(ar.REC[s, b], F[u, 0, b], PA, PB, PC, ar.deg, np.int64(7), ar.D, ar.D2, ar.D3, -INF)
+
+
+def _tm_log(ar, s, k, u):
+    F = ar.F
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        if ar.HV[k]:
+            _quotient_step(F[s, k, b], F, s, u, u, k, b, PA, PB, PC, ar.REC[s, b], ar.T, ar.S)
+        else:
+            _quotient_step_pre(F[s, k, b], F, ar.C, s, u, u, k, b, ar.REC[s, b], ar.T, ar.S, ar.LV, ar.HV, ar.q0)
+
+
+def _tm_sincos0(ar, ss, cs, u):
+    F = ar.F
+    PA, PB, PC = _products(ar, np.int64(0))
+    for b in range(F.shape[2]):
+        _unary_into(F[ss, 0, b], F[u, 0, b], PA, PB, PC, ar.deg, np.int64(3), ar.D, ar.D2, ar.D3, -INF)
+        _unary_into(F[cs, 0, b], F[u, 0, b], PA, PB, PC, ar.deg, np.int64(4), ar.D, ar.D2, ar.D3, -INF)
+
+
+def _tm_sincos(ar, ss, cs, k, u):
+    F = ar.F
+    T = ar.T
+    fk = float(k)
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        if ar.HV[k]:
+            _clear(T)
+            for j in range(1, k + 1):
+                _acc_mul(T, F[u, j, b], F[cs, k - j, b], PA, PB, PC, float(j))
+            _div_int_into(F[ss, k, b], T, fk)
+            _clear(T)
+            for j in range(1, k + 1):
+                _acc_mul(T, F[u, j, b], F[ss, k - j, b], PA, PB, PC, -float(j))
+            _div_int_into(F[cs, k, b], T, fk)
+        else:
+            _conv_pre(T, F, ar.C, u, cs, k, np.int64(1), k + 1, 0.0, 1.0, b, ar.LV, ar.HV, ar.q0, np.int64(1))
+            _div_int_pre(F[ss, k, b], T, fk, ar.LV[k])
+            _conv_pre(T, F, ar.C, u, ss, k, np.int64(1), k + 1, 0.0, -1.0, b, ar.LV, ar.HV, ar.q0, np.int64(1))
+            _div_int_pre(F[cs, k, b], T, fk, ar.LV[k])
+
+
+def _tm_tan0(ar, s, vs, u):
+    F = ar.F  # vs: v = 1 + tan^2 = tan'
+    PA, PB, PC = _products(ar, np.int64(0))
+    for b in range(F.shape[2]):
+        Z = F[s, 0, b]
+        _unary_into(Z, F[u, 0, b], PA, PB, PC, ar.deg, np.int64(5), ar.D, ar.D2, ar.D3, -INF)
+        V = F[vs, 0, b]
+        _clear(V)
+        V[0] = 1.0
+        _acc_mul(V, Z, Z, PA, PB, PC, 1.0)
+
+
+def _tm_tan(ar, s, vs, k, u):
+    F = ar.F
+    T = ar.T
+    fk = float(k)
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        V = F[vs, k, b]
+        if ar.HV[k]:
+            _clear(T)
+            for j in range(1, k + 1):
+                _acc_mul(T, F[u, j, b], F[vs, k - j, b], PA, PB, PC, float(j))
+            _div_int_into(Z, T, fk)
+            _clear(V)
+            _sqrconv(V, F, s, k, np.int64(0), b, PA, PB, PC)
+        else:
+            _conv_pre(T, F, ar.C, u, vs, k, np.int64(1), k + 1, 0.0, 1.0, b, ar.LV, ar.HV, ar.q0, np.int64(1))
+            _div_int_pre(Z, T, fk, ar.LV[k])
+            _sqrconv_pre(V, F, ar.C, s, k, np.int64(0), b, ar.LV, ar.HV, ar.q0, np.int64(1))
+
+
+def _tm_atan0(ar, s, vs, u):
+    F = ar.F  # vs: v = 1 + u^2, atan(u)' = u' / v
+    PA, PB, PC = _products(ar, np.int64(0))
+    for b in range(F.shape[2]):
+        _unary_into(F[s, 0, b], F[u, 0, b], PA, PB, PC, ar.deg, np.int64(6), ar.D, ar.D2, ar.D3, -INF)
+        V = F[vs, 0, b]
+        _clear(V)
+        V[0] = 1.0
+        _acc_mul(V, F[u, 0, b], F[u, 0, b], PA, PB, PC, 1.0)
+        _unary_into(ar.REC[s, b], V, PA, PB, PC, ar.deg, np.int64(7), ar.D, ar.D2, ar.D3, 1.0)  # v0 >= 1
+
+
+def _tm_atan(ar, s, vs, k, u):
+    F = ar.F
+    PA, PB, PC = _products(ar, k)
+    for b in range(F.shape[2]):
+        Z = F[s, k, b]
+        V = F[vs, k, b]
+        if ar.HV[k]:
+            _clear(V)
+            _sqrconv(V, F, u, k, np.int64(0), b, PA, PB, PC)
+            _quotient_step(Z, F, s, u, vs, k, b, PA, PB, PC, ar.REC[s, b], ar.T, ar.S)
+        else:
+            _sqrconv_pre(V, F, ar.C, u, k, np.int64(0), b, ar.LV, ar.HV, ar.q0, np.int64(1))
+            _quotient_step_pre(Z, F, ar.C, s, u, vs, k, b, ar.REC[s, b], ar.T, ar.S, ar.LV, ar.HV, ar.q0)
+
+
+def _tm_slot_done(ar, s, k):
+    """The pool: a remainder born in slot ``s`` becomes the coefficient of a symbol of its
+    own (zero in every input: nothing upstream carries it), so the operations downstream
+    carry it linearly, with its cancellations."""
+    o = ar.op[s]
+    if k >= ar.pool_orders or ar.pool0 < 0 or o == T_INPUT or o == T_PARAM or o == T_CONST or o == T_MID:
+        return
+    F = ar.F
+    E = F.shape[3] - 1
+    used = ar.used
+    for b in range(F.shape[2]):
+        if used[b] < ar.pool_n:
+            Z = F[s, k, b]
+            if ar.HV[k]:
+                mag = 0.0  # sum |Z[1:E]| in index order from 0.0, as numpy's sum in numba (no allocation)
+                for i in range(1, E):
+                    mag += abs(Z[i])
+            else:
+                mag = _abs_sum(Z, 1, ar.LV[k])
+            if Z[E] > ar.pool_tol * (mag + abs(Z[0])) and Z[E] < np.inf:
+                Z[1 + ar.pool0 + used[b]] = Z[E]
+                Z[E] = 0.0
+                ar.C[s, k, b, 0] = -1.0  # (its sums change)
+                used[b] += 1
+
+
+def _tm_integrate(ar, i, o, k):
+    F = ar.F
+    E = F.shape[3] - 1
+    n = ar.out.shape[0]
+    fk = float(k)
+    for b in range(F.shape[2]):
+        Y = ar.out[i, k + 1, b]
+        if ar.HV[k]:
+            _div_int_into(Y, F[o, k, b], fk + 1.0)
+            if not ar.HV[k + 1]:
+                _sweep_nonlinear(Y, ar.q0)  # (x_[linear_orders]: its block into the remainder)
+        else:
+            _div_int_pre(Y, F[o, k, b], fk + 1.0, ar.LV[k])
+        if ar.fresh0 >= 0:
+            # e [-1, 1] = e delta: exact, and later orders carry delta linearly
+            Y[1 + ar.fresh0 + k * n + i] = Y[E]
+            Y[E] = 0.0
+
+
+register(ModelTable, const=_tm_const, mid=_tm_mid, param=_tm_param, state=_tm_state, add=_tm_add, sub=_tm_sub,
+         neg=_tm_neg, mul_const=_tm_mul_const, mul=_tm_mul, sqr=_tm_sqr, div_const=_tm_div_const, div=_tm_div,
+         sqrt0=_tm_sqrt0, sqrt=_tm_sqrt, exp0=_tm_exp0, exp=_tm_exp, log0=_tm_log0, log=_tm_log,
+         sincos0=_tm_sincos0, sincos=_tm_sincos, tan0=_tm_tan0, tan=_tm_tan, atan0=_tm_atan0, atan=_tm_atan,
+         slot_done=_tm_slot_done, integrate=_tm_integrate)
 
 
 @njit(cache=True)
 def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA, PB, PC, deg, fresh0, F, REC,
                   pool0=-1, pool_n=0, pool_tol=0.0, pool_orders=1, product_orders=-1, q0=-1, linear_orders=-1):
-    """Taylor models of x_[0..order]; X (n, B, L) and P (p, B, L) are the input models.
+    """Taylor models of x_[0..order]; X (n, B, L) and P (p, B, L) are the input models:
+    the recursion (:mod:`verified.series.recursion`) with the model table
+    (:class:`ModelTable`, rules ``_tm_*``).
 
     ``F`` (slots, order + 1, B, L) and ``REC`` (slots, B, L) are the caller's work
     arrays, any contents: every entry the loop reads is written first, except the
     orders >= 1 of constant slots, which are zeroed here. (Fresh arrays per call cost
     page faults, a large share of the kernel's time on robots; docs/lab/code_notes.md.)
 
-    Returns (n, order + 1, B, L). The loop is the one of
-    :func:`verified.series.affine_taylor._affine_kernel_reference`, with model operations.
-    ``fresh0 >= 0``: the remainder of ``x_[k]_i`` (k >= 1) moves into the linear
-    coefficient of symbol ``fresh0 + (k - 1) n + i`` (zero in the inputs; see
-    :meth:`TaylorModelODE._run`).
+    Returns (n, order + 1, B, L). ``fresh0 >= 0``: the remainder of ``x_[k]_i`` (k >= 1)
+    moves into the linear coefficient of symbol ``fresh0 + (k - 1) n + i`` (zero in the
+    inputs; see :meth:`TaylorModelODE._run`); ``pool0 >= 0``: the pool (``_tm_slot_done``).
 
     ``linear_orders >= 1`` (with ``q0``, the storage index of the first nonlinear
     coefficient): the orders ``k >= linear_orders`` keep no nonlinear coefficients
@@ -938,14 +1301,12 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
     The lower orders' models are whole (``LV`` = q0, ``HV`` = 1)."""
     nslots = op.size
     n, nb, L = X.shape
-    E = L - 1
     LV = np.empty(order + 1, np.int64)
     HV = np.empty(order + 1, np.int64)
     for k in range(order + 1):
         lin = linear_orders >= 1 and k >= linear_orders and q0 >= 0
         LV[k] = (min(q0, 1 + fresh0 + k * n) if fresh0 >= 0 else q0) if lin else max(q0, 0)
         HV[k] = 0 if lin else 1
-    C = np.full((nslots, order + 1, nb, 2), -1.0)  # the models' sums (_model_sums)
     # (REC[s, b], the reciprocal of slot s's order-0 divisor, is written before it is read)
     for s in range(nslots):
         if cst[s]:  # a constant's coefficients >= 1 are read as exact zeros
@@ -956,177 +1317,15 @@ def _model_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, PA,
                     else:
                         _clear_pre(F[s, k, b], LV[k])
     out = np.zeros((n, order + 1, nb, L))
-    out[:, 0, :, :] = X
-    T = np.zeros(L)
-    S = np.zeros(L)
-    D = np.zeros(L)
-    D2 = np.zeros(L)
-    D3 = np.zeros(L)
-    used = np.zeros(nb, dtype=np.int64)
-    # orders k >= product_orders multiply with an empty table: _acc_mul bounds every
-    # pair of non-constant monomials into the remainder (see TaylorModelODE.product_orders)
-    full_a, full_b, full_c = PA, PB, PC
-    none_a, none_b, none_c = PA[:0].copy(), PB[:0].copy(), PC[:0].copy()
-    for k in range(order):
-        fk = float(k)
-        if 0 <= product_orders <= k:
-            PA, PB, PC = none_a, none_b, none_c
-        else:
-            PA, PB, PC = full_a, full_b, full_c
-        for s in range(nslots):
-            o = op[s]
-            u = a0[s]
-            v = a1[s]
-            if o == T_AUX or (k > 0 and cst[s]):
-                continue  # a constant's coefficients >= 1 stay exactly 0
-            if not HV[k]:
-                _linear_order_slot(F, C, REC, out, T, S, o, s, u, v, aux[s], idx[s], cst[u], cst[v], k, LV, HV, q0)
-            for b in range(nb if HV[k] else 0):
-                Z = F[s, k, b]
-                if o == T_CONST:
-                    if k == 0:
-                        _clear(Z)
-                        mid = 0.5 * clo[s] + 0.5 * chi[s]
-                        Z[0] = mid
-                        Z[E] = _up(max(chi[s] - mid, mid - clo[s]))
-                elif o == T_PARAM:
-                    if k == 0:
-                        Z[:] = P[idx[s], b]
-                elif o == T_MID:
-                    if k == 0:
-                        _frozen_point_into(Z, F[u, 0, b])
-                elif o == T_INPUT:
-                    Z[:] = out[idx[s], k, b]
-                elif o == T_ADD or o == T_SUB:
-                    _clear(Z)
-                    _acc_add(Z, F[u, k, b], 1.0)
-                    _acc_add(Z, F[v, k, b], 1.0 if o == T_ADD else -1.0)
-                elif o == T_NEG:
-                    for i in range(E):
-                        Z[i] = -F[u, k, b, i]
-                    Z[E] = F[u, k, b, E]
-                elif o == T_MUL:
-                    _clear(Z)
-                    if cst[u]:
-                        _acc_mul(Z, F[u, 0, b], F[v, k, b], PA, PB, PC, 1.0)
-                    elif cst[v]:
-                        _acc_mul(Z, F[u, k, b], F[v, 0, b], PA, PB, PC, 1.0)
-                    else:
-                        for j in range(k + 1):
-                            _acc_mul(Z, F[u, j, b], F[v, k - j, b], PA, PB, PC, 1.0)
-                elif o == T_SQR:
-                    _clear(Z)
-                    _sqrconv(Z, F, u, k, np.int64(0), b, PA, PB, PC)
-                elif o == T_DIV:
-                    if k == 0:
-                        _unary_into(REC[s, b], F[v, 0, b], PA, PB, PC, deg, np.int64(7), D, D2, D3, -INF)
-                    _clear(T)
-                    _acc_add(T, F[u, k, b], 1.0)
-                    if not cst[v]:
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[v, j, b], F[s, k - j, b], PA, PB, PC, -1.0)
-                    _clear(Z)
-                    _acc_mul(Z, T, REC[s, b], PA, PB, PC, 1.0)
-                elif o == T_SQRT:
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(0), D, D2, D3, -INF)
-                        _scale_into(T, Z, 2.0)
-                        _unary_into(REC[s, b], T, PA, PB, PC, deg, np.int64(7), D, D2, D3, -INF)
-                    else:
-                        _clear(T)
-                        _acc_add(T, F[u, k, b], 1.0)
-                        _clear(S)
-                        _sqrconv(S, F, s, k, np.int64(1), b, PA, PB, PC)
-                        _acc_add(T, S, -1.0)
-                        _clear(Z)
-                        _acc_mul(Z, T, REC[s, b], PA, PB, PC, 1.0)
-                elif o == T_EXP:
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(1), D, D2, D3, -INF)
-                    else:
-                        _clear(T)
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[u, j, b], F[s, k - j, b], PA, PB, PC, float(j))
-                        _div_int_into(Z, T, fk)
-                elif o == T_LOG:
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(2), D, D2, D3, -INF)
-                        _unary_into(REC[s, b], F[u, 0, b], PA, PB, PC, deg, np.int64(7), D, D2, D3, -INF)
-                    else:
-                        _quotient_step(Z, F, s, u, u, k, b, PA, PB, PC, REC[s, b], T, S)
-                elif o == T_SIN or o == T_COS:
-                    ss = s if o == T_SIN else aux[s]
-                    cs = aux[s] if o == T_SIN else s
-                    if k == 0:
-                        _unary_into(F[ss, 0, b], F[u, 0, b], PA, PB, PC, deg, np.int64(3), D, D2, D3, -INF)
-                        _unary_into(F[cs, 0, b], F[u, 0, b], PA, PB, PC, deg, np.int64(4), D, D2, D3, -INF)
-                    else:
-                        _clear(T)
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[u, j, b], F[cs, k - j, b], PA, PB, PC, float(j))
-                        _div_int_into(F[ss, k, b], T, fk)
-                        _clear(T)
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[u, j, b], F[ss, k - j, b], PA, PB, PC, -float(j))
-                        _div_int_into(F[cs, k, b], T, fk)
-                elif o == T_TAN:
-                    vs = aux[s]  # v = 1 + tan^2 = tan'
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(5), D, D2, D3, -INF)
-                        V = F[vs, 0, b]
-                        _clear(V)
-                        V[0] = 1.0
-                        _acc_mul(V, Z, Z, PA, PB, PC, 1.0)
-                    else:
-                        _clear(T)
-                        for j in range(1, k + 1):
-                            _acc_mul(T, F[u, j, b], F[vs, k - j, b], PA, PB, PC, float(j))
-                        _div_int_into(Z, T, fk)
-                        V = F[vs, k, b]
-                        _clear(V)
-                        _sqrconv(V, F, s, k, np.int64(0), b, PA, PB, PC)
-                elif o == T_ATAN:
-                    vs = aux[s]  # v = 1 + u^2, atan(u)' = u' / v
-                    if k == 0:
-                        _unary_into(Z, F[u, 0, b], PA, PB, PC, deg, np.int64(6), D, D2, D3, -INF)
-                        V = F[vs, 0, b]
-                        _clear(V)
-                        V[0] = 1.0
-                        _acc_mul(V, F[u, 0, b], F[u, 0, b], PA, PB, PC, 1.0)
-                        _unary_into(REC[s, b], V, PA, PB, PC, deg, np.int64(7), D, D2, D3, 1.0)  # v0 >= 1
-                    else:
-                        V = F[vs, k, b]
-                        _clear(V)
-                        _sqrconv(V, F, u, k, np.int64(0), b, PA, PB, PC)
-                        _quotient_step(Z, F, s, u, vs, k, b, PA, PB, PC, REC[s, b], T, S)
-            if k < pool_orders and pool0 >= 0 and o != T_INPUT and o != T_PARAM and o != T_CONST and o != T_MID:
-                # a remainder born here becomes the coefficient of a symbol of its own
-                # (zero in every input: nothing upstream carries it), so the operations
-                # downstream carry it linearly, with its cancellations
-                for b in range(nb):
-                    if used[b] < pool_n:
-                        Z = F[s, k, b]
-                        mag = np.abs(Z[1:E]).sum() if HV[k] else _abs_sum(Z, 1, LV[k])
-                        if Z[E] > pool_tol * (mag + abs(Z[0])) and Z[E] < np.inf:
-                            Z[1 + pool0 + used[b]] = Z[E]
-                            Z[E] = 0.0
-                            C[s, k, b, 0] = -1.0  # (its sums change)
-                            used[b] += 1
-        # x_[k+1] = f_[k] / (k + 1)
-        for i in range(n):
-            o = outputs[i]
-            for b in range(nb):
-                Y = out[i, k + 1, b]
-                if HV[k]:
-                    _div_int_into(Y, F[o, k, b], fk + 1.0)
-                    if not HV[k + 1]:
-                        _sweep_nonlinear(Y, q0)  # (x_[linear_orders]: its block into the remainder)
-                else:
-                    _div_int_pre(Y, F[o, k, b], fk + 1.0, LV[k])
-                if fresh0 >= 0:
-                    # e [-1, 1] = e delta: exact, and later orders carry delta linearly
-                    Y[1 + fresh0 + k * n + i] = Y[E]
-                    Y[E] = 0.0
+    for i in range(n):  # (a loop: a slice assignment compiles numba's broadcasting errors)
+        for b in range(nb):
+            for j in range(L):
+                out[i, 0, b, j] = X[i, b, j]
+    ar = ModelTable(F, REC, out, P, np.full((nslots, order + 1, nb, 2), -1.0), np.zeros(L), np.zeros(L),
+                    np.zeros(L), np.zeros(L), np.zeros(L), np.zeros(nb, dtype=np.int64), PA, PB, PC,
+                    PA[:0].copy(), PB[:0].copy(), PC[:0].copy(), LV, HV, op, deg, q0, fresh0, pool0, pool_n,
+                    pool_tol, pool_orders, product_orders)
+    recursion(op, a0, a1, aux, idx, cst, clo, chi, outputs, order, ar)
     return out
 
 
