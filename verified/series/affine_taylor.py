@@ -82,13 +82,13 @@ def _pm(a, b):
     return a * b
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _clear(T, m):
     for i in range(m + 2):
         T[i] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _poison(T, m):
     """The form that stands for 'unknown': all of the real line."""
     for i in range(m + 1):
@@ -108,7 +108,7 @@ def _centre_product(T, x0, y0, w):
     return 2.0 * abs(t0) + abs(c)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _acc_mul(T, x, y, m, w):
     """T += w * x * y for forms x, y (1-D arrays of m + 2) and an exact small weight w."""
     e = T[m + 1]
@@ -133,7 +133,7 @@ def _acc_mul(T, x, y, m, w):
     T[m + 1] = _up(e + _pm(aw, nl) + rnd * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _acc_sqr(T, x, m, w):
     """T += w * x^2 (w >= 0 exact): the quadratic part is in [0, (R + e)^2]."""
     x0 = x[0]
@@ -156,7 +156,7 @@ def _acc_sqr(T, x, m, w):
     T[m + 1] = _up(T[m + 1] + _up(half) + _pm(2.0 * w * abs(x0), ex) + rnd * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _acc_add(T, x, m, sign):
     """T += sign * x (sign = +1 or -1)."""
     rnd = 0.0
@@ -167,7 +167,7 @@ def _acc_add(T, x, m, sign):
     T[m + 1] = _up(T[m + 1] + x[m + 1] + rnd * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _scale_into(Z, x, m, d):
     """Z = d * x for a float d (exact or not: the product's rounding is bounded)."""
     rnd = 0.0
@@ -178,7 +178,7 @@ def _scale_into(Z, x, m, d):
     Z[m + 1] = _up(_pm(abs(d), x[m + 1]) + rnd * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _frozen_point_into(Z, x, m):
     """Z = the graph op ``mid`` of the form x: its centre as an exact point; a form
     without finite centre and radius stays 'unknown' (all of the real line)."""
@@ -193,7 +193,7 @@ def _frozen_point_into(Z, x, m):
         Z[m + 1] = INF
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _div_int_into(Z, x, m, kf):
     """Z = x / kf for a positive integer kf."""
     rnd = 0.0
@@ -204,7 +204,7 @@ def _div_int_into(Z, x, m, kf):
     Z[m + 1] = _up(x[m + 1] / kf + rnd * _U)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _deriv(kind, lo, hi):
     """Interval enclosure of f' over [lo, hi] for the unary functions below."""
     if kind == 0:  # sqrt: 1 / (2 sqrt(x))
@@ -234,7 +234,7 @@ def _deriv(kind, lo, hi):
     return -rh, -rl
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _value(kind, lo, hi):
     """Interval enclosure of f over [lo, hi]."""
     if kind == 0:
@@ -254,7 +254,7 @@ def _value(kind, lo, hi):
     return _k.div(1.0, 1.0, lo, hi)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _unary_into(Z, x, m, kind, known_lo=-INF):
     """Z = f(x) by the mean-value form about the centre (module docstring).
 
@@ -614,7 +614,7 @@ register(AffineTable, const=_ar_const, mid=_ar_mid, param=_ar_param, state=_ar_s
          slot_done=_ar_slot_done, integrate=_ar_integrate)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh,
                              sel, sel_base):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms:
@@ -643,7 +643,7 @@ def _affine_kernel_reference(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P,
     return out, F
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _created_errors(op, a0, a1, F, b, m):
     """Per tape slot, the error its own rule added at order 0 for box ``b``: its error
     radius minus what its operands' radii propagate to it (taken at the centres).
@@ -669,7 +669,7 @@ def _created_errors(op, a0, a1, F, b, m):
     return created
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _weighted_attribution(op, a0, a1, F, m, outputs):
     """How much of the outputs' error radii each tape slot creates (order 0), summed over
     the boxes: :func:`_created_errors` times the sum over paths to the ``outputs`` of
@@ -718,7 +718,7 @@ def _weighted_attribution(op, a0, a1, F, m, outputs):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _quotient_step(Z, F, s, u, v, k, b, m, rec, T, S):
     """Z = (F[u, k] - (1/k) sum_{j=1}^{k-1} j F[s, j] F[v, k-j]) * rec, the recurrence of
     log (v = u) and atan (v = 1 + u^2), ``rec`` the form of 1 / v_0; T, S are scratch."""
@@ -733,7 +733,7 @@ def _quotient_step(Z, F, s, u, v, k, b, m, rec, T, S):
     _acc_mul(Z, S, rec, m, 1.0)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _sqrconv(Z, F, u, k, j0, b, m):
     """Z += sum_{j=j0}^{k-j0} F[u, j] F[u, k-j], pairing equal terms (the middle one squared)."""
     for j in range(j0, (k + 1) // 2):
@@ -773,7 +773,7 @@ _CHUNK = 32  # lanes per chunk (SIMD width times enough independent work)
 _CHUNK_BYTES = 256 * 2**20  # at most this much working memory per chunk (fewer lanes then)
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_clear(F, z, L, m, nl):
     """Z = 0 (entries 0..L and m + 1), F the flat view of A (rows, nl lanes). Rows
     z..z+L of A are one contiguous run of (L + 1) nl numbers: cleared as such, all
@@ -784,7 +784,7 @@ def _b_clear(F, z, L, m, nl):
         F[q] = 0.0
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_copy(F, z, x, L, m, nl, sign):
     """Z = sign * x for sign = +1 or -1 (entries 0..L), error radius copied; all
     lanes, as :func:`_b_clear`."""
@@ -795,7 +795,7 @@ def _b_copy(F, z, x, L, m, nl, sign):
         F[q] = F[q + d]
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_acc_mul(A, z, x, y, lz, lxy, m, w, cb, R):
     """Z += w * x * y (:func:`_acc_mul`) for x, y without symbols beyond ``lxy`` and Z
     without symbols beyond ``lz``; returns Z's new bound. R is scratch (>= 3, lanes).
@@ -863,7 +863,7 @@ def _b_acc_mul(A, z, x, y, lz, lxy, m, w, cb, R):
     return max(lz, lxy)
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_acc_sqr(A, z, x, lz, lx, m, w, cb, R):
     """Z += w * x^2 (:func:`_acc_sqr`); bounds as in :func:`_b_acc_mul`."""
     if cb < _VEC_MIN:
@@ -920,7 +920,7 @@ def _b_acc_sqr(A, z, x, lz, lx, m, w, cb, R):
     return max(lz, lx)
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_acc_add(A, z, x, lz, lx, m, sign, cb, R):
     """Z += sign * x (:func:`_acc_add`); bounds as in :func:`_b_acc_mul`."""
     if cb < _VEC_MIN:
@@ -949,7 +949,7 @@ def _b_acc_add(A, z, x, lz, lx, m, sign, cb, R):
     return max(lz, lx)
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_div_int_into(A, z, x, L, m, kf, cb, R):
     """Z = x / kf for a positive integer kf (:func:`_div_int_into`)."""
     if cb < _VEC_MIN:
@@ -972,7 +972,7 @@ def _b_div_int_into(A, z, x, L, m, kf, cb, R):
         A[z + m + 1, c] = _up(A[x + m + 1, c] / kf + R[2, c] * _U)
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_scale_into(A, z, x, L, m, d, cb):
     """Z = d * x (:func:`_scale_into`); rare (sqrt at order 0), lanes one at a time."""
     for c in range(cb):
@@ -984,7 +984,7 @@ def _b_scale_into(A, z, x, L, m, d, cb):
         A[z + m + 1, c] = _up(_pm(abs(d), A[x + m + 1, c]) + rnd * _U)
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_frozen_point_into(A, z, x, L, m, cb):
     """The graph op ``mid`` (:func:`_frozen_point_into`); Z has no symbols."""
     for c in range(cb):
@@ -1000,7 +1000,7 @@ def _b_frozen_point_into(A, z, x, L, m, cb):
             A[z + m + 1, c] = INF
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_unary_into(A, z, x, L, m, kind, known_lo, cb):
     """Z = f(x) by the mean-value form (:func:`_unary_into`), lane by lane."""
     for c in range(cb):
@@ -1049,7 +1049,7 @@ def _b_unary_into(A, z, x, L, m, kind, known_lo, cb):
                 A[z + m + 1, c] = grad
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_sqrconv(A, z, u, us, L, k, j0, lz, m, cb, R):
     """Z += sum_{j=j0}^{k-j0} u_j u_{k-j} (:func:`_sqrconv`); ``u`` is the row of the
     order-0 form of slot ``us``, its order j at ``u + j (m + 2)``, bounds L[us, j];
@@ -1062,7 +1062,7 @@ def _b_sqrconv(A, z, u, us, L, k, j0, lz, m, cb, R):
     return lz
 
 
-@njit(cache=True, _nrt=False)  # no arrays made: no reference counting per call
+@njit(cache=True, forceinline=False, _nrt=False)  # no arrays made: no reference counting per call
 def _b_quotient_step(A, Af, s, ss, u, us, v, vs, L, k, rec, t, sc, Ls, m, cb, R):
     """w_k = (u_k - (1/k) sum_{j=1}^{k-1} j w_j v_{k-j}) * rec (:func:`_quotient_step`),
     with ``s, u, v`` the rows of the order-0 forms of slots ``ss, us, vs`` (w, u, v),
@@ -1081,7 +1081,7 @@ def _b_quotient_step(A, Af, s, ss, u, us, v, vs, L, k, rec, t, sc, Ls, m, cb, R)
     _b_acc_mul(A, s + k * m2, sc, rec, np.int64(0), max(lt, L[ss, 0]), m, 1.0, cb, R)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh, sel, sel_base):
     """Bounds of the highest nonzero symbol: L[s, k] for the forms of slot s at order k
     (and of everything its recurrence reads and writes: operands at orders <= k, its
@@ -1134,7 +1134,7 @@ def _live_counts(op, a0, a1, aux, idx, cst, outputs, Lx, Lp, order, m0, n_fresh,
     return np.ascontiguousarray(LT.T), Lo
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _highest_nonzero(A):
     """Per row j of forms A (rows, B, m + 2): the highest symbol index i in 1..m with
     A[j, b, i] != 0 for some box b (NaN counts as nonzero), 0 if none."""
@@ -1149,7 +1149,7 @@ def _highest_nonzero(A):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _affine_work_size(nslots, order, m2, n, CB):
     """Floats of :func:`_affine_kernel_into`'s working forms (their layout is there):
     per lane, ``order + 1`` forms per slot, a reciprocal per slot, two scratch forms
@@ -1157,7 +1157,7 @@ def _affine_work_size(nslots, order, m2, n, CB):
     return (nslots * (order + 2) + 2 + n * (order + 1)) * m2 * CB
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _affine_kernel(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
                    sel, sel_base):
     """:func:`_affine_kernel_into` with work memory of its own."""
@@ -1445,7 +1445,7 @@ register(LaneTable, const=_ln_const, mid=_ln_mid, param=_ln_param, state=_ln_sta
          slot_done=_ln_slot_done, integrate=_ln_integrate)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=False, _nrt=True)
 def _affine_kernel_into(op, a0, a1, aux, idx, cst, clo, chi, outputs, X, P, order, m0, n_fresh, keep, lanes,
                         sel, sel_base, work):
     """Affine forms of x_[0..order]; X (n, B, m+2) and P (p, B, m+2) are the input forms:
