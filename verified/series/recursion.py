@@ -85,9 +85,9 @@ A compiled function a rule calls is compiled with the rule's ``forceinline`` and
 reference counting (numba passes a caller's ``forceinline``, ``nrt``, ``fastmath`` and
 ``error_model`` on to a callee that sets none of its own), unless it sets them: a helper
 that should stay a function of its own, compiled as any other caller would compile it,
-sets ``forceinline=False, _nrt=True`` (the Taylor-model table's helpers do; see
-docs/lab/recursion_engine.md, where this cost 4x the compile time and changed the last bits
-of reassociated sums).
+sets ``forceinline=False, _nrt=True`` (the Taylor-model and affine tables' helpers do; see
+docs/lab/recursion_engine.md, where this cost up to 4x the compile time and changed the last
+bits of reassociated sums).
 
 numba caches the engine's compiled code per table only as part of a cached caller: a
 table's module calls :func:`recursion` from a ``cache=True`` function of its own, and
