@@ -171,3 +171,11 @@ def test_register_checks_the_rules():
         recursion.register(_DropsATerm, **{k: v for k, v in rules.items() if k != "sqr"})
     with pytest.raises(ValueError, match="must take"):
         recursion.register(_DropsATerm, **dict(rules, add=lambda ar, s, k, a, b: None))
+
+
+def test_rules_named_collects_a_tables_rules_and_names_a_missing_one():
+    rules = recursion.rules_named(vars(taylor), "_iv_")
+    assert set(rules) == set(recursion.RULES) and rules["add"] is taylor._iv_add
+    namespace = {k: v for k, v in vars(taylor).items() if k != "_iv_sqr"}
+    with pytest.raises(ValueError, match="_iv_sqr"):
+        recursion.rules_named(namespace, "_iv_")

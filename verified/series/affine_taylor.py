@@ -48,7 +48,7 @@ from numba import njit
 
 from verified.arith import _kernels as _k
 from verified.arith.interval import Interval, _as_interval
-from verified.series.recursion import recursion, register
+from verified.series.recursion import recursion, register, rules_named
 from verified.series.taylor import (
     T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG, T_PARAM, T_SIN, T_SQR,
     T_SQRT, T_SUB, T_TAN, _Tape
@@ -607,11 +607,7 @@ def _ar_integrate(ar, i, o, k):  # x_[k+1] = f_[k] / (k + 1)
             out[i, k + 1, b, m + 1] = 0.0
 
 
-register(AffineTable, const=_ar_const, mid=_ar_mid, param=_ar_param, state=_ar_state, add=_ar_add, sub=_ar_sub,
-         neg=_ar_neg, mul_const=_ar_mul_const, mul=_ar_mul, sqr=_ar_sqr, div_const=_ar_div_const, div=_ar_div,
-         sqrt0=_ar_sqrt0, sqrt=_ar_sqrt, exp0=_ar_exp0, exp=_ar_exp, log0=_ar_log0, log=_ar_log,
-         sincos0=_ar_sincos0, sincos=_ar_sincos, tan0=_ar_tan0, tan=_ar_tan, atan0=_ar_atan0, atan=_ar_atan,
-         slot_done=_ar_slot_done, integrate=_ar_integrate)
+register(AffineTable, **rules_named(globals(), "_ar_"))
 
 
 @njit(cache=True, forceinline=False, _nrt=True)
@@ -1438,11 +1434,7 @@ def _ln_integrate(ar, i, o, k):  # x_[k+1] = f_[k] / (k + 1)
             A[z + m + 1, c] = 0.0
 
 
-register(LaneTable, const=_ln_const, mid=_ln_mid, param=_ln_param, state=_ln_state, add=_ln_add, sub=_ln_sub,
-         neg=_ln_neg, mul_const=_ln_mul_const, mul=_ln_mul, sqr=_ln_sqr, div_const=_ln_div_const, div=_ln_div,
-         sqrt0=_ln_sqrt0, sqrt=_ln_sqrt, exp0=_ln_exp0, exp=_ln_exp, log0=_ln_log0, log=_ln_log,
-         sincos0=_ln_sincos0, sincos=_ln_sincos, tan0=_ln_tan0, tan=_ln_tan, atan0=_ln_atan0, atan=_ln_atan,
-         slot_done=_ln_slot_done, integrate=_ln_integrate)
+register(LaneTable, **rules_named(globals(), "_ln_"))
 
 
 @njit(cache=True, forceinline=False, _nrt=True)

@@ -106,7 +106,7 @@ import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
-__all__ = ["RULES", "recursion", "register"]
+__all__ = ["RULES", "recursion", "register", "rules_named"]
 
 # Tape opcodes (independent of Op's numbering).
 T_CONST, T_INPUT, T_PARAM, T_ADD, T_SUB, T_MUL, T_DIV, T_NEG, T_SQR = range(9)
@@ -159,6 +159,17 @@ def register(table, **rules):
         if got != want:
             raise ValueError(f"table {table.__name__}: rule {name}{tuple(got)} must take {tuple(want)}")
     _TABLES[table] = dict(rules)
+
+
+def rules_named(namespace: dict, prefix: str) -> dict:
+    """The rules ``{name: namespace[prefix + name]}`` for every name of :data:`RULES` (a
+    table's module names its rules ``_iv_add``, ``_ar_add``, ...): ``register(Table,
+    **rules_named(globals(), "_iv_"))``. A rule missing from ``namespace`` is an error
+    naming it."""
+    missing = [prefix + name for name in RULES if prefix + name not in namespace]
+    if missing:
+        raise ValueError(f"rules not defined: {', '.join(missing)}")
+    return {name: namespace[prefix + name] for name in RULES}
 
 
 @_stub

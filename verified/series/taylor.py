@@ -36,7 +36,7 @@ from verified.arith.interval import Interval, _as_interval
 from verified.graph import Graph, Op
 from verified.series.recursion import (
     T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG, T_PARAM, T_SIN, T_SQR,
-    T_SQRT, T_SUB, T_TAN, recursion, register
+    T_SQRT, T_SUB, T_TAN, recursion, register, rules_named
 )
 
 __all__ = ["TaylorODE"]
@@ -413,11 +413,7 @@ def _iv_integrate(ar, i, o, k):  # x_[k+1] = f_[k] / (k + 1)
         ar.xlo[i, k + 1, b], ar.xhi[i, k + 1, b] = _k.div(tlo[o, k, b], thi[o, k, b], fk + 1.0, fk + 1.0)
 
 
-register(IntervalTable, const=_iv_const, mid=_iv_mid, param=_iv_param, state=_iv_state, add=_iv_add, sub=_iv_sub,
-         neg=_iv_neg, mul_const=_iv_mul_const, mul=_iv_mul, sqr=_iv_sqr, div_const=_iv_div_const, div=_iv_div,
-         sqrt0=_iv_sqrt0, sqrt=_iv_sqrt, exp0=_iv_exp0, exp=_iv_exp, log0=_iv_log0, log=_iv_log,
-         sincos0=_iv_sincos0, sincos=_iv_sincos, tan0=_iv_tan0, tan=_iv_tan, atan0=_iv_atan0, atan=_iv_atan,
-         slot_done=_iv_slot_done, integrate=_iv_integrate)
+register(IntervalTable, **rules_named(globals(), "_iv_"))
 
 
 @njit(cache=True)

@@ -78,7 +78,7 @@ from verified.series.affine_taylor import (
 )
 from verified.arith.interval import Interval, _as_interval
 from verified.arith.linalg import upper_pairs
-from verified.series.recursion import recursion, register
+from verified.series.recursion import recursion, register, rules_named
 from verified.series.taylor import (
     T_ADD, T_ATAN, T_AUX, T_CONST, T_COS, T_DIV, T_EXP, T_INPUT, T_LOG, T_MID, T_MUL, T_NEG, T_PARAM, T_SIN, T_SQR,
     T_SQRT, T_SUB, T_TAN, _Tape
@@ -1267,11 +1267,7 @@ def _tm_integrate(ar, i, o, k):
             Y[E] = 0.0
 
 
-register(ModelTable, const=_tm_const, mid=_tm_mid, param=_tm_param, state=_tm_state, add=_tm_add, sub=_tm_sub,
-         neg=_tm_neg, mul_const=_tm_mul_const, mul=_tm_mul, sqr=_tm_sqr, div_const=_tm_div_const, div=_tm_div,
-         sqrt0=_tm_sqrt0, sqrt=_tm_sqrt, exp0=_tm_exp0, exp=_tm_exp, log0=_tm_log0, log=_tm_log,
-         sincos0=_tm_sincos0, sincos=_tm_sincos, tan0=_tm_tan0, tan=_tm_tan, atan0=_tm_atan0, atan=_tm_atan,
-         slot_done=_tm_slot_done, integrate=_tm_integrate)
+register(ModelTable, **rules_named(globals(), "_tm_"))
 
 
 @njit(cache=True)
