@@ -426,7 +426,7 @@ def _three_oscillators():
 
 @pytest.mark.parametrize("system, n_own", [("three", 6), ("one", 2)])
 def test_split_pieces_run_each_alone_from_six_states(system, n_own, monkeypatch):
-    """From ladder.OWN_CHUNKS_STATES states on the composition runs a split's pieces each
+    """From ladder.ALONE_FROM_STATES states on the composition runs a split's pieces each
     alone (their own steps; the probe's run reused), below as one batch; either way every
     sampled true state at t = 3 lies in the result."""
     alone = []
@@ -447,7 +447,7 @@ def test_split_pieces_run_each_alone_from_six_states(system, n_own, monkeypatch)
     assert sol.status == "completed"
     split = [e for e in sol.method_log if e["pieces"] > 1]
     assert split, sol.method
-    if n_own >= ladder.OWN_CHUNKS_STATES:
+    if n_own >= ladder.ALONE_FROM_STATES:
         assert alone and set(alone) == {1}
         assert len(alone) == sum(e["pieces"] - 1 for e in split)  # (each probe's siblings, one by one)
     else:
@@ -476,7 +476,7 @@ def test_loose_pieces_leave_the_survivors_and_are_split_with_the_failed():
     g = _blowup_and_decay()
     lad = ladder._Ladder(solve, g, g, pieces, None, (0.0, 1.5), method=Auto(), t_eval=None, consistency=None,
                          hooks=[], progress=None, started=0.0, common={})
-    assert lad._own_chunks(5, 0)
+    assert lad._runs_alone(5, 0)
     sols = [lad._one_piece(pieces[i:i + 1], None, 0) for i in range(5)]
     assert [s.status for s in sols] == ["completed"] * 4 + ["breakdown"]
     assert ladder._loose_pieces(sols) == [3]

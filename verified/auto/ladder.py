@@ -47,7 +47,7 @@ LARGE_PARAMS_PER_STATE = 12
 #: runs split pieces each alone, not as one batch: 4 payload pieces of a Panda cost
 #: 1.47x the CPU in one batch, 8 pieces of the 3-link arm 1.16x, while 16 pieces of the
 #: double pendulum (4 states) cost 0.71x (docs/lab/auto.md)
-OWN_CHUNKS_STATES = 6
+ALONE_FROM_STATES = 6
 #: a piece that reached the end with a final enclosure more than this many times as
 #: wide, in some state, as the median of its siblings that reached it too "only just
 #: held" (:func:`_loose_pieces`): where other pieces broke down and are split, it is
@@ -332,10 +332,10 @@ class _Ladder:
 
     def _attempt(self, pieces, params, r, first=None):
         """Rung ``r`` on ``pieces`` from t0: one batch, or each piece alone where
-        :meth:`_own_chunks` says so (``first``: piece 0's run, a probe, reused)."""
-        consistency = None if self.consistency is None else copy.deepcopy(self.consistency)
+        :meth:`_runs_alone` says so (``first``: piece 0's run, a probe, reused)."""
         k = pieces.shape[0]
-        if first is None and not self._own_chunks(k, r):
+        if first is None and not self._runs_alone(k, r):
+            consistency = None if self.consistency is None else copy.deepcopy(self.consistency)
             return self.solve(self.ode, pieces, (self.t0, self.t1), method=self.rungs[r], params=params,
                               t_eval=self.t_eval, consistency=consistency, hooks=self._run_hooks(r, self.t0),
                               progress=self.progress, **self.common)
@@ -346,21 +346,22 @@ class _Ladder:
             sols.append(self._one_piece(pieces[i:i + 1], _rows(params, [i]), r))
         return self._alone_merged(sols, pieces)
 
-    def _own_chunks(self, k: int, r: int) -> bool:
+    def _runs_alone(self, k: int, r: int) -> bool:
         """Whether ``k`` pieces on rung ``r`` run each alone, with its own steps, instead
         of one batch that steps them together: the composition from
-        :data:`OWN_CHUNKS_STATES` states on, where a step's cost is its sets' Taylor
+        :data:`ALONE_FROM_STATES` states on, where a step's cost is its sets' Taylor
         models rather than Python, and one batch takes every piece's shortest step
         (docs/lab/auto.md). Not where the caller chose ``chunks``, a ``client`` or
         ``workers`` > 1 (their batches are the caller's), and not with a consistency
         test (one batch can suspend an idle one, a piece alone cannot)."""
         workers = self.common.get("workers")
         return (k > 1 and isinstance(self.rungs[r], Composition) and self.consistency is None
-                and self.n + _carried(self.pv) >= OWN_CHUNKS_STATES
+                and self.n + _carried(self.pv) >= ALONE_FROM_STATES
                 and self.common.get("chunks") is None and self.common.get("client") is None
                 and (workers is None or (isinstance(workers, str) and workers == "auto") or workers == 1))
 
     def _one_piece(self, piece, params, r):
+        """Rung ``r`` on one piece (1, n) from t0, with no consistency test (see :meth:`_runs_alone`)."""
         return self.solve(self.ode, piece, (self.t0, self.t1), method=self.rungs[r], params=params,
                           t_eval=self.t_eval, hooks=self._run_hooks(r, self.t0), progress=self.progress,
                           **self.common)
@@ -398,7 +399,7 @@ class _Ladder:
         if cont is None and task.probe is not None:
             # a split whose first part ran alone as its probe: the others, then both as one attempt
             k = task.boxes.shape[0]
-            if self._own_chunks(k, task.rung):
+            if self._runs_alone(k, task.rung):
                 return self._attempt(task.boxes, task.params, task.rung, first=task.probe)
             rest = self._attempt(task.boxes[1:], _rows(task.params, range(1, k)), task.rung)
             sol = merge_parts([task.probe, rest], [1, k - 1], task.boxes, self.outs, self.t0, self.names,
