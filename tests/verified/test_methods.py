@@ -424,7 +424,7 @@ def _three_oscillators():
     return trace(f, 6)
 
 
-@pytest.mark.parametrize("system, n_own", [("three", 6), ("one", 2)])
+@pytest.mark.parametrize("system, n_own", [pytest.param("three", 6, marks=pytest.mark.slow), ("one", 2)])
 def test_split_pieces_run_each_alone_from_six_states(system, n_own, monkeypatch):
     """From ladder.ALONE_FROM_STATES states on the composition runs a split's pieces each
     alone (their own steps; the probe's run reused), below as one batch; either way every
