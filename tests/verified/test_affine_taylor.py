@@ -927,3 +927,26 @@ def test_solver_gives_deep_variational_tapes_fresh_slots(monkeypatch, arm_pin):
     pts = np.unique(sample_initial_points(lo, hi, 12), axis=0)
     sols = trajectories(f, pts, 0.3)
     assert misses(sol, sols, per_step=2) == []
+
+
+def test_affine_range_per_box_and_batched_paths_agree(monkeypatch):
+    """affine_range runs the per-box kernel up to RANGE_PER_BOX_UP_TO boxes and the batched
+    one above: the same bounds either way (a 3-link arm's pivots and a frame-like graph
+    with more outputs than inputs, 70 boxes, some of them points)."""
+    from models.planar import planar_chain
+
+    rng = np.random.default_rng(11)
+    chain = planar_chain(3)
+    graphs = [chain.numeric().pivot_graph(),
+              trace(lambda x, p: [x[0] * x[1], (x[1] + x[2]).sin(), x[0].exp() / (2.0 + x[2].cos()), x[2] * x[2]], 3)]
+    for g in graphs:
+        c = rng.uniform(-1, 1, (70, g.n_inputs))
+        r = np.where(np.arange(70)[:, None] % 7 == 0, 0.0, rng.uniform(0, 1e-2, (70, g.n_inputs)))
+        x = Interval(c - r, c + r)
+        batched = at.affine_range(g, x)
+        monkeypatch.setattr(at, "RANGE_PER_BOX_UP_TO", 1000)
+        per_box = at.affine_range(g, x)
+        monkeypatch.setattr(at, "RANGE_PER_BOX_UP_TO", 64)
+        assert np.array_equal(batched.lo, per_box.lo) and np.array_equal(batched.hi, per_box.hi)
+        # and each box alone (the per-box path) gives its row
+        assert np.array_equal(at.affine_range(g, x[5:6]).hi, batched.hi[5:6])

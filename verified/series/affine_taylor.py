@@ -1580,6 +1580,12 @@ def _wide_symbol_forms(graph, x, params, extra: int):
     return X, P, m0
 
 
+#: :func:`affine_range` over up to this many boxes runs the per-box kernel, above it the
+#: batched one (their numbers are equal; per call the per-box one took 0.95-1.23x the
+#: batched one's time up to 64 boxes, 2.3-4.1x from 256 on; docs/lab/recursion_engine.md)
+RANGE_PER_BOX_UP_TO = 64
+
+
 def affine_range(graph, x, params=None) -> Interval:
     """Enclosure of a graph's outputs over boxes ``x`` (B, n_inputs) in affine
     arithmetic (one symbol per wide input or parameter): any graph, square or not.
@@ -1591,13 +1597,20 @@ def affine_range(graph, x, params=None) -> Interval:
     tape = _Tape(graph)
     X, P, m = _wide_symbol_forms(graph, x, params, extra=0)
     nb = X.shape[1]
-    # One pass at order 0 of the per-box kernel gives every slot's form. It gives the
-    # batched kernel's numbers (tests/verified/test_affine_taylor.py) at 0.95-1.23x its
-    # time here, and a robot's frames and mass-matrix proof then never compile the
-    # batched kernel, ~60 s of CPU once per installation (docs/lab/recursion_engine.md).
-    # Boxes in chunks: the kernel keeps every slot's forms, slots x 2 x boxes x (m + 2).
     # the kernel integrates n "state outputs", not used here: any valid slots will do
     dummy = np.full(graph.n_inputs, tape.outputs[0] if tape.outputs.size else 0, dtype=np.int64)
+    if nb > RANGE_PER_BOX_UP_TO:
+        # many boxes: the batched kernel (2-4x faster from 256 boxes on)
+        _, G = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo, tape.chi, dummy,
+                              X, P, 1, m, 0, tape.outputs, _lanes(tape, 1, m, graph.n_inputs, nb), _NO_SLOTS, 0)
+        lo, hi = forms_to_interval(G.transpose(1, 0, 2))
+        return Interval._from_bounds(lo, hi)
+    # Few boxes (a robot's frames, the mass-matrix proof of one piece): one pass at order
+    # 0 of the per-box kernel gives every slot's form, the batched kernel's numbers
+    # (tests/verified/test_affine_taylor.py) at 0.95-1.23x its time, and such a run then
+    # never compiles the batched kernel, ~60 s of CPU once per installation
+    # (docs/lab/recursion_engine.md). The kernel keeps every slot's forms, slots x 2 x
+    # boxes x (m + 2): boxes in chunks.
     per_box = tape.op.size * 2 * (m + 2) * 8
     step = int(max(1, min(nb, _CHUNK_BYTES // max(per_box, 1))))
     parts = []
