@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -18,6 +19,7 @@ def _bench():
     return mod
 
 
+@pytest.mark.slow  # (62 s, most of it the kernels' first compile in a fresh clone: the slow step)
 def test_quick_cases_complete_and_contain_the_samples():
     bench = _bench()
     lines = []
