@@ -414,18 +414,18 @@ def test_probe_verdicts():
     assert _probe_verdict(probe("breakdown", 2.0), **args) == ("go", None)  # (one more split: 64 pieces)
 
 
-def _three_oscillators():
-    """Three uncoupled copies of the vdp-like oscillator: 6 states."""
+def _five_oscillators():
+    """Five uncoupled copies of the vdp-like oscillator: 10 states."""
     def f(x, p):
         out = []
-        for i in range(0, 6, 2):
+        for i in range(0, 10, 2):
             out += [x[i + 1], -x[i] - 2 * x[i + 1] * x[i] * x[i]]
         return out
-    return trace(f, 6)
+    return trace(f, 10)
 
 
-@pytest.mark.parametrize("system, n_own", [pytest.param("three", 6, marks=pytest.mark.slow), ("one", 2)])
-def test_split_pieces_run_each_alone_from_six_states(system, n_own, monkeypatch):
+@pytest.mark.parametrize("system, n_own", [pytest.param("five", 10, marks=pytest.mark.slow), ("one", 2)])
+def test_split_pieces_run_each_alone_from_ten_states(system, n_own, monkeypatch):
     """From ladder.ALONE_FROM_STATES states on the composition runs a split's pieces each
     alone (their own steps; the probe's run reused), below as one batch; either way every
     sampled true state at t = 3 lies in the result."""
@@ -437,10 +437,11 @@ def test_split_pieces_run_each_alone_from_six_states(system, n_own, monkeypatch)
         return real(self, piece, params, r)
     monkeypatch.setattr(ladder._Ladder, "_one_piece", spy)
     small = 1e-3
-    if system == "three":
-        g = _three_oscillators()
-        box = Interval([-0.5, -0.5, 0.2 - small, -small, -small, 0.3 - small],
-                       [0.5, 0.5, 0.2 + small, small, small, 0.3 + small])
+    if system == "five":
+        g = _five_oscillators()
+        c = np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.3, -0.1, 0.1, 0.2, -0.2])
+        r = np.array([0.5, 0.5] + [small] * 8)
+        box = Interval(c - r, c + r)
     else:
         g, box = _vdp_like(), BOX
     sol = solve(g, box, (0.0, 3.0))
@@ -459,9 +460,9 @@ def test_split_pieces_run_each_alone_from_six_states(system, n_own, monkeypatch)
 
 
 def _blowup_and_decay():
-    """6 uncoupled states: x0' = x0^2 (blows up at t = 1 from x0 = 1, decays from -1), the
-    others x' = -x."""
-    return trace(lambda x, p: [x[0] * x[0]] + [-x[i] for i in range(1, 6)], 6)
+    """10 uncoupled states: x0' = x0^2 (blows up at t = 1 from x0 = 1, decays from -1),
+    the others x' = -x."""
+    return trace(lambda x, p: [x[0] * x[0]] + [-x[i] for i in range(1, 10)], 10)
 
 
 def test_loose_pieces_leave_the_survivors_and_are_split_with_the_failed():
@@ -469,7 +470,7 @@ def test_loose_pieces_leave_the_survivors_and_are_split_with_the_failed():
     siblings. ``_loose_pieces`` names the wide one, and the attempt's ``surviving`` holds
     the three others only; with LOOSE_FACTOR above the ratio it keeps all four."""
     from verified.methods import Auto
-    rows = [([-1.0] + [0.1] * 5, 1e-4)] * 3 + [([-1.0] + [0.1] * 5, 1e-2), ([1.0] + [0.1] * 5, 1e-4)]
+    rows = [([-1.0] + [0.1] * 9, 1e-4)] * 3 + [([-1.0] + [0.1] * 9, 1e-2), ([1.0] + [0.1] * 9, 1e-4)]
     lo = np.array([np.array(c) - w for c, w in rows])
     hi = np.array([np.array(c) + w for c, w in rows])
     pieces = Interval(lo, hi)
@@ -487,9 +488,9 @@ def test_loose_pieces_leave_the_survivors_and_are_split_with_the_failed():
     assert float(np.max(sol.surviving.hull[-1].width())) < wide / 10
     # every sampled state of the three narrow pieces at the end lies in surviving
     for c, w in rows[:3]:
-        x = np.array(c) + w * np.random.default_rng(0).uniform(-1, 1, (50, 6))
+        x = np.array(c) + w * np.random.default_rng(0).uniform(-1, 1, (50, 10))
         T = 1.5
-        x_end = np.column_stack([x[:, 0] / (1 - T * x[:, 0])] + [x[:, i] * np.exp(-T) for i in range(1, 6)])
+        x_end = np.column_stack([x[:, 0] / (1 - T * x[:, 0])] + [x[:, i] * np.exp(-T) for i in range(1, 10)])
         assert Interval(sol.surviving.hull[-1].lo, sol.surviving.hull[-1].hi).contains(x_end).all()
     import verified.auto.ladder as mod
     old = mod.LOOSE_FACTOR
