@@ -42,6 +42,7 @@ import numpy as np
 
 from verified.auto import solve_auto
 from verified.driver.batch import MODEL_CAPS, VerifiedODE, solve_batch
+from verified.driver.hooks import after_solve
 from verified.arith.interval import Interval
 from verified.methods import METHOD_FIELDS, METHODS, Auto, as_method, from_settings
 from verified.execution.plan import auto_workers
@@ -137,8 +138,10 @@ def solve(
         Called before the run, after every accepted step (with the step's
         :class:`~verified.steppers.protocol.StepResult` and the sets; a hook may replace the sets
         by sets enclosing the same true states, roll the step back, or stop the run) and
-        on the Solution, in this order after ``progress`` and ``consistency``. For
-        example :class:`verified.driver.hooks.StopAfterWall` caps the wall-clock time.
+        on the Solution, in this order after ``progress`` and ``consistency``; a hook's
+        ``after_solve`` last, once, on the whole Solution returned (after a chunked run's
+        merge and ``auto``'s attempts), which it may cut back. For example
+        :class:`verified.driver.hooks.StopAfterWall` caps the wall-clock time.
     invariants : sequence of :class:`verified.consistency.conservation.Conserved` /
         :class:`~verified.consistency.conservation.NonIncreasing`
         Quantities of the ODE that are constant (``Conserved([1, 1, 1])`` for
@@ -204,12 +207,14 @@ def solve(
     if invariants is not None and not (isinstance(invariants, (tuple, list)) and len(invariants) == 0):
         hooks = _with_invariants(ode, invariants, hooks)
     if isinstance(method, Auto):
-        return solve_auto(
+        sol = solve_auto(
             solve, ode, x0, t_span, method=method, params=params, t_eval=t_eval, subdivision=subdivision,
             consistency=consistency, hooks=hooks, progress=progress, h_max=h_max, h_min=h_min,
             max_steps=max_steps, max_width=max_width, adaptive=adaptive, split_ratio=split_ratio,
             max_boxes=max_boxes, wrap_target=wrap_target, merge_slack=merge_slack, workers=workers,
             client=client, chunks=chunks, rechunk=rechunk)
+        after_solve(hooks, sol)
+        return sol
     order, tol, error_basis, arithmetic = flags["order"], flags["tol"], flags["error_basis"], flags["arithmetic"]
     set_order, set_step, model_degree = flags["set_order"], flags["set_step"], flags["model_degree"]
     model_caps, absorb, params_per_state = flags["model_caps"], flags["absorb"], flags["params_per_state"]
@@ -224,6 +229,7 @@ def solve(
                             progress=progress, workers=workers, client=client, chunks=chunks, rechunk=rechunk,
                             start=start)
     sol.method = method.describe() if method is not None else _legacy_name(flags)
+    after_solve(hooks, sol)
     return sol
 
 

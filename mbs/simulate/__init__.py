@@ -42,7 +42,8 @@ from .. import progress as _progress
 from ..modes import MODES, Mode, get_mode
 from ..robots import PAPER_MODELS
 from .hooks import CtrlC, energy_shell_of, energy_test, shell_hooks, stop_hooks
-from .mass_matrix import _pivot_diagnosis, _prove_mass_matrix, apply_proof, check_initial, pivots_proven
+from .mass_matrix import (MassMatrixProof, _pivot_diagnosis, _prove_mass_matrix, check_initial,
+                          pivots_proven)
 from .model import chain_state_names, resolve, system_for
 from .options import TEST_DEFAULTS, check_solver_kwargs, method_defaults, output_times
 from .params import params_record, solver_params
@@ -195,11 +196,11 @@ def simulate(model, x0, t_end: float, *, mode: str | Mode = "ii", t0: float = 0.
     t_eval = output_times(t0, t_end, output_dt)
     hooks += stop_hooks(solver_kwargs, invariant_after, max_wall, run.loop, t0, t_end, t_eval, run.system.rhs)
     ctrl_c = CtrlC()
-    solver_kwargs["hooks"] = hooks + [ctrl_c]
+    # (the M(q) > 0 proof last, on the whole run: it may cut it back)
+    proof = [MassMatrixProof(run.masses)] if run.masses is not None else []
+    solver_kwargs["hooks"] = hooks + [ctrl_c] + proof
     sol = _integrate(run.system.rhs, box, (t0, t_end), t_eval, ode_params, method, run.subdivision, test,
                      progress, mode, ctrl_c, solver_kwargs)
-    if run.masses is not None:
-        apply_proof(run.masses, sol)  # (may cut the run back: the one edit of solve's result)
     # (by default not where the caller's own limits ended the run: max_steps, max_width, h_min)
     limited = any(solver_kwargs.get(k) is not None for k in ("max_steps", "max_width", "h_min"))
     if energy_shell or (energy_shell is None and run.loop is None and not limited):

@@ -16,11 +16,11 @@ axes (M = 0, M = diag(2, 0), singular configurations) are caught here:
   on it; where the proof fails the run is cut back to that time and reported as a
   break-down naming the joint (:func:`apply_proof`).
 
-:func:`apply_proof` is the one place where ``simulate`` changes what
-:func:`verified.solver.solve` returned. It is applied to the whole run after ``solve``,
-not as a solver hook: a hook's ``after_run`` sees each chunk of a chunked run, while the
-proof's cut and the pieces' record (``piece_results``, ``surviving``, the reason's
-summary of the pieces) belong to the merged run.
+The proof runs as the solver hook :class:`MassMatrixProof`, at the stage
+``after_solve`` (:mod:`verified.driver.hooks`): once, on the whole run ``solve``
+returns, because its cut and the pieces' record (``piece_results``, ``surviving``, the
+reason's summary of the pieces) belong to the merged run, not to a chunk of a chunked
+run or to an attempt of ``auto``.
 """
 from __future__ import annotations
 
@@ -30,6 +30,7 @@ import numpy as np
 
 from verified.series.affine_taylor import affine_range
 from verified.arith.interval import Interval
+from verified.driver.hooks import Hook
 from verified.solver import Solution
 
 from ..errors import ModelError
@@ -52,6 +53,18 @@ class MassMatrix:
             self.graph = cparams.pivot_graph()
             self.pbox = (cparams.lo, cparams.hi) if cparams.n else None
         self.n = chain.n
+
+
+class MassMatrixProof(Hook):
+    """The solver hook that proves M(q) > 0 on every box of the whole run
+    (:func:`apply_proof` at the stage ``after_solve``; ``masses`` a :class:`MassMatrix`
+    or a Chain)."""
+
+    def __init__(self, masses):
+        self.masses = masses
+
+    def after_solve(self, solution) -> None:
+        apply_proof(self.masses, solution)
 
 
 def apply_proof(masses, sol: Solution) -> None:

@@ -13,6 +13,8 @@ from mbs.app.sampling import dop853
 
 import verified.auto
 from verified.auto import ladder, splitting
+from verified.driver import hooks as hooks_mod
+from verified.driver.hooks import Hook, part_hooks
 from verified.graph import trace
 from verified.arith.interval import Interval
 from verified.methods import METHODS, Auto, Composition, Lohner, SecondOrder, as_method
@@ -365,6 +367,58 @@ def test_a_split_that_gains_nothing_is_given_up_after_its_probe():
     x0 = np.linspace(0.0, 1e-3, 11)
     states = np.stack([np.tan(t + np.arctan(x0)), np.zeros_like(x0), np.zeros_like(x0), np.zeros_like(x0)], 1)
     assert _inside_union(states, sol.boxes[-1], slack=1e-12).all()
+
+
+class _Whole(_StopAttempt):
+    """Counts the runs (stops none) and the calls of the stage ``after_solve``, which
+    marks the Solution it is given (an edit the caller must see)."""
+
+    def __init__(self):
+        super().__init__(0)
+        self.wholes = []
+
+    def after_solve(self, solution):
+        self.wholes.append(solution)
+        solution.reason += " [seen whole]"
+
+
+class _OnlyWhole(Hook):
+    """A hook with no stage but ``after_solve``."""
+
+    def __init__(self):
+        self.wholes = []
+
+    def after_solve(self, solution):
+        self.wholes.append(solution)
+
+
+def _two_attempts(hooks):
+    box = Interval([0.0, -1.0, -1.0, -1.0], [1e-3, 1.0, 1.0, 1.0])
+    return solve(_blow_up(), box, (0.0, 2.0), hooks=hooks)
+
+
+def test_after_solve_sees_the_whole_run_once():
+    """``auto`` solves twice (the box, then its probe): the stage ``after_solve`` runs once,
+    on the Solution returned, and its edit is what the caller gets; a hook with no other
+    stage is not handed to the attempts at all."""
+    whole, only = _Whole(), _OnlyWhole()
+    sol = _two_attempts([whole, only])
+    assert whole.runs == 2 and whole.wholes == [sol] and only.wholes == [sol]
+    assert sol.reason.endswith(" [seen whole]")
+    assert part_hooks([whole, only])[0].hook is whole and len(part_hooks([whole, only])) == 1
+    g = trace(lambda x, p: [x[1], -x[0]], 2)  # (no auto: chunks of one run merged)
+    whole = _Whole()
+    sol = solve(g, Interval([0.9, -0.1], [1.1, 0.1]), (0.0, 1.0), method="lohner", chunks=2, subdivision=[2, 1],
+                hooks=[whole])
+    assert sol.status == "completed" and whole.runs == 2 and whole.wholes == [sol]
+
+
+def test_after_solve_per_attempt_is_caught(monkeypatch):
+    """The test above bites: attempts that keep the stage call it three times."""
+    monkeypatch.setattr(hooks_mod, "part_hooks", lambda hooks: list(hooks or ()))
+    whole = _Whole()
+    sol = _two_attempts([whole])
+    assert whole.runs == 2 and len(whole.wholes) == 3 and sol.reason.count("[seen whole]") == 2
 
 
 def test_projected_pieces_is_optimistic_and_monotone():

@@ -20,7 +20,13 @@ then ``hooks``):
     kind for another graph (``run.make_stepper(graph)``, for backward tests).
 ``after_run(solution)``
     once, on the :class:`~verified.solver.Solution` (also a partial one), to attach
-    records and statistics.
+    records and statistics. In a chunked run it sees each chunk's Solution.
+``after_solve(solution)`` (optional: a hook without it is called at the other three)
+    once, on the whole Solution :func:`~verified.solver.solve` returns: after the chunks
+    of a chunked run are merged and after every attempt of ``auto``. It may edit that
+    Solution in place, for a proof that belongs to the whole run (a proof that fails
+    on some box cuts the run back to that time and makes it a break-down). Like
+    ``after_step``'s sets, what it leaves is what ``solve`` returns.
 
 Soundness is the hook's responsibility: whatever ``after_step`` returns is what the
 solver continues from and reports at output times.
@@ -46,7 +52,8 @@ if TYPE_CHECKING:  # annotations only
     from verified.graph import Graph
     from verified.arith.interval import Interval
 
-__all__ = ["RunSetup", "RunControl", "SolverHook", "Hook", "StopAfterWall", "ProgressHook", "check_hooks"]
+__all__ = ["RunSetup", "RunControl", "SolverHook", "Hook", "StopAfterWall", "ProgressHook", "check_hooks",
+           "after_solve", "part_hooks"]
 
 
 @dataclass
@@ -140,6 +147,18 @@ class Hook:
     def after_run(self, solution) -> None:
         return None
 
+    def after_solve(self, solution) -> None:
+        return None
+
+
+def after_solve(hooks, solution) -> None:
+    """Call the ``after_solve`` stage of every hook in ``hooks`` that has one, in order,
+    on the whole ``solution`` (:func:`verified.solver.solve`'s last act)."""
+    for h in hooks or ():
+        stage = getattr(h, "after_solve", None)
+        if stage is not None:
+            stage(solution)
+
 
 class StopAfterWall(Hook):
     """Stop the integration once ``seconds`` of wall-clock time have passed since
@@ -168,13 +187,50 @@ class StopAfterWall(Hook):
         return None
 
 
+class _PartOf(Hook):
+    """A hook as one part of a whole run sees it: every stage but ``after_solve``, which
+    the whole run's :func:`verified.solver.solve` calls once."""
+
+    def __init__(self, hook):
+        self.hook = hook
+
+    def before_run(self, setup):
+        return self.hook.before_run(setup)
+
+    def after_step(self, step, sets, run):
+        return self.hook.after_step(step, sets, run)
+
+    def after_run(self, solution):
+        return self.hook.after_run(solution)
+
+
+def _own(hook, stage: str) -> bool:
+    """Whether ``hook`` has ``stage`` other than :class:`Hook`'s no-op."""
+    return getattr(hook, stage, None) is not None and getattr(type(hook), stage, None) is not getattr(Hook, stage)
+
+
+def part_hooks(hooks) -> list:
+    """``hooks`` for one part of a whole run (an attempt of ``auto``, a chunk of a chunked
+    run): without their ``after_solve`` stage, which belongs to the whole; a hook that has
+    no other stage is left out (a chunk need not carry it to a worker)."""
+    out = []
+    for h in hooks or ():
+        if _own(h, "after_solve"):
+            if not any(_own(h, s) for s in ("before_run", "after_step", "after_run")):
+                continue
+            h = _PartOf(h)
+        out.append(h)
+    return out
+
+
 def caps_from(hooks, started: float) -> list:
     """``hooks`` for one of several runs that make up one (the attempts of ``auto``, the
     phases of an energy test that steps aside): a wall-clock cap
     (:class:`StopAfterWall`) counts from ``started`` (``time.perf_counter()`` at the start
-    of the whole), not from the start of this run."""
+    of the whole), not from the start of this run; ``after_solve`` stages are left to the
+    whole (:func:`part_hooks`)."""
     out = []
-    for h in hooks:
+    for h in part_hooks(hooks):
         if isinstance(h, StopAfterWall):
             h = StopAfterWall(max(0.0, h.seconds - (time.perf_counter() - started)), h.clock)
         out.append(h)

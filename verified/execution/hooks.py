@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from verified.driver.hooks import Hook, StopAfterWall
+from verified.driver.hooks import Hook, StopAfterWall, part_hooks
 
 
 # ----------------------------------------------------------------------------- hooks
@@ -80,9 +80,10 @@ class _Board:
 
 def _split_hooks(hooks, t_start_wall: float):
     """(hooks for the chunks, the run's deadline or None): StopAfterWall becomes one
-    deadline for the whole call."""
+    deadline for the whole call; ``after_solve`` stages stay with the whole call
+    (:func:`verified.driver.hooks.part_hooks`)."""
     out, deadline = [], None
-    for h in list(hooks or ()):
+    for h in part_hooks(hooks):
         if isinstance(h, StopAfterWall):
             d = t_start_wall + h.seconds
             deadline = d if deadline is None else min(deadline, d)
