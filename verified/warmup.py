@@ -1,4 +1,4 @@
-"""Compile the numba kernels once, ahead of use: ``python -m verified.warmup [FAMILY ...]``.
+"""Compile the numba kernels once, ahead of use: ``python -m verified.warmup [--jobs N] [FAMILY ...]``.
 
 The kernels are compiled on first use and cached on disk (``cache=True``), which costs
 seconds to a minute per family the first time (the longest: the affine Taylor kernel,
@@ -7,7 +7,9 @@ which the demo's double pendulum uses; docs/lab/code_notes.md).
 This module runs tiny verified integrations that go through every family (interval,
 affine with fresh symbols, Taylor models of degree 2, 3 and 4 with the composition
 step, interval parameters, the rigorous linear solve), so that later runs start warm.
-``python -m mbs demo`` starts it in a background process on the machine's other core.
+``python -m mbs demo`` starts it in a background process on the machine's other core, and
+building the package (``pip install .``: ``setup.py``) runs it with ``--jobs 2``, so that
+the installed package carries the compiled kernels in its numba cache.
 
 Nothing here is needed for correctness: a kernel that is not warm compiles when it is
 first called.
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["compile_kernels", "start_in_background", "finish_background"]
+__all__ = ["compile_kernels", "compile_in_processes", "start_in_background", "finish_background"]
 
 
 def _rhs(x, p):
@@ -112,13 +114,18 @@ def start_in_background(families=None):
         raise ValueError(f"unknown kernel families {unknown}; known: {', '.join(FAMILIES)}")
     if (os.cpu_count() or 1) < 2 or os.environ.get("MBS_NO_WARMUP"):
         return None
-    root = str(Path(__file__).resolve().parents[1])
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
     try:
         return subprocess.Popen([sys.executable, "-m", "verified.warmup", *families], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, env=env)
+                                stderr=subprocess.DEVNULL, env=_child_env())
     except OSError:
         return None
+
+
+def _child_env() -> dict:
+    """The environment of a child ``python -m verified.warmup``: this ``verified`` package
+    first on its path, so that the kernels land in the same cache."""
+    root = str(Path(__file__).resolve().parents[1])
+    return dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
 
 
 def finish_background(proc, timeout: float = 300.0) -> str:
@@ -140,6 +147,45 @@ def finish_background(proc, timeout: float = 300.0) -> str:
             f"{f' (waited {waited:.0f} s for them)' if waited >= 1 else ''}")
 
 
-if __name__ == "__main__":
-    wall = compile_kernels(log=lambda s: print(s, file=sys.stderr, flush=True), families=sys.argv[1:] or None)
+#: the families one process each warms with ``--jobs`` 2 or more: the two longest compiles
+#: side by side (each compiles the interval kernels too, which every run uses)
+_JOB_FAMILIES = (("Taylor-model",), ("affine",))
+
+
+def compile_in_processes(jobs: int, log=None) -> float:
+    """:func:`compile_kernels` for the three families, in up to ``jobs`` child processes at
+    once (the Taylor-model and the affine family side by side; one process where ``jobs``
+    is 1); returns the wall time in s. Raises RuntimeError naming a child that failed."""
+    t0 = time.perf_counter()
+    if jobs <= 1:
+        compile_kernels(log=log)
+        return time.perf_counter() - t0
+    procs = [subprocess.Popen([sys.executable, "-m", "verified.warmup", *fam], env=_child_env())
+             for fam in _JOB_FAMILIES[:jobs]]
+    failed = [" ".join(fam) for fam, p in zip(_JOB_FAMILIES, procs) if p.wait() != 0]
+    if failed:
+        raise RuntimeError(f"the kernel warm-up of {', '.join(failed)} failed")
+    return time.perf_counter() - t0
+
+
+def _main(argv) -> int:
+    """``python -m verified.warmup [--jobs N] [FAMILY ...]``."""
+    log = (lambda s: print(s, file=sys.stderr, flush=True))
+    jobs = 1
+    if argv[:1] == ["--jobs"]:
+        try:
+            jobs = int(argv[1])
+        except (IndexError, ValueError):
+            print("usage: python -m verified.warmup [--jobs N] [FAMILY ...]", file=sys.stderr)
+            return 2
+        argv = argv[2:]
+    if jobs > 1 and not argv:
+        wall = compile_in_processes(jobs, log)
+    else:
+        wall = compile_kernels(log=log, families=argv or None)
     print(f"numba kernels warm ({wall:.1f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main(sys.argv[1:]))

@@ -39,3 +39,20 @@ def test_background_failures_and_overruns_are_reported_not_raised():
     slow = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
     msg = warmup.finish_background(slow, timeout=0.2)
     assert "stopped after" in msg and slow.poll() is not None
+
+
+def test_jobs_split_the_families_over_processes_and_name_a_failure(monkeypatch):
+    started = []
+
+    class Child:
+        def __init__(self, cmd, env=None):
+            started.append(cmd[3:])
+            self.rc = 1 if cmd[3:] == ["affine"] else 0
+
+        def wait(self):
+            return self.rc
+    monkeypatch.setattr(warmup.subprocess, "Popen", Child)
+    with pytest.raises(RuntimeError, match="warm-up of affine failed"):
+        warmup.compile_in_processes(2)
+    assert started == [["Taylor-model"], ["affine"]]
+    assert warmup._main(["--jobs"]) == 2 and warmup._main(["--jobs", "two"]) == 2
