@@ -369,6 +369,38 @@ def test_a_split_that_gains_nothing_is_given_up_after_its_probe():
     assert _inside_union(states, sol.boxes[-1], slack=1e-12).all()
 
 
+def _regrown(growing: int):
+    """x_i' = x_i for the first ``growing`` of 3 states (the others constant), from
+    [0.99, 1.01]^3 with max_width = 1: one box breaks down at ~4.19 s, and each split
+    gains ~0.5 s, so T = 5 needs a second split; closed form x(T) = x0 e^T."""
+    g = trace(lambda x, p: [x[i] if i < growing else 0 * x[i] for i in range(3)], 3)
+    box = Interval([0.99] * 3, [1.01] * 3)
+    sol = solve(g, box, (0.0, 5.0), max_width=1.0)
+    x0 = np.random.default_rng(5).uniform(0.99, 1.01, (300, 3))
+    x0 = np.concatenate([x0, np.array(np.meshgrid(*[[0.99, 1.01]] * 3)).reshape(3, -1).T])
+    return sol, x0 * np.where(np.arange(3) < growing, np.exp(5.0), 1.0)
+
+
+def test_a_split_of_split_pieces_bisects_two_components():
+    """Pieces that came from a split are bisected along two of their three (equally
+    wide) components, where that gains: 8 -> 32, not 64; every closed-form state is held."""
+    sol, states = _regrown(2)
+    assert sol.status == "completed", sol.reason
+    assert [e["pieces"] for e in sol.method_log] == [1, 1, 8, 1, 32]
+    assert _inside_union(states, sol.boxes[-1]).all()
+
+
+def test_a_split_along_two_components_that_gains_nothing_splits_along_three():
+    """Where the third component's width is what ends the pieces, the two-component
+    split's probe gets no further, and the pieces are bisected along all three."""
+    sol, states = _regrown(3)
+    assert sol.status == "completed", sol.reason
+    assert [e["pieces"] for e in sol.method_log] == [1, 1, 8, 1, 1, 64]
+    assert sol.method_log[3]["probe"] == "part 1 of the 32 run first"
+    assert sol.method_log[3]["next"].endswith("split along more components")
+    assert _inside_union(states, sol.boxes[-1]).all()
+
+
 class _Whole(_StopAttempt):
     """Counts the runs (stops none) and the calls of the stage ``after_solve``, which
     marks the Solution it is given (an edit the caller must see)."""

@@ -19,7 +19,7 @@ from verified.arith.interval import Interval, concatenate
 from verified.methods import Auto, Composition, Lohner, Method
 from verified.driver.solution import Failure, Solution, Start
 from verified.driver.time_chain import chain_in_time
-from verified.auto.splitting import split_pieces
+from verified.auto.splitting import SPLIT_DIMS, SPLIT_DIMS_AGAIN, split_pieces
 
 __all__ = ["default_rungs", "COMPOSITION_MAX_STATES"]
 
@@ -500,31 +500,31 @@ class _Ladder:
     def _split(self, task, sol, entry, failed, kept):
         """Split the failed pieces' initial boxes and run them from t0 (splitting the
         sets where they failed gained less: docs/lab, issue 40), part 1 first as a
-        probe; or give up, saying why."""
+        probe; or give up, saying why. Pieces that came from a split are bisected along
+        fewer components first (:data:`~verified.auto.splitting.SPLIT_DIMS_AGAIN`), and
+        along all it allows where that split's probe gains nothing (the width that ends
+        them may be in a component left whole)."""
         last = self.fallback if task.rung == self.fallback else self.fallback - 1  # (the rung splitting continues with)
         fb, fp = task.boxes[np.asarray(failed)], _rows(task.params, failed)
         t_fail = float(sol.t_reached) if task.failure is not None else _failure_time(sol)
-        parts, part_params = split_pieces(self.graph, fb, fp, float(t_fail) - float(self.t0))
-        n_after = self.pieces_total - fb.shape[0] + parts.shape[0]
-        why = None
-        if parts.shape[0] == fb.shape[0]:
-            why = "the pieces cannot be split (no state or parameter of finite, nonzero width)"
-        elif n_after > self.method.max_pieces:
-            why = f"splitting {len(failed)} piece(s) would make more than max_pieces = {self.method.max_pieces}"
-        elif t_fail <= task.parent_t + MIN_GAIN * (self.t1 - self.t0):
-            # splitting did not take the pieces further: the cause is not the sets' width
-            # (a blow-up, a singularity, a step-size limit), and more pieces will not help
-            why = (f"the split pieces broke down at t = {t_fail:g}, no later than the piece they were "
-                   f"split from (t = {task.parent_t:g})")
         if not self.todo:
             # this attempt's pieces and the finished ones cover every initial piece: their
             # enclosure, verified to where this attempt got, stands if later attempts end earlier
             self.covers.append(list(self.done) + [(task.boxes, sol, task.params)])
-        probe = None
-        if why is None and parts.shape[0] > 1:
-            probe, why = self._probe(task, sol, parts, part_params, last, t_fail, n_after, fb.shape[0])
+        tried = 0
+        dim_caps = (SPLIT_DIMS,) if task.splits == 0 else (SPLIT_DIMS_AGAIN, SPLIT_DIMS)
+        for i, max_dims in enumerate(dim_caps):
+            parts, part_params = split_pieces(self.graph, fb, fp, float(t_fail) - float(self.t0), max_dims)
+            if parts.shape[0] <= tried:  # (no more components to split than the split just judged)
+                break
+            tried = parts.shape[0]
+            n_after, probe, why = self._judge_split(task, sol, parts, part_params, last, t_fail, fb.shape[0])
             if probe is _STOPPED:
                 return
+            if why is None:
+                break
+            if probe is not None and i + 1 < len(dim_caps):  # (its log entry says why the next split is wider)
+                self.log[-1]["next"] = f"{why}: split along more components"
         if why is not None:
             entry["next"] = f"gave up: {why}"
             # (the failed attempt encloses all its pieces up to its end)
@@ -537,6 +537,25 @@ class _Ladder:
         self.todo.append(_Task(parts, part_params, last, task.splits + 1, t_fail, probe=probe))
         entry["next"] = f"{len(failed)} piece(s) split into {parts.shape[0]}, with {self.rungs[last].describe()}" + (
             ", part 1 run first as a probe" if probe is not None else "")
+
+    def _judge_split(self, task, sol, parts, part_params, last, t_fail, n_failed):
+        """(pieces after the split, its probe or None or :data:`_STOPPED`, why to give up
+        or None) for the split of ``n_failed`` failed pieces into ``parts``."""
+        n_after = self.pieces_total - n_failed + parts.shape[0]
+        why = None
+        if parts.shape[0] == n_failed:
+            why = "the pieces cannot be split (no state or parameter of finite, nonzero width)"
+        elif n_after > self.method.max_pieces:
+            why = f"splitting {n_failed} piece(s) would make more than max_pieces = {self.method.max_pieces}"
+        elif t_fail <= task.parent_t + MIN_GAIN * (self.t1 - self.t0):
+            # splitting did not take the pieces further: the cause is not the sets' width
+            # (a blow-up, a singularity, a step-size limit), and more pieces will not help
+            why = (f"the split pieces broke down at t = {t_fail:g}, no later than the piece they were "
+                   f"split from (t = {task.parent_t:g})")
+        probe = None
+        if why is None and parts.shape[0] > 1:
+            probe, why = self._probe(task, sol, parts, part_params, last, t_fail, n_after, n_failed)
+        return n_after, probe, why
 
     def _probe(self, task, sol, parts, part_params, last, t_fail, n_after, n_failed):
         """Run part 1 of a split first: where it gets no further than the piece it was

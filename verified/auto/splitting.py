@@ -9,12 +9,18 @@ import numpy as np
 
 from verified.arith.interval import Interval
 
-__all__ = ["split_boxes", "split_pieces", "influences"]
+__all__ = ["split_boxes", "split_pieces", "influences", "SPLIT_DIMS", "SPLIT_DIMS_AGAIN"]
 
 
 #: at most this many components are bisected at once when a piece is split (a piece of a
 #: 7-state box bisected in every component would become 128)
 SPLIT_DIMS = 3
+#: at most this many when the piece itself came from a split (``auto``'s ladder): where
+#: the first split gained, its pieces need a little less width, not 2^3 times fewer
+#: pieces. The 3-link arm +- 0.01 to T = 2 went 1 -> 8 -> 32 pieces at 0.64x the CPU of
+#: 1 -> 8 -> 64, its enclosure 4 % wider (ratio 1.16 against 1.12); with one component
+#: (16 pieces) 0.43x, but 1.71 (docs/lab/auto.md)
+SPLIT_DIMS_AGAIN = 2
 
 
 def _widest_dims(lo, hi, max_dims: int) -> list[int]:
@@ -106,19 +112,19 @@ def influences(graph, lo, hi, plo, phi, T: float):
     return out
 
 
-def split_pieces(graph, boxes: Interval, params, span: float):
+def split_pieces(graph, boxes: Interval, params, span: float, max_dims: int = SPLIT_DIMS):
     """The failed pieces ``boxes`` (B, n) with their parameters ``params`` ((p,) for all,
     (B, p) rows, or None), split: ``(parts, part_params)``. Without uncertain parameters,
     :func:`split_boxes` and the rows repeated. With them, each piece is bisected along the
     components -- states and parameters alike -- that move its states most over ``span``
     (:func:`influences`, at least :data:`INFLUENCE_SHARE` of the most, at most
-    :data:`SPLIT_DIMS` of them; the widest parameter with the states' choice where the
+    ``max_dims`` of them; the widest parameter with the states' choice where the
     integration fails), and every part gets its own parameter row: ``part_params`` (parts,
     p). Every state and parameter of a piece lies in one of its parts (the cut is shared
     by both halves), so the parts cover the pieces."""
     wide = params is not None and isinstance(params, Interval) and bool(np.any(params.width() > 0))
     if not wide:
-        parts = split_boxes(boxes)
+        parts = split_boxes(boxes, max_dims)
         return parts, _repeat_rows(params, parts.shape[0] // boxes.shape[0])
     n = boxes.shape[-1]
     out_x, out_p = [], []
@@ -130,10 +136,10 @@ def split_pieces(graph, boxes: Interval, params, span: float):
         if infl is None or not np.any(infl > 0):
             # (the states' own choice, and the widest parameter relative to its size)
             rel = np.where(phi > plo, (phi - plo) / np.maximum(np.abs(0.5 * (plo + phi)), 1e-300), 0.0)
-            dims = sorted(_widest_dims(lo, hi, SPLIT_DIMS))[:SPLIT_DIMS - 1] + [n + int(np.argmax(rel))]
+            dims = sorted(_widest_dims(lo, hi, max_dims))[:max_dims - 1] + [n + int(np.argmax(rel))]
         else:
             order = np.argsort(-infl, kind="stable")
-            dims = [int(j) for j in order[:SPLIT_DIMS] if infl[j] > 0 and infl[j] >= INFLUENCE_SHARE * infl[order[0]]]
+            dims = [int(j) for j in order[:max_dims] if infl[j] > 0 and infl[j] >= INFLUENCE_SHARE * infl[order[0]]]
         cuts = _bisect(np.concatenate([lo, plo]), np.concatenate([hi, phi]), dims)
         out_x += [(a[:n], c[:n]) for a, c in cuts]
         out_p += [(a[n:], c[n:]) for a, c in cuts]
