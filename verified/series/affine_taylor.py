@@ -1603,14 +1603,21 @@ def affine_range(graph, x, params=None) -> Interval:
         # many boxes: the batched kernel (2-4x faster from 256 boxes on)
         _, G = _affine_kernel(tape.op, tape.a0, tape.a1, tape.aux, tape.idx, tape.cst, tape.clo, tape.chi, dummy,
                               X, P, 1, m, 0, tape.outputs, _lanes(tape, 1, m, graph.n_inputs, nb), _NO_SLOTS, 0)
-        lo, hi = forms_to_interval(G.transpose(1, 0, 2))
-        return Interval._from_bounds(lo, hi)
-    # Few boxes (a robot's frames, the mass-matrix proof of one piece): one pass at order
-    # 0 of the per-box kernel gives every slot's form, the batched kernel's numbers
-    # (tests/verified/test_affine_taylor.py) at 0.95-1.23x its time, and such a run then
-    # never compiles the batched kernel, ~60 s of CPU once per installation
-    # (docs/lab/recursion_engine.md). The kernel keeps every slot's forms, slots x 2 x
-    # boxes x (m + 2): boxes in chunks.
+    else:
+        G = _output_forms_per_box(tape, X, P, m, dummy)
+    lo, hi = forms_to_interval(G.transpose(1, 0, 2))
+    return Interval._from_bounds(lo, hi)
+
+
+def _output_forms_per_box(tape, X, P, m: int, dummy) -> np.ndarray:
+    """The outputs' affine forms (outputs, boxes, m + 2) by the per-box kernel, for
+    :func:`affine_range` over few boxes (a robot's frames, the mass-matrix proof of one
+    piece): one pass at order 0 gives every slot's form, the batched kernel's numbers
+    (tests/verified/test_affine_taylor.py) at 0.95-1.23x its time, and such a run then
+    never compiles the batched kernel, ~60 s of CPU once per installation
+    (docs/lab/recursion_engine.md). The kernel keeps every slot's forms, slots x 2 x
+    boxes x (m + 2): boxes in chunks."""
+    nb = X.shape[1]
     per_box = tape.op.size * 2 * (m + 2) * 8
     step = int(max(1, min(nb, _CHUNK_BYTES // max(per_box, 1))))
     parts = []
@@ -1620,10 +1627,7 @@ def affine_range(graph, x, params=None) -> Interval:
                                         tape.chi, dummy, np.ascontiguousarray(X[:, b0:b1]),
                                         np.ascontiguousarray(P[:, b0:b1]), 1, m, 0, _NO_SLOTS, 0)
         parts.append(F[tape.outputs, 0])  # (outputs, boxes, m + 2)
-    G = np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
-    lo, hi = forms_to_interval(G.transpose(1, 0, 2))
-    return Interval._from_bounds(lo, hi)
-
+    return np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
 
 class AffineTaylorODE:
     """Taylor-coefficient enclosures like :class:`verified.series.taylor.TaylorODE`, computed in
