@@ -389,6 +389,73 @@ def test_policies():
     assert w.h_limit == 0.15  # grows back by doubling, never beyond h_max
 
 
+class _TubeStepper:
+    """apriori over [0, h] returns a fresh (E, cE) whose order-K coefficient is ``mag``."""
+    order = 4
+
+    def __init__(self, mag, fail_above=np.inf):
+        self.mag, self.fail_above, self.calls = mag, fail_above, []
+
+    def apriori(self, X, cX, h):
+        self.calls.append(h)
+        if h > self.fail_above:
+            return None
+        cE = Interval(np.full((1, self.order + 1, 2), -self.mag), np.full((1, self.order + 1, 2), self.mag))
+        return Interval(np.zeros((1, 2)), np.ones((1, 2))), cE
+
+
+def test_a_step_shrunk_for_its_remainder_keeps_its_enclosure():
+    """The remainder control shrinks a step whose Lagrange remainder ``|x_[K](E)| h^K``
+    is above ``remainder_slack * tol`` without a second a-priori test: the enclosure over
+    [0, h] holds over every shorter step. The step returned is never longer than the one
+    its enclosure was validated for, and its remainder is within the limit."""
+    c = StepControl(tol=1e-10, h_min=1e-9, h_max=1.0, steer=2)
+    limit = c.remainder_slack * c.tol
+    h0 = 0.1
+    st = _TubeStepper(mag=3.0 * limit / h0**4)  # remainder 3 x the limit at h0
+    found = c.validate(st, None, None, h0)
+    assert st.calls == [h0] and found.evaluations == 1 and found.rejected == 1
+    assert found.h < h0 and st.mag * found.h**4 <= limit
+    # far above the limit (the shrink factor is capped at 0.2): a fresh test at the shorter step
+    st = _TubeStepper(mag=1e6 * limit / h0**4)
+    found = c.validate(st, None, None, h0)
+    assert len(st.calls) >= 2 and st.calls[1] == pytest.approx(0.2 * h0)
+    assert found.h <= st.calls[-1] and st.mag * found.h**4 <= limit
+    # an enclosure that failed at h0 is never kept: the halved step is tested afresh
+    st = _TubeStepper(mag=limit / h0**4, fail_above=0.75 * h0)
+    found = c.validate(st, None, None, h0)
+    assert st.calls == [h0, 0.5 * h0] and found.h == 0.5 * h0
+
+
+def test_a_kept_enclosure_encloses_the_sampled_trajectories(monkeypatch):
+    """Laub-Loomis (W = 0.01, `auto`): steps shrunk for their remainder take the
+    enclosure validated over the longer step (checked to happen here), and every
+    sampled trajectory (DOP853) stays in the output boxes and the step tubes."""
+    import verified.driver.control as control
+
+    def f(x, p):
+        x1, x2, x3, x4, x5, x6, x7 = x
+        return [1.4 * x3 - 0.9 * x1, 2.5 * x5 - 1.5 * x2, 0.6 * x7 - 0.8 * x2 * x3, 2 - 1.3 * x3 * x4,
+                0.7 * x1 - x4 * x5, 0.3 * x1 - 3.1 * x6, 1.8 * x6 - 1.5 * x2 * x7]
+    c0 = np.array([1.2, 1.05, 1.5, 2.4, 1, 0.1, 0.45])
+    x0 = Interval(c0 - 0.01, c0 + 0.01)
+    kept = []
+    validate = control.StepControl.validate
+
+    def counting(self, stepper, X, cX, h):
+        found = validate(self, stepper, X, cX, h)
+        kept.append(found.enclosure is not None and found.evaluations == found.rejected)
+        return found
+    monkeypatch.setattr(control.StepControl, "validate", counting)
+    sol = _solve(trace(f, 7), x0, (0.0, 20.0), t_eval=np.linspace(1.0, 20.0, 20))
+    assert sol.status == "completed" and any(kept)
+
+    def rhs(x):
+        return np.array(f(x, None), float)
+    pts = sample_initial_points(x0.lo, x0.hi, 24, seed=3, corner_limit=16)
+    assert misses(sol, trajectories(rhs, pts, 20.0)) == []
+
+
 def test_a_stop_after_the_last_output_is_a_completed_run(ode, box, reference):
     sol = solve(ode, box, (0.0, 0.6), t_eval=T_EVAL, subdivision=[2, 2], hooks=[StopAt(reference.stats["steps"])])
     assert sol.status == "completed" and sol.reason == ""

@@ -76,10 +76,22 @@ class StepControl:
 
     def validate(self, stepper, X: Interval, cX: Interval, h: float) -> Validated:
         """Shrink ``h`` until ``stepper.apriori`` validates an enclosure over ``[0, h]``
-        whose remainder is small enough (see the class)."""
+        whose remainder is small enough (see the class). The enclosure returned may have
+        been validated over a longer step ``[0, h']``, ``h' >= h`` (a step shrunk for its
+        remainder keeps the enclosure it has): ``E`` encloses every solution over ``[0,
+        h]`` and ``cE`` bounds the Taylor coefficients there, which is all a step uses."""
         K = stepper.order
+        limit = self.remainder_slack * self.tol
         evaluations = rejected = 0
+        kept = None  # (h_kept, (E, cE), max |x_[K]| over E): the last enclosure validated
         while True:
+            if kept is not None and h <= kept[0] and not kept[2] * h**K > limit:
+                # E encloses every solution over [0, h_kept], hence over [0, h], and
+                # x_[K] over E bounds the Lagrange remainder there: a step shrunk for
+                # the remainder alone needs no new a-priori test (one over [0, h] would
+                # give a narrower E, which accepts this h too; the step takes its
+                # remainder from the E it is given). docs/lab/robot_speed.md
+                return Validated(kept[1], h, evaluations, rejected)
             validated = stepper.apriori(X, cX, h)
             evaluations += 1
             if validated is not None:
@@ -87,10 +99,14 @@ class StepControl:
                 # hull X, but the Lagrange remainder takes it over the wider a-priori
                 # enclosure E. Over a deep model graph that can be many orders larger,
                 # and a remainder far above tol wrecks a narrow set for good.
-                rem = float(np.max(validated[1][:, K, :self.steer].mag())) * h**K
-                if not rem > self.remainder_slack * self.tol or h < self.h_min:
+                top = float(np.max(validated[1][:, K, :self.steer].mag()))
+                rem = top * h**K
+                if not rem > limit or h < self.h_min:
                     return Validated(validated, h, evaluations, rejected)
-                h *= max(0.2, min(0.9, (self.remainder_slack * self.tol / rem) ** (1.0 / K)))
+                kept = (h, validated, top)
+                # (0.95: the kept enclosure's remainder at the new step is then clearly
+                # within the limit, not at it, so whether it is kept is no rounding's call)
+                h *= max(0.2, min(0.9, 0.95 * (limit / rem) ** (1.0 / K)))
             elif h < self.h_min:
                 return Validated(None, h, evaluations, rejected)
             else:
