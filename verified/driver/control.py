@@ -34,7 +34,8 @@ LANDING_STRETCH = 1.2
 @dataclass
 class Validated:
     """The outcome of :meth:`StepControl.validate`: ``enclosure = (E, cE)`` or None
-    (no step validated above ``h_min``), the step ``h`` (s) it was validated for, and the
+    (no step validated above ``h_min``), the step ``h`` (s) to take (``E`` encloses every
+    solution over ``[0, h]``: it was validated for ``h`` or for a longer step), and the
     a-priori attempts made (``evaluations``) and rejected."""
 
     enclosure: tuple | None
