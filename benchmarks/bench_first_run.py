@@ -2,7 +2,7 @@
 run of a robot never run before <= 2x the warm run).
 
     python benchmarks/bench_first_run.py                      # ur5_quintic, then panda_pd_hold
-    python benchmarks/bench_first_run.py --scenes ur5_quintic --no-build --wheel DIST/x.whl
+    python benchmarks/bench_first_run.py --scenes ur5_quintic --wheel DIST/x.whl   # a wheel built before
 
 Builds a wheel of this checkout as ``pip install .`` does (``pip wheel . --no-deps``: the
 build compiles the numba kernels into it, ``setup.py``), installs it into a fresh virtual
