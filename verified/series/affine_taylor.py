@@ -1629,6 +1629,7 @@ def _output_forms_per_box(tape, X, P, m: int, dummy) -> np.ndarray:
         parts.append(F[tape.outputs, 0])  # (outputs, boxes, m + 2)
     return np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
 
+
 class AffineTaylorODE:
     """Taylor-coefficient enclosures like :class:`verified.series.taylor.TaylorODE`, computed in
     affine arithmetic over one noise symbol per wide input (and wide parameter).
